@@ -1,0 +1,1 @@
+"""Analyses built on the RBE solve: the stability check and the per-step sequence check."""

@@ -1,0 +1,52 @@
+"""The geometry stage of a check: posed blocks and their contact interfaces."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from ..geometry.block import PosedBlock, pose_block
+from ..geometry.contacts import ContactOptions, Interface, detect_interfaces
+from ..scene import Scene
+
+
+@dataclass(frozen=True)
+class Assembly:
+    """Posed blocks, the interfaces between them (not between two supports), and gravity."""
+
+    blocks: tuple[PosedBlock, ...]
+    interfaces: tuple[Interface, ...]
+    gravity: np.ndarray
+
+    @classmethod
+    def from_scene(cls, scene: Scene, contact: ContactOptions = ContactOptions()) -> "Assembly":
+        blocks = tuple(pose_block(b) for b in scene.blocks)
+        interfaces = tuple(it for it in detect_interfaces(list(blocks), contact)
+                           if not (blocks[it.a].support and blocks[it.b].support))
+        return cls(blocks, interfaces, np.asarray(scene.gravity, dtype=float))
+
+    def subset(self, ids) -> "Assembly":
+        """The assembly of the blocks named in ``ids``, with the interfaces among them."""
+        keep = set(ids)
+        index = {}
+        for old, b in enumerate(self.blocks):
+            if b.id in keep:
+                index[old] = len(index)
+        interfaces = tuple(Interface(index[it.a], index[it.b], it.frame, it.points, it.area)
+                           for it in self.interfaces if it.a in index and it.b in index)
+        return Assembly(tuple(self.blocks[i] for i in index), interfaces, self.gravity)
+
+    def floating_blocks(self) -> list[str]:
+        """Free blocks with no chain of interfaces to a support (no equilibrium is possible)."""
+        n = len(self.blocks)
+        if not n:
+            return []
+        a = [it.a for it in self.interfaces]
+        b = [it.b for it in self.interfaces]
+        graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(n, n))
+        _, labels = connected_components(graph, directed=False)
+        grounded = {labels[i] for i, blk in enumerate(self.blocks) if blk.support}
+        return [blk.id for i, blk in enumerate(self.blocks)
+                if not blk.support and labels[i] not in grounded]

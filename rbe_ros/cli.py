@@ -1,0 +1,230 @@
+"""Command line of rbe_ros: check, tilt, min-friction and analyse a scene JSON file.
+
+Bad input gives one line ``rbe-ros: error: ...`` and exit status 2, never a traceback.
+With ``--strict`` the exit status is 1 when a checked assembly or step is not stable.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import shutil
+import sys
+import time
+from pathlib import Path
+
+from .analysis.assembly import Assembly
+from .analysis.check import CheckOptions, check, check_scene
+from .analysis.friction import minimum_friction
+from .analysis.tilt import DIRECTIONS, tilt_capacity
+from .analysis.virtual import ANALYSES, virtual_assembly
+from .analysis.sequence import check_sequence, first_failing_step
+from .rbe.cones import CONES
+from .rbe.solver import SolveOptions
+from .report import format_table, json_number, report_json
+from .scene import Scene, SceneError, load_scene
+
+#: Topics under which the CLI records, the names the node uses (node name rbe_node).
+STATE_TOPIC = "/rbe_node/assembly"
+REPORT_TOPIC = "/rbe_node/report"
+
+
+def _solver_arguments(parser: argparse.ArgumentParser) -> None:
+    g = parser.add_argument_group("RBE model")
+    g.add_argument("--mu", type=float, default=0.6, help="friction coefficient (default 0.6)")
+    g.add_argument("--mu-threshold", type=float, default=None,
+                   help="post-check |V| <= threshold N per interface (default: --mu)")
+    g.add_argument("--objective", choices=("qp", "lp"), default="qp")
+    g.add_argument("--friction", choices=("net", "plus"), default="net",
+                   help="friction-net (decides stability) or friction+ (always feasible)")
+    g.add_argument("--cone", choices=CONES, default="soc",
+                   help="exact second-order cone or a linearised pyramid")
+    g.add_argument("--tension-tol", type=float, default=1e-5,
+                   help="tension counts above this share of the free weight")
+
+
+def _options(args) -> CheckOptions:
+    solve = SolveOptions(objective=args.objective, friction=args.friction, cone=args.cone,
+                         mu=args.mu)
+    if args.mu_threshold is not None and not args.mu_threshold > 0:
+        raise ValueError("--mu-threshold must be positive")
+    return CheckOptions(solve=solve, mu_threshold=args.mu_threshold, tension_tol=args.tension_tol)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="rbe-ros", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    check = sub.add_parser("check", help="check an assembly, or every step of its sequence")
+    check.add_argument("scene", help="scene JSON file (format in README)")
+    check.add_argument("--sequence", action="store_true",
+                       help="check every insertion step of the scene's sequence")
+    check.add_argument("--json", action="store_true", help="print one JSON object")
+    check.add_argument("--bag", metavar="DIR",
+                       help="record states and reports as a rosbag2 MCAP bag in DIR")
+    check.add_argument("--force", action="store_true", help="replace an existing --bag DIR")
+    check.add_argument("--strict", action="store_true",
+                       help="exit 1 when an assembly or step is not stable")
+    _solver_arguments(check)
+    check.set_defaults(run=_run_check)
+
+    tilt = sub.add_parser("tilt", help="largest tilt of gravity the assembly stands")
+    tilt.add_argument("scene")
+    tilt.add_argument("--direction", choices=DIRECTIONS, default="x",
+                      help="where the horizontal part of the turned gravity points")
+    tilt.add_argument("--tol-deg", type=float, default=0.01, help="bisection tolerance")
+    tilt.add_argument("--json", action="store_true")
+    _solver_arguments(tilt)
+    tilt.set_defaults(run=_run_tilt)
+
+    fric = sub.add_parser("min-friction", help="smallest mu at which the assembly stands")
+    fric.add_argument("scene")
+    fric.add_argument("--tol", type=float, default=1e-4)
+    fric.add_argument("--json", action="store_true")
+    _solver_arguments(fric)
+    fric.set_defaults(run=_run_min_friction)
+
+    analyse = sub.add_parser("analyse", help="check on virtual (reduced) interfaces")
+    analyse.add_argument("scene")
+    analyse.add_argument("--analysis", choices=ANALYSES, default="kern-fitting")
+    analyse.add_argument("--factor", type=float, default=0.1,
+                         help="shrink factor of base-fitting and max-thrust")
+    analyse.add_argument("--json", action="store_true")
+    _solver_arguments(analyse)
+    analyse.set_defaults(run=_run_analyse)
+
+    figure = sub.add_parser("figure", help="draw the forces of a check (or an analysis) as PNG")
+    figure.add_argument("scene")
+    figure.add_argument("-o", "--output", required=True, help="PNG file to write")
+    figure.add_argument("--analysis", choices=ANALYSES, default=None)
+    figure.add_argument("--factor", type=float, default=0.1)
+    figure.add_argument("--view", type=float, nargs=2, default=(20.0, -60.0),
+                        metavar=("ELEV", "AZIM"), help="camera elevation and azimuth in deg")
+    _solver_arguments(figure)
+    figure.set_defaults(run=_run_figure)
+    return parser
+
+
+def _run_check(args) -> int:
+    options = _options(args)
+    scene = load_scene(args.scene)
+    if args.bag:
+        _prepare_bag_dir(Path(args.bag), args.force)
+    if args.sequence:
+        if not args.json:
+            print(f"checking {scene.name}: {len(scene.blocks)} blocks, "
+                  f"{len(scene.sequence) or sum(not b.support for b in scene.blocks)} steps",
+                  file=sys.stderr)
+        reports = check_sequence(scene, options, on_step=None if args.json else _progress)
+        out = {"scene": scene.name, "first_failing_step": first_failing_step(reports),
+               "steps": [report_json(r) for r in reports]}
+    else:
+        reports = [check_scene(scene, options)]
+        out = {"scene": scene.name, **report_json(reports[0])}
+    if args.bag:
+        _record(Path(args.bag), scene, reports)
+    if args.json:
+        print(json.dumps(out, indent=1))
+    else:
+        print(format_table(reports))
+        if args.bag:
+            print(f"bag written to {args.bag}")
+    return 1 if args.strict and not all(r.stable for r in reports) else 0
+
+
+def _run_tilt(args) -> int:
+    result = tilt_capacity(Assembly.from_scene(load_scene(args.scene)), _options(args),
+                           args.direction, args.tol_deg)
+    out = {"direction": result.direction, "tilt_deg": json_number(result.tilt_deg),
+           "multiplier": json_number(result.multiplier),
+           "tilt_deg_multiplier": json_number(result.tilt_deg_multiplier),
+           "bisection_trials": result.trials, "time_bisection": result.time_bisection,
+           "time_multiplier": result.time_multiplier}
+    if args.json:
+        print(json.dumps(out, indent=1))
+    elif math.isnan(result.tilt_deg):
+        print("the assembly does not stand untilted: no tilt capacity (see rbe-ros check)")
+    else:
+        print(f"tilt capacity towards {result.direction}: {result.tilt_deg:.2f} deg by bisection"
+              f" ({result.trials} solves), lambda = {result.multiplier:.4f}"
+              f" (atan: {result.tilt_deg_multiplier:.2f} deg) by one load-multiplier solve")
+    return 0
+
+
+def _run_min_friction(args) -> int:
+    mu = minimum_friction(Assembly.from_scene(load_scene(args.scene)), _options(args), args.tol)
+    if args.json:
+        print(json.dumps({"mu_min": json_number(mu)}))
+    else:
+        print(f"minimum friction coefficient: {mu:.4f}" if math.isfinite(mu)
+              else "no friction coefficient makes the assembly stand (it needs tension)")
+    return 0
+
+
+def _analysed(args):
+    """The assembly of ``args.scene`` (on virtual interfaces if ``args.analysis``) and its check."""
+    assembly = Assembly.from_scene(load_scene(args.scene))
+    if args.analysis:
+        assembly = virtual_assembly(assembly, args.analysis, args.factor)
+    return assembly, check(assembly, _options(args))
+
+
+def _run_analyse(args) -> int:
+    _, report = _analysed(args)
+    if args.json:
+        print(json.dumps({"analysis": args.analysis, **report_json(report)}, indent=1))
+    else:
+        print(f"{args.analysis}: {report.message}")
+    return 0
+
+
+def _run_figure(args) -> int:
+    from .figures import draw_report
+
+    assembly, report = _analysed(args)
+    title = f"{args.analysis + ': ' if args.analysis else ''}{report.message}"
+    print(f"figure written to {draw_report(assembly, report, args.output, title=title, view=tuple(args.view))}")
+    return 0
+
+
+def _progress(report, total: int) -> None:
+    print(f"  step {report.step_index + 1}/{total}: {report.block_placed} {report.status.name}",
+          file=sys.stderr)
+
+
+def _prepare_bag_dir(path: Path, force: bool) -> None:
+    if path.exists():
+        if not force:
+            raise SceneError(f"bag directory {str(path)!r} exists (use --force to replace it)")
+        shutil.rmtree(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+
+
+def _record(path: Path, scene: Scene, reports) -> None:
+    """Write the scene's state and every report, as the node would have published them."""
+    from .bag import BagWriter
+    from .messages import header_dict, report_to_dict, state_to_dict
+
+    stamp = time.time_ns()
+    with BagWriter(path) as bag:
+        bag.add_topic(STATE_TOPIC, "rbe_msgs/msg/AssemblyState")
+        bag.add_topic(REPORT_TOPIC, "rbe_msgs/msg/StabilityReport", transient_local=True)
+        bag.write(STATE_TOPIC, state_to_dict(scene, "world", stamp), stamp)
+        header = header_dict("world", stamp)
+        for k, report in enumerate(reports):
+            bag.write(REPORT_TOPIC, report_to_dict(report, header), stamp + k + 1)
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.run(args)
+    except (SceneError, ValueError, OSError) as exc:
+        print(f"rbe-ros: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

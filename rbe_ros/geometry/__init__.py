@@ -1,0 +1,1 @@
+"""Geometry: posed convex blocks, their planar faces, contact interfaces and kerns."""

@@ -1,0 +1,80 @@
+"""Planar polygons in 3D: a frame on a plane, projection to and lifting from 2D."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def newell_normal(points: np.ndarray) -> np.ndarray:
+    """Unit normal of a (possibly non-convex) planar polygon, oriented by its winding."""
+    p, q = points, np.roll(points, -1, axis=0)
+    n = np.array([np.sum((p[:, 1] - q[:, 1]) * (p[:, 2] + q[:, 2])),
+                  np.sum((p[:, 2] - q[:, 2]) * (p[:, 0] + q[:, 0])),
+                  np.sum((p[:, 0] - q[:, 0]) * (p[:, 1] + q[:, 1]))])
+    length = np.linalg.norm(n)
+    return n / length if length > 0 else n
+
+
+def tangent_basis(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors u, v with (u, v, normal) right-handed; deterministic for a given normal."""
+    helper = np.array([1.0, 0.0, 0.0]) if abs(normal[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    u = np.cross(helper, normal)
+    u /= np.linalg.norm(u)
+    return u, np.cross(normal, u)
+
+
+@dataclass(frozen=True)
+class PlaneFrame:
+    """Origin and right-handed axes (u, v, n) of a plane."""
+
+    origin: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+    n: np.ndarray
+
+    def to_2d(self, points: np.ndarray) -> np.ndarray:
+        d = np.asarray(points) - self.origin
+        return np.column_stack((d @ self.u, d @ self.v))
+
+    def to_3d(self, points2d: np.ndarray) -> np.ndarray:
+        p = np.asarray(points2d)
+        return self.origin + np.outer(p[:, 0], self.u) + np.outer(p[:, 1], self.v)
+
+
+def area_moments(poly2d: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """Area A, centroid G and second-moment tensor J_G = int (r-G)(r-G)^T dA of a simple polygon.
+
+    Counter-clockwise vertices give a positive area (the Green's-theorem sums of paper Eq. 1-5).
+    """
+    x, y = poly2d[:, 0], poly2d[:, 1]
+    xn, yn = np.roll(x, -1), np.roll(y, -1)
+    cross = x * yn - xn * y
+    area = 0.5 * cross.sum()
+    cx = ((x + xn) * cross).sum() / (6 * area)
+    cy = ((y + yn) * cross).sum() / (6 * area)
+    ixx = ((x * x + x * xn + xn * xn) * cross).sum() / 12   # int x^2 dA about the origin
+    iyy = ((y * y + y * yn + yn * yn) * cross).sum() / 12
+    ixy = ((x * yn + 2 * x * y + 2 * xn * yn + xn * y) * cross).sum() / 24
+    j = np.array([[ixx - area * cx * cx, ixy - area * cx * cy],
+                  [ixy - area * cx * cy, iyy - area * cy * cy]])
+    return float(area), np.array([cx, cy]), j
+
+
+def drop_collinear(points: np.ndarray, tol: float) -> np.ndarray:
+    """The polygon without vertices within ``tol`` of the line through their neighbours
+    (clipping leaves such vertices on straight edges; shapely's simplify keeps the ring's
+    start point whatever it is)."""
+    pts = np.asarray(points, dtype=float)
+    changed = True
+    while changed and len(pts) > 3:
+        prev, nxt = np.roll(pts, 1, axis=0), np.roll(pts, -1, axis=0)
+        chord = nxt - prev
+        length = np.linalg.norm(chord, axis=1)
+        cross = chord[:, 0] * (pts - prev)[:, 1] - chord[:, 1] * (pts - prev)[:, 0]
+        dist = np.abs(cross) / np.where(length > 0, length, 1.0)
+        worst = int(np.argmin(dist))
+        changed = dist[worst] <= tol
+        if changed:
+            pts = np.delete(pts, worst, axis=0)
+    return pts

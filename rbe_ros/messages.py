@@ -1,0 +1,254 @@
+"""Conversions between core objects and *message dicts* (the single place that knows the layout).
+
+A message dict is a plain nested dict/list shaped exactly like the ROS message, as
+``rosidl_runtime_py.message_to_ordereddict`` gives it: field names as keys, nested messages as
+dicts (``geometry_msgs/Point`` as ``{"x", "y", "z"}``), arrays as lists, numbers as Python
+``float``/``int``. The ROS node turns them into rclpy messages with
+``rosidl_runtime_py.set_message_fields``; :mod:`rbe_ros.bag` turns them into rosbags objects.
+Nothing here imports rclpy or the generated ``rbe_msgs`` package.
+
+Incoming dicts may omit fields: a missing field takes the ROS default (zeros, empty arrays,
+identity quaternion), exactly as ``set_message_fields`` would leave it.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+from .rbe.result import InterfaceResult, Report, Status
+from .scene import (BOX_FACES, Scene, SceneError, box_vertices, make_block,
+                    make_scene)
+
+SOLID_PRIMITIVE_BOX = 1  # shape_msgs/SolidPrimitive.BOX
+_XYZ = ("x", "y", "z")
+_XYZW = ("x", "y", "z", "w")
+
+
+# --- small helpers ----------------------------------------------------------------------------
+
+def _vec(v, keys=_XYZ) -> dict:
+    """A Point/Vector3 (or Quaternion with ``keys=_XYZW``) dict from a sequence of numbers."""
+    return {k: float(x) for k, x in zip(keys, v)}
+
+
+def _vecs(rows) -> list[dict]:
+    return [_vec(r) for r in np.asarray(rows, dtype=float).reshape(-1, 3)]
+
+
+def _floats(values) -> list[float]:
+    return [float(x) for x in np.asarray(values, dtype=float).ravel()]
+
+
+def _field(d, key: str, default, what: str):
+    """``d[key]`` with a ROS default for a missing key; ``d`` must be a mapping."""
+    if not isinstance(d, Mapping):
+        raise SceneError(f"{what} must be a mapping (message dict), got {type(d).__name__}")
+    value = d.get(key, default)
+    return default if value is None else value
+
+
+def _list(d, key: str, what: str) -> list:
+    value = _field(d, key, [], what)
+    if isinstance(value, (str, bytes, Mapping)) or not hasattr(value, "__iter__"):
+        raise SceneError(f"{what}.{key} must be a list, got {type(value).__name__}")
+    return list(value)
+
+
+def _number(d, key: str, what: str) -> float:
+    value = _field(d, key, 0.0, what)
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise SceneError(f"{what}: {key} must be a number, got {value!r}") from None
+
+
+def _xyz(d, what: str, keys=_XYZ, default=None) -> list:
+    """Numbers of a Point/Vector3/Quaternion dict (validated later by make_block/make_scene)."""
+    default = default or (0.0,) * len(keys)
+    return [_field(d, k, dflt, what) for k, dflt in zip(keys, default)]
+
+
+def _points(points) -> np.ndarray:
+    """(n, 3) array from a list of Point/Vector3 dicts."""
+    return np.array([[float(p[k]) for k in _XYZ] for p in points], dtype=float).reshape(-1, 3)
+
+
+def header_dict(frame_id: str, stamp_ns: int) -> dict:
+    """A std_msgs/Header dict (stamp split into sec and nanosec)."""
+    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
+    return {"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": str(frame_id)}
+
+
+def header_stamp_ns(header: Mapping) -> int:
+    """Nanoseconds of a Header dict's stamp."""
+    stamp = header.get("stamp") or {}
+    return int(stamp.get("sec", 0)) * 1_000_000_000 + int(stamp.get("nanosec", 0))
+
+
+# --- AssemblyState ----------------------------------------------------------------------------
+
+def _fan(face) -> list[dict]:
+    """Fan triangulation of a convex polygon face as shape_msgs/MeshTriangle dicts."""
+    return [{"vertex_indices": [int(face[0]), int(face[i]), int(face[i + 1])]}
+            for i in range(1, len(face) - 1)]
+
+
+def _block_to_dict(b) -> dict:
+    return {
+        "id": b.id,
+        "pose": {"position": _vec(b.position), "orientation": _vec(b.orientation, _XYZW)},
+        "primitive": {"type": 0, "dimensions": [], "polygon": {"points": []}},
+        "mesh": {"triangles": [t for f in b.faces for t in _fan(f)], "vertices": _vecs(b.vertices)},
+        "density": float(b.density),
+        "mass": float(b.mass),
+        "support": bool(b.support),
+    }
+
+
+def state_to_dict(scene: Scene, frame_id: str = "world", stamp_ns: int = 0) -> dict:
+    """An rbe_msgs/AssemblyState dict of ``scene``; every block is sent as a triangle mesh."""
+    return {
+        "header": header_dict(frame_id, stamp_ns),
+        "blocks": [_block_to_dict(b) for b in scene.blocks],
+        "sequence": list(scene.sequence),
+        "gravity": _vec(scene.gravity),
+    }
+
+
+def _block_from_dict(index: int, raw):
+    if not isinstance(raw, Mapping):
+        raise SceneError(f"block #{index} must be a mapping (message dict), "
+                         f"got {type(raw).__name__}")
+    bid = raw.get("id")
+    if not isinstance(bid, str) or not bid:
+        raise SceneError(f"block #{index} has no id (a non-empty string)")
+    where = f"block {bid!r}"
+    pose = _field(raw, "pose", {}, where)
+    position = _xyz(_field(pose, "position", {}, f"{where}: pose"), f"{where}: pose.position")
+    orientation = _xyz(_field(pose, "orientation", {}, f"{where}: pose"),
+                       f"{where}: pose.orientation", _XYZW, (0.0, 0.0, 0.0, 1.0))
+    mesh = _field(raw, "mesh", {}, where)
+    triangles = _list(mesh, "triangles", f"{where}: mesh")
+    if triangles:
+        vertices = [_xyz(p, f"{where}: mesh vertex")
+                    for p in _list(mesh, "vertices", f"{where}: mesh")]
+        faces = []
+        for t in triangles:
+            idx = _list(t, "vertex_indices", f"{where}: mesh triangle")
+            if len(idx) != 3:
+                raise SceneError(f"{where}: a mesh triangle needs 3 vertex indices, got {len(idx)}")
+            faces.append(idx)
+        if not vertices:
+            raise SceneError(f"{where}: mesh has triangles but no vertices")
+    else:
+        prim = _field(raw, "primitive", {}, where)
+        ptype = _field(prim, "type", 0, f"{where}: primitive")
+        dims = _list(prim, "dimensions", f"{where}: primitive")
+        if ptype != SOLID_PRIMITIVE_BOX:
+            raise SceneError(f"{where}: no shape: give mesh triangles or a BOX primitive "
+                             f"(type {SOLID_PRIMITIVE_BOX}), got primitive type {ptype!r}")
+        try:
+            size = np.asarray(dims, dtype=float)
+        except (TypeError, ValueError):
+            raise SceneError(f"{where}: BOX dimensions must be numbers") from None
+        if size.shape != (3,) or not np.all(np.isfinite(size)) or np.any(size <= 0):
+            raise SceneError(f"{where}: a BOX needs 3 positive finite dimensions (full edge "
+                             f"lengths), got {dims!r}")
+        vertices, faces = box_vertices(size), BOX_FACES
+    return make_block(bid, vertices, faces, position, orientation,
+                      density=_number(raw, "density", where), mass=_number(raw, "mass", where),
+                      support=bool(_field(raw, "support", False, where)))
+
+
+def scene_from_state_dict(d) -> Scene:
+    """The validated scene of an rbe_msgs/AssemblyState dict (raises :class:`SceneError`).
+
+    Mesh blocks keep their triangles as faces (no merging of coplanar triangles here).
+    The scene is named after the header frame ("assembly" when empty).
+    """
+    if not isinstance(d, Mapping):
+        raise SceneError("an AssemblyState must be a mapping (message dict), "
+                         f"got {type(d).__name__}")
+    blocks = [_block_from_dict(i, b) for i, b in enumerate(_list(d, "blocks", "AssemblyState"))]
+    sequence = _list(d, "sequence", "AssemblyState")
+    if not all(isinstance(s, str) for s in sequence):
+        raise SceneError("AssemblyState.sequence must be a list of block ids (strings)")
+    gravity = _xyz(_field(d, "gravity", {}, "AssemblyState"), "AssemblyState.gravity")
+    name = _field(_field(d, "header", {}, "AssemblyState"), "frame_id", "", "AssemblyState.header")
+    return make_scene(str(name) or "assembly", blocks, gravity, sequence)  # zero gravity: default
+
+
+# --- StabilityReport --------------------------------------------------------------------------
+
+def _interface_to_dict(r: InterfaceResult) -> dict:
+    return {
+        "block_a": r.block_a,
+        "block_b": r.block_b,
+        "normal": _vec(r.normal),
+        "polygon": _vecs(r.polygon),
+        "normal_forces": _floats(r.normal_forces),
+        "tangential_forces": _vecs(r.tangential_forces),
+        "resultant_force": _vec(r.resultant),
+        "normal_resultant": float(r.normal_resultant),
+        "shear_resultant": _vec(r.shear),
+        "centre_of_pressure": _vec(r.centre_of_pressure),
+        "torque": float(r.torque),
+        "kern": _vecs(r.kern),
+        "friction_ratio": float(r.friction_ratio),
+        "tension": bool(r.tension),
+        "friction_exceeded": bool(r.friction_exceeded),
+    }
+
+
+def _interface_from_dict(d: Mapping) -> InterfaceResult:
+    return InterfaceResult(
+        block_a=d["block_a"], block_b=d["block_b"],
+        normal=_points([d["normal"]])[0],
+        polygon=_points(d["polygon"]),
+        normal_forces=np.asarray(d["normal_forces"], dtype=float).reshape(-1),
+        tangential_forces=_points(d["tangential_forces"]),
+        resultant=_points([d["resultant_force"]])[0],
+        normal_resultant=float(d["normal_resultant"]),
+        shear=_points([d["shear_resultant"]])[0],
+        centre_of_pressure=_points([d["centre_of_pressure"]])[0],
+        torque=float(d["torque"]),
+        kern=_points(d["kern"]),
+        friction_ratio=float(d["friction_ratio"]),
+        tension=bool(d["tension"]),
+        friction_exceeded=bool(d["friction_exceeded"]),
+    )
+
+
+def report_to_dict(report: Report, header: dict) -> dict:
+    """An rbe_msgs/StabilityReport dict of ``report`` (``header``: see :func:`header_dict`)."""
+    return {
+        "header": header,
+        "step_index": int(report.step_index),
+        "block_placed": str(report.block_placed),
+        "stable": bool(report.stable),
+        "status": int(report.status),
+        "max_tension": float(report.max_tension),
+        "worst_friction_ratio": float(report.worst_friction_ratio),
+        "solve_time": float(report.solve_time),
+        "num_blocks": int(report.num_blocks),
+        "interfaces": [_interface_to_dict(r) for r in report.interfaces],
+        "unstable_blocks": [str(b) for b in report.unstable_blocks],
+        "message": str(report.message),
+    }
+
+
+def report_from_dict(d: Mapping) -> Report:
+    """The :class:`Report` of a StabilityReport dict (header dropped; numpy arrays restored)."""
+    return Report(
+        stable=bool(d["stable"]), status=Status(int(d["status"])), message=str(d["message"]),
+        max_tension=float(d["max_tension"]), worst_friction_ratio=float(d["worst_friction_ratio"]),
+        solve_time=float(d["solve_time"]), num_blocks=int(d["num_blocks"]),
+        interfaces=[_interface_from_dict(i) for i in d["interfaces"]],
+        unstable_blocks=[str(b) for b in d["unstable_blocks"]],
+        step_index=int(d["step_index"]), block_placed=str(d["block_placed"]),
+    )
+
+
+__all__ = ["SOLID_PRIMITIVE_BOX", "header_dict", "header_stamp_ns", "state_to_dict",
+           "scene_from_state_dict", "report_to_dict", "report_from_dict"]

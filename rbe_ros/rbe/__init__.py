@@ -1,0 +1,1 @@
+"""The RBE model: equilibrium matrices, friction cones, the conic solve and its results."""

@@ -1,0 +1,113 @@
+"""Equilibrium of the free blocks in terms of the interface vertex forces (paper Eq. 8-10).
+
+Every interface vertex i carries f_i = (fn+_i - fn-_i) n + fu_i u + fv_i v, the force that
+block a exerts on block b there. For every free block j (supports are left unbalanced):
+
+    sum_k s_jk f_k                    = -w_j         (forces)
+    sum_k s_jk (x_k - c_j) x f_k      =  0           (moments about the centroid c_j)
+
+with s = +1 where j is side b and -1 where it is side a. The variables are stored by kind,
+x = [fn+, fn-, fu, fv] (nv each), and the system is scaled to forces in units of the total
+free weight W and lever arms in units of the scene length L, so that the solver works on
+numbers of order one whatever the units of the scene.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..geometry.block import PosedBlock
+from ..geometry.contacts import Interface
+
+#: Variable kinds in the order they are stacked.
+KINDS = ("fn_pos", "fn_neg", "fu", "fv")
+
+
+@dataclass(frozen=True)
+class EquilibriumModel:
+    """A_eq x = b_eq for the scaled vertex forces x, with what is needed to read x back."""
+
+    blocks: tuple[PosedBlock, ...]
+    interfaces: tuple[Interface, ...]
+    free: np.ndarray             # indices of the free blocks (rows 6r..6r+5 are block free[r])
+    a_eq: sp.csc_matrix          # (6 m, 4 nv)
+    dead_load: np.ndarray        # (6 m,) scaled p for gravity: b_eq = -p
+    vertex_interface: np.ndarray  # (nv,) interface index of each vertex
+    points: np.ndarray           # (nv, 3) world
+    normal: np.ndarray           # (nv, 3) per-vertex n, u, v of its interface
+    u: np.ndarray
+    v: np.ndarray
+    force_scale: float           # W in N
+    length_scale: float          # L in m
+
+    @property
+    def num_vertices(self) -> int:
+        return len(self.points)
+
+    def load(self, acceleration: np.ndarray) -> np.ndarray:
+        """Scaled load vector p of the free blocks' weights under ``acceleration`` (m/s^2)."""
+        return _weights(self.blocks, self.free, acceleration, self.force_scale)
+
+
+def _weights(blocks, free, acceleration, force_scale) -> np.ndarray:
+    """Weights m_j a of the free blocks, acting at their centroids (so no moment)."""
+    masses = np.array([blocks[j].mass for j in free])
+    p = np.zeros((len(free), 6))
+    p[:, :3] = masses[:, None] * np.asarray(acceleration)[None, :] / force_scale
+    return p.ravel()
+
+
+def build_model(blocks, interfaces, gravity) -> EquilibriumModel:
+    """Assemble the scaled equilibrium matrix of the free blocks (vectorised over vertices)."""
+    blocks, interfaces = tuple(blocks), tuple(interfaces)
+    gravity = np.asarray(gravity, dtype=float)
+    free = np.array([j for j, b in enumerate(blocks) if not b.support], dtype=int)
+    row_of = np.full(len(blocks), -1)
+    row_of[free] = np.arange(len(free))
+
+    counts = [len(it.points) for it in interfaces]
+    vi = np.repeat(np.arange(len(interfaces)), counts).astype(int)
+    nv = len(vi)
+    if nv:
+        points = np.concatenate([it.points for it in interfaces])
+        n, u, v = (np.repeat(np.array([getattr(it.frame, k) for it in interfaces]), counts, axis=0)
+                   for k in "nuv")
+    else:
+        points = n = u = v = np.zeros((0, 3))
+
+    weight = float(sum(blocks[j].mass for j in free)) * float(np.linalg.norm(gravity))
+    force_scale = weight if weight > 0 else 1.0
+    centroids = np.array([b.centroid for b in blocks]) if blocks else np.zeros((0, 3))
+    extent = np.ptp(centroids, axis=0).max() if len(blocks) > 1 else 0.0
+    length_scale = float(max(extent, max((b.size for b in blocks), default=1.0)))
+
+    # basis[:, k, :] is the world force of a unit value of variable kind k at each vertex
+    basis = np.stack((n, -n, u, v), axis=1)                            # (nv, 4, 3)
+    cols = (np.arange(4)[None, :] * nv + np.arange(nv)[:, None])       # (nv, 4)
+    rows, cols_all, vals = [], [], []
+    a_side = np.array([it.a for it in interfaces], dtype=int)[vi] if nv else np.zeros(0, int)
+    b_side = np.array([it.b for it in interfaces], dtype=int)[vi] if nv else np.zeros(0, int)
+    for side, sign in ((a_side, -1.0), (b_side, 1.0)):
+        r = row_of[side]
+        on = r >= 0
+        if not np.any(on):
+            continue
+        arm = (points[on] - centroids[side[on]]) / length_scale
+        force = sign * basis[on]                                       # (k, 4, 3)
+        moment = np.cross(arm[:, None, :], force)                      # (k, 4, 3)
+        block_rows = 6 * r[on][:, None, None] + np.arange(6)[None, None, :]
+        entries = np.concatenate((force, moment), axis=2)              # (k, 4, 6)
+        rows.append(np.broadcast_to(block_rows, entries.shape).ravel())
+        cols_all.append(np.broadcast_to(cols[on][:, :, None], entries.shape).ravel())
+        vals.append(entries.ravel())
+    shape = (6 * len(free), 4 * nv)
+    if rows:
+        a_eq = sp.csc_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols_all))),
+                             shape=shape)
+    else:
+        a_eq = sp.csc_matrix(shape)
+    return EquilibriumModel(blocks, interfaces, free, a_eq,
+                            _weights(blocks, free, gravity, force_scale), vi,
+                            points, n, u, v, force_scale, length_scale)

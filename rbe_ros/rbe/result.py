@@ -1,0 +1,56 @@
+"""Results of an RBE check: per-interface forces and resultants, and the verdict."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import IntEnum
+
+import numpy as np
+
+
+class Status(IntEnum):
+    """Verdict codes, equal to the constants of rbe_msgs/StabilityReport."""
+
+    STABLE = 0
+    TENSION_REQUIRED = 1
+    FRICTION_EXCEEDED = 2
+    INFEASIBLE = 3
+    SOLVER_FAILED = 4
+    INVALID_INPUT = 5
+
+
+@dataclass(frozen=True)
+class InterfaceResult:
+    """Forces block_a exerts on block_b over one contact polygon (SI units, assembly frame)."""
+
+    block_a: str
+    block_b: str
+    normal: np.ndarray              # (3,) unit, from a into b
+    polygon: np.ndarray             # (k, 3) vertices where the forces act
+    normal_forces: np.ndarray       # (k,) signed: + compression, - tension
+    tangential_forces: np.ndarray   # (k, 3)
+    resultant: np.ndarray           # (3,) total force
+    normal_resultant: float         # N
+    shear: np.ndarray               # (3,) V
+    centre_of_pressure: np.ndarray  # (3,)
+    torque: float                   # about the normal through the centre of pressure
+    kern: np.ndarray                # (m, 3)
+    friction_ratio: float           # |V| / N
+    tension: bool
+    friction_exceeded: bool
+
+
+@dataclass
+class Report:
+    """Verdict of one check of an assembly or of one step of a sequence."""
+
+    stable: bool
+    status: Status
+    message: str
+    max_tension: float = 0.0
+    worst_friction_ratio: float = 0.0
+    solve_time: float = 0.0
+    num_blocks: int = 0
+    interfaces: list[InterfaceResult] = field(default_factory=list)
+    unstable_blocks: list[str] = field(default_factory=list)
+    step_index: int = -1
+    block_placed: str = ""

@@ -1,0 +1,132 @@
+"""COMPAS Assembly JSON: the bundled sample, round trips, and compas_cra's own samples.
+
+tests/data/compas_two_cubes.json is ``generators.two_blocks(shift=0.2, height=1.0)`` written by
+``save_compas_assembly``, loaded with compas 2.15.1 / compas_assembly 0.7.1, solved by
+compas_cra 0.8.0 ``rbe_solve`` (density 1, so its forces sum to the unit volume) and written
+back with ``compas.json_dump``: the format as COMPAS itself writes it, with the authors' forces.
+The compas_cra samples are found through $RBE_COMPAS_SAMPLES or an importable compas_cra.
+"""
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rbe_ros import generators as gen
+from rbe_ros.analysis.assembly import Assembly
+from rbe_ros.analysis.check import CheckOptions, check_scene
+from rbe_ros.compas_io import (compas_interfaces, compas_samples_dir, load_compas_assembly,
+                               save_compas_assembly)
+from rbe_ros.geometry.block import pose_block
+from rbe_ros.geometry.contacts import ContactOptions
+from rbe_ros.rbe.result import Status
+from rbe_ros.rbe.solver import SolveOptions
+from rbe_ros.scene import SceneError
+
+SAMPLE = Path(__file__).parent / "data" / "compas_two_cubes.json"
+SAMPLES = compas_samples_dir()
+needs_samples = pytest.mark.skipif(SAMPLES is None, reason="compas_cra samples not available"
+                                   " (set RBE_COMPAS_SAMPLES or install compas-cra)")
+
+
+def test_bundled_sample_loads_blocks_supports_and_density():
+    scene = load_compas_assembly(SAMPLE)
+    assert [b.id for b in scene.blocks] == ["base", "top"]
+    assert [b.support for b in scene.blocks] == [True, False]
+    assert [b.density for b in scene.blocks] == [2000.0, 2000.0]
+    posed = [pose_block(b) for b in scene.blocks]
+    assert [p.volume for p in posed] == pytest.approx([1.0, 1.0])
+    assert posed[1].centroid == pytest.approx([0.2, 0.0, 1.5])
+
+
+def test_bundled_sample_interfaces_and_forces_match_ours():
+    stored = compas_interfaces(SAMPLE)
+    assert len(stored) == 1
+    it = stored[0]
+    assert (it.a, it.b) == ("0", "1") and it.size == pytest.approx(0.8)
+    assert it.normal == pytest.approx([0, 0, 1]) and it.origin == pytest.approx([0.1, 0, 1])
+    ours = Assembly.from_scene(load_compas_assembly(SAMPLE)).interfaces
+    assert len(ours) == 1
+    key = lambda p: tuple(np.round(p, 9))                                  # noqa: E731
+    assert sorted(map(key, ours[0].points)) == sorted(map(key, it.points))
+    # the same QP (weights 1, 1e6, 1) gives compas_cra's vertex forces up to the load scale
+    report = check_scene(load_compas_assembly(SAMPLE))
+    assert report.status == Status.STABLE
+    mine = {key(p): f for p, f in zip(report.interfaces[0].polygon, report.interfaces[0].normal_forces)}
+    theirs = {key(p): f for p, f in zip(it.points, it.forces[:, 0] - it.forces[:, 1])}
+    assert it.forces[:, 0].sum() == pytest.approx(1.0, rel=1e-6)
+    total = sum(mine.values())
+    for p, f in theirs.items():
+        assert mine[p] / total == pytest.approx(f, abs=1e-6)               # 0.3125 and 0.1875
+
+
+def test_supports_argument_replaces_the_flags():
+    scene = load_compas_assembly(SAMPLE, supports=[1])
+    assert [b.support for b in scene.blocks] == [False, True]
+    with pytest.raises(SceneError, match="not in the assembly"):
+        load_compas_assembly(SAMPLE, supports=["7"])
+    assert {b.density for b in load_compas_assembly(SAMPLE, density=1800).blocks} == {1800.0}
+
+
+def test_compas1_key_names_are_understood(tmp_path):
+    text = SAMPLE.read_text().replace('"data":', '"value":')
+    text = text.replace('"default_node_attributes"', '"dna"').replace('"default_vertex_attributes"', '"dva"')
+    old = tmp_path / "old.json"
+    old.write_text(text)
+    a, b = load_compas_assembly(old), load_compas_assembly(SAMPLE)
+    assert [x.id for x in a.blocks] == [x.id for x in b.blocks]
+    assert all(np.allclose(x.vertices, y.vertices) for x, y in zip(a.blocks, b.blocks))
+    assert len(compas_interfaces(old)) == 1
+
+
+def test_not_an_assembly_is_a_scene_error(tmp_path):
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"dtype": "compas.datastructures/Mesh", "data": {}}))
+    with pytest.raises(SceneError, match="not a COMPAS Assembly"):
+        load_compas_assembly(bad)
+    with pytest.raises(SceneError, match="cannot read"):
+        load_compas_assembly(tmp_path / "missing.json")
+
+
+def test_round_trip_keeps_geometry_supports_and_verdict(tmp_path):
+    scene = gen.buttressed_arch()
+    path = tmp_path / "arch.json"
+    save_compas_assembly(scene, path)
+    back = load_compas_assembly(path)
+    assert [b.id for b in back.blocks] == [b.id for b in scene.blocks]
+    assert [b.support for b in back.blocks] == [b.support for b in scene.blocks]
+    for b0, b1 in zip(scene.blocks, back.blocks):
+        p0, p1 = pose_block(b0), pose_block(b1)
+        assert p1.volume == pytest.approx(p0.volume) and np.allclose(p1.centroid, p0.centroid)
+        assert p1.mass == pytest.approx(p0.mass)
+    assert len(compas_interfaces(path)) == len(Assembly.from_scene(scene).interfaces) == 26
+    options = CheckOptions(SolveOptions(mu=0.8), mu_threshold=0.6)
+    assert check_scene(back, options).status == check_scene(scene, options).status == Status.STABLE
+
+
+@needs_samples
+def test_bridge_sample_loads_and_checks():
+    # compas_cra's example 09_bridge.py fixes nodes 0 and 1
+    scene = load_compas_assembly(SAMPLES / "bridge.json", supports=[0, 1])
+    assert len(scene.blocks) == 16 and sum(b.support for b in scene.blocks) == 2
+    report = check_scene(scene, CheckOptions(SolveOptions(mu=0.6)))
+    assert isinstance(report.status, Status) and report.num_blocks == 16
+    assert report.stable
+
+
+@needs_samples
+def test_armadillo_sample_loads_and_checks():
+    stored = compas_interfaces(SAMPLES / "armadillo_cra.json")
+    supports = {b.id for b in load_compas_assembly(SAMPLES / "armadillo_cra.json").blocks if b.support}
+    assert len(stored) == 1014 and len(supports) == 33
+    scene = load_compas_assembly(SAMPLES / "armadillo.json", supports=supports)
+    assert len(scene.blocks) == 399
+    # its faces are a few percent of a block apart: detect with compas_cra's looser tolerance
+    contact = ContactOptions(distance_tol=0.05, angle_tol_deg=5.0)
+    assembly = Assembly.from_scene(scene, contact)
+    ids = [b.id for b in assembly.blocks]
+    ours = {frozenset((ids[it.a], ids[it.b])) for it in assembly.interfaces}
+    assert {frozenset((it.a, it.b)) for it in stored} <= ours
+    report = check_scene(scene, CheckOptions(SolveOptions(mu=0.6), contact=contact))
+    assert isinstance(report.status, Status) and report.num_blocks == 399
+    assert report.stable

@@ -1,0 +1,274 @@
+"""Message dicts (rbe_ros.messages) and rosbag2 MCAP bags (rbe_ros.bag), without ROS."""
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from rosbags.highlevel import AnyReader
+from ruamel.yaml import YAML
+
+from rbe_ros import bag, messages
+from rbe_ros.rbe.result import InterfaceResult, Report, Status
+from rbe_ros.scene import SceneError, box_block, box_vertices, make_block, make_scene
+
+REPO = Path(__file__).resolve().parents[1]
+Q = np.array([0.0, 0.0, math.sin(0.3), math.cos(0.3)])  # 0.6 rad about z
+TETRA = np.array([[0, 0, 0], [0.3, 0, 0], [0, 0.3, 0], [0, 0, 0.3]], dtype=float)
+TETRA_FACES = [(0, 2, 1), (0, 1, 3), (0, 3, 2), (1, 2, 3)]
+
+
+def scene():
+    return make_scene("lab", [
+        box_block("ground", (2, 2, 0.2), (0, 0, -0.1), support=True, mass=1.0),
+        box_block("a", (0.2, 0.3, 0.4), (0.1, 0.0, 0.2), Q, density=2400.0),
+        make_block("t", TETRA, TETRA_FACES, (0.5, 0.5, 0.0), mass=3.5),
+    ], gravity=(0.0, 0.1, -9.8), sequence=["t", "a"])
+
+
+def report():
+    square = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)
+    iface = InterfaceResult(
+        block_a="ground", block_b="a", normal=np.array([0.0, 0.0, 1.0]), polygon=square,
+        normal_forces=np.array([10.0, 20.5, -1.25, 7.0]),
+        tangential_forces=np.array([[0.1, 0, 0], [0, 0.2, 0], [0, 0, 0], [0.3, 0.3, 0]]),
+        resultant=np.array([0.4, 0.5, 36.25]), normal_resultant=36.25,
+        shear=np.array([0.4, 0.5, 0.0]), centre_of_pressure=np.array([0.45, 0.37, 0.0]),
+        torque=-0.125, kern=square[:3] * 0.5, friction_ratio=math.inf, tension=True,
+        friction_exceeded=False)
+    return Report(stable=False, status=Status.TENSION_REQUIRED, message="needs glue",
+                  max_tension=1.25, worst_friction_ratio=0.0177, solve_time=0.004, num_blocks=3,
+                  interfaces=[iface], unstable_blocks=["a"], step_index=1, block_placed="a")
+
+
+# --- messages ---------------------------------------------------------------------------------
+
+def test_state_round_trip():
+    s = scene()
+    d = messages.state_to_dict(s, "map", 1_500_000_000_123)
+    assert d["header"] == {"stamp": {"sec": 1500, "nanosec": 123}, "frame_id": "map"}
+    assert d["gravity"] == {"x": 0.0, "y": 0.1, "z": -9.8}
+    assert len(d["blocks"][0]["mesh"]["triangles"]) == 12  # 6 quads fanned
+    back = messages.scene_from_state_dict(d)
+    assert back.name == "map" and back.sequence == ("t", "a")
+    np.testing.assert_allclose(back.gravity, s.gravity)
+    for a, b in zip(s.blocks, back.blocks):
+        assert (a.id, a.mass, a.density, a.support) == (b.id, b.mass, b.density, b.support)
+        np.testing.assert_allclose(b.vertices, a.vertices)
+        np.testing.assert_allclose(b.position, a.position)
+        np.testing.assert_allclose(b.orientation, a.orientation)
+        assert all(len(f) == 3 for f in b.faces)
+
+
+def test_box_primitive_and_defaults():
+    d = {"blocks": [
+        {"id": "g", "primitive": {"type": 1, "dimensions": [1.0, 1.0, 0.1]}, "mass": 5.0,
+         "support": True},
+        {"id": "b", "pose": {"position": {"x": 0.0, "y": 0.0, "z": 0.3}},
+         "primitive": {"type": 1, "dimensions": [0.2, 0.2, 0.4]}, "density": 1000.0}]}
+    s = messages.scene_from_state_dict(d)
+    assert s.name == "assembly"
+    np.testing.assert_allclose(s.gravity, [0, 0, -9.81])
+    np.testing.assert_allclose(s.block("b").vertices, box_vertices((0.2, 0.2, 0.4)))
+    np.testing.assert_allclose(s.block("b").orientation, [0, 0, 0, 1])
+
+
+def _state(**change):
+    d = messages.state_to_dict(scene())
+    for path, value in change.items():
+        *keys, last = path.split("__")
+        target = d
+        for k in keys:
+            target = target[int(k)] if isinstance(target, list) else target[k]
+        target[int(last) if isinstance(target, list) else last] = value
+    return d
+
+
+@pytest.mark.parametrize("d, reason", [
+    (_state(blocks__1__pose__position__y=math.nan), "position contain NaN"),
+    (_state(blocks__1__pose__orientation={"x": 0.0, "y": 0.0, "z": 0.0, "w": 0.0}), "unit norm"),
+    (_state(blocks__2__id="a"), "duplicate block id 'a'"),
+    (_state(sequence=["t", "ghost"]), "sequence names block 'ghost'"),
+    (_state(blocks__2__mesh={"triangles": [], "vertices": []}), "block 't': no shape"),
+    (_state(blocks__2__mesh__triangles__0={"vertex_indices": [0, 1]}), "3 vertex indices"),
+    (_state(blocks__2__mesh__triangles__0={"vertex_indices": [0, 1, 9]}), "existing vertices"),
+    (_state(blocks__2__mass=0.0), "exactly one of a positive density"),
+    (_state(blocks__2__mass="heavy"), "mass must be a number"),
+    (_state(blocks__2__mesh__triangles__0={"vertex_indices": 7}), "vertex_indices must be a list"),
+    (_state(blocks__1__primitive={"type": 1, "dimensions": [0.2, -1.0, 0.1]},
+            blocks__1__mesh={"triangles": [], "vertices": []}), "3 positive finite dimensions"),
+    (_state(blocks__0__pose="nope"), "pose must be a mapping"),
+    (_state(blocks__0__id=""), "block #0 has no id"),
+    (_state(blocks=[]), "no blocks"),
+    ([], "must be a mapping"),
+])
+def test_malformed_state(d, reason):
+    with pytest.raises(SceneError) as err:
+        messages.scene_from_state_dict(d)
+    assert reason in str(err.value) and "\n" not in str(err.value)
+
+
+def test_report_round_trip():
+    r = report()
+    d = messages.report_to_dict(r, messages.header_dict("world", 42))
+    assert d["status"] == 1 and isinstance(d["status"], int)
+    assert d["interfaces"][0]["polygon"][2] == {"x": 1.0, "y": 1.0, "z": 0.0}
+    assert d["interfaces"][0]["normal_forces"] == [10.0, 20.5, -1.25, 7.0]
+    back = messages.report_from_dict(d)
+    assert back.status is Status.TENSION_REQUIRED and back.unstable_blocks == ["a"]
+    assert (back.step_index, back.block_placed, back.num_blocks) == (1, "a", 3)
+    a, b = r.interfaces[0], back.interfaces[0]
+    for name in ("normal", "polygon", "normal_forces", "tangential_forces", "resultant", "shear",
+                 "centre_of_pressure", "kern"):
+        np.testing.assert_array_equal(getattr(b, name), getattr(a, name))
+    assert b.polygon.shape == (4, 3) and b.kern.shape == (3, 3)
+    assert (b.friction_ratio, b.torque, b.tension) == (math.inf, -0.125, True)
+
+
+# --- bags -------------------------------------------------------------------------------------
+
+def _assert_matches(obj, expected, where="msg"):
+    """A rosbags/mcap_ros2 object equals a message dict, field by field (independent of bag.py)."""
+    if isinstance(expected, dict):
+        for key, value in expected.items():
+            _assert_matches(getattr(obj, key), value, f"{where}.{key}")
+    elif isinstance(expected, list):
+        items = obj.tolist() if isinstance(obj, np.ndarray) else list(obj)
+        assert len(items) == len(expected), where
+        for i, (o, e) in enumerate(zip(items, expected)):
+            _assert_matches(o, e, f"{where}[{i}]")
+    else:
+        assert obj == expected, f"{where}: {obj!r} != {expected!r}"
+
+
+@pytest.fixture
+def written(tmp_path):
+    state = messages.state_to_dict(scene(), "world", 1_000)
+    rep = messages.report_to_dict(report(), messages.header_dict("world", 1_000))
+    path = tmp_path / "rec"
+    with bag.BagWriter(path) as w:
+        w.add_topic("/rbe/assembly", "rbe_msgs/msg/AssemblyState", transient_local=True)
+        w.add_topic("/rbe/report", "rbe_msgs/msg/StabilityReport")
+        w.write("/rbe/assembly", state, 2_000)
+        w.write("/rbe/report", rep, 3_000)
+        # raw CDR bytes, as the node passes rclpy.serialization.serialize_message output
+        store = bag.typestore()
+        raw = store.serialize_cdr(bag.to_rosbags(store, "rbe_msgs/msg/StabilityReport", rep),
+                                  "rbe_msgs/msg/StabilityReport")
+        w.write("/rbe/report", bytes(raw), 4_000)
+    return path, state, rep
+
+
+def test_bag_reads_with_rosbags(written):
+    path, state, rep = written
+    with AnyReader([path]) as reader:
+        assert {c.topic: c.msgtype for c in reader.connections} == {
+            "/rbe/assembly": "rbe_msgs/msg/AssemblyState",
+            "/rbe/report": "rbe_msgs/msg/StabilityReport"}
+        got = [(c.topic, t, reader.deserialize(raw, c.msgtype)) for c, t, raw in reader.messages()]
+    assert [(topic, t) for topic, t, _ in got] == [
+        ("/rbe/assembly", 2_000), ("/rbe/report", 3_000), ("/rbe/report", 4_000)]
+    _assert_matches(got[0][2], state)
+    _assert_matches(got[1][2], rep)
+    _assert_matches(got[2][2], rep)
+    msg = got[1][2]
+    assert msg.status == 1 == msg.TENSION_REQUIRED and msg.stable is False
+    assert msg.interfaces[0].normal_forces[2] == -1.25
+    assert (msg.interfaces[0].centre_of_pressure.x, msg.interfaces[0].centre_of_pressure.y) == (0.45, 0.37)
+    assert math.isinf(msg.interfaces[0].friction_ratio)
+    assert got[0][2].blocks[2].mass == 3.5 and got[0][2].blocks[1].pose.orientation.w == pytest.approx(Q[3], abs=1e-15)
+
+
+def test_bag_mcap_layout(written):
+    path, state, _ = written
+    mcap_file = path / "rec_0.mcap"
+    assert sorted(p.name for p in path.iterdir()) == ["metadata.yaml", "rec_0.mcap"]
+    with mcap_file.open("rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        assert reader.get_header().profile == "ros2"
+        summary = reader.get_summary()
+        assert summary.statistics.message_count == 3
+        schemas = {s.name: s for s in summary.schemas.values()}
+        assert set(schemas) == {"rbe_msgs/msg/AssemblyState", "rbe_msgs/msg/StabilityReport"}
+        for s in schemas.values():
+            assert s.encoding == "ros2msg"
+            text = s.data.decode()
+            assert "=" * 80 + "\nMSG: std_msgs/Header\n" in text
+            assert "\nMSG: geometry_msgs/Point\n" in text
+        assert "\nMSG: rbe_msgs/Block\n" in schemas["rbe_msgs/msg/AssemblyState"].data.decode()
+        assert "\nMSG: rbe_msgs/InterfaceForces\n" in schemas["rbe_msgs/msg/StabilityReport"].data.decode()
+        durability = {}
+        for ch in summary.channels.values():
+            assert ch.message_encoding == "cdr"
+            assert ch.metadata["topic_type_hash"].startswith("RIHS01_")
+            (qos,) = YAML(typ="safe").load(ch.metadata["offered_qos_profiles"])
+            assert (qos["reliability"], qos["history"], qos["depth"]) == ("reliable", "keep_last", 10)
+            durability[ch.topic] = qos["durability"]
+        assert durability == {"/rbe/assembly": "transient_local", "/rbe/report": "volatile"}
+        # a second, independent decoder (mcap_ros2, what Foxglove-like tools use)
+        decoded = [m for _, _, _, m in reader.iter_decoded_messages(topics=["/rbe/assembly"])]
+    _assert_matches(decoded[0], state)
+
+    meta = YAML(typ="safe").load((path / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert (meta["version"], meta["storage_identifier"], meta["message_count"]) == (9, "mcap", 3)
+    assert meta["relative_file_paths"] == ["rec_0.mcap"]
+    assert (meta["starting_time"]["nanoseconds_since_epoch"], meta["duration"]["nanoseconds"]) == (2_000, 2_000)
+    counts = {t["topic_metadata"]["name"]: t["message_count"] for t in meta["topics_with_message_count"]}
+    assert counts == {"/rbe/assembly": 1, "/rbe/report": 2}
+
+
+def test_read_bag_returns_what_was_written(written):
+    path, state, rep = written
+    out = list(bag.read_bag(path))
+    assert [(m.topic, m.msgtype, m.stamp_ns) for m in out] == [
+        ("/rbe/assembly", "rbe_msgs/msg/AssemblyState", 2_000),
+        ("/rbe/report", "rbe_msgs/msg/StabilityReport", 3_000),
+        ("/rbe/report", "rbe_msgs/msg/StabilityReport", 4_000)]
+    assert out[0].data == state and out[1].data == rep and out[2].data == rep
+    back = messages.report_from_dict(out[1].data)
+    np.testing.assert_array_equal(back.interfaces[0].normal_forces, [10.0, 20.5, -1.25, 7.0])
+    assert messages.scene_from_state_dict(out[0].data).block("t").mass == 3.5
+
+
+def test_writer_refuses_existing_dir_and_unknown_topic(tmp_path):
+    with pytest.raises(FileExistsError):
+        bag.BagWriter(tmp_path)
+    with bag.BagWriter(tmp_path / "b") as w:
+        with pytest.raises(KeyError):
+            w.write("/nope", {}, 0)
+        with pytest.raises(KeyError):
+            w.add_topic("/x", "rbe_msgs/msg/Nope")
+
+
+def test_killed_recording_is_recoverable(tmp_path):
+    """Messages written before a SIGKILL are on disk and read back (no footer, no close)."""
+    path = tmp_path / "killed"
+    script = textwrap.dedent(f"""
+        import sys, time
+        from rbe_ros import bag, messages
+        w = bag.BagWriter({str(path)!r})
+        w.add_topic("/rbe/report", "rbe_msgs/msg/StabilityReport")
+        for i in range(5):
+            w.write("/rbe/report", {{"step_index": i, "message": "step %d" % i}}, 1000 + i)
+        print("written", flush=True)
+        time.sleep(60)
+    """)
+    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, env=env, text=True)
+    try:
+        assert proc.stdout.readline().strip() == "written"
+    finally:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+    assert (path / "metadata.yaml").exists()
+    out = list(bag.read_bag(path))
+    assert [(m.topic, m.stamp_ns, m.data["step_index"], m.data["message"]) for m in out] == [
+        ("/rbe/report", 1000 + i, i, f"step {i}") for i in range(5)]

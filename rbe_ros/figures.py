@@ -15,7 +15,7 @@ def draw_report(assembly: Assembly, report: Report, path, *, title: str = "",
     """Write a PNG of ``report`` on ``assembly``; ``view`` is (elevation, azimuth) in deg.
 
     Nodal force arrows point along the force on block b, with length proportional to the
-    force (the largest vertex force is drawn as a quarter of the scene size unless
+    force (the largest vertex force is drawn as a tenth of the scene size unless
     ``force_scale`` in m/N is given). Resultants are black arrows at the centre of pressure.
     """
     import matplotlib
@@ -37,7 +37,7 @@ def draw_report(assembly: Assembly, report: Report, path, *, title: str = "",
     size = float(np.ptp(all_pts, axis=0).max())
     forces = [r.normal_forces for r in report.interfaces]
     fmax = max((np.abs(f).max(initial=0.0) for f in forces), default=0.0)
-    scale = force_scale if force_scale else (0.25 * size / fmax if fmax > 0 else 0.0)
+    scale = force_scale if force_scale else (0.1 * size / fmax if fmax > 0 else 0.0)
     comp_map, tens_map = plt.get_cmap("Blues"), plt.get_cmap("Reds")
     norm = colors.Normalize(0, fmax if fmax > 0 else 1.0)
     for r in report.interfaces:

@@ -283,6 +283,12 @@ def running_bond_wall(courses: int = 6, bricks_per_course: int = 5, brick=(0.4, 
     return make_scene(f"running-bond-wall({courses}x{bricks_per_course})", blocks, sequence=order)
 
 
+def dome_joint_ring(block_a: str, block_b: str) -> tuple[str, str]:
+    """The ring of dome joints the interface between two dome blocks belongs to: joints of one
+    ring are alike by symmetry (course joints between two courses, or meridian joints in one)."""
+    return block_a.split("_")[0], block_b.split("_")[0]
+
+
 GENERATORS = {
     "two-blocks": two_blocks,
     "stack": stack,

@@ -1,0 +1,107 @@
+"""The command line: JSON outputs with real values, one-line errors for bad input."""
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from rbe_ros.bag import read_bag
+from rbe_ros.cli import main
+
+EXAMPLE = Path(__file__).parents[1] / "examples" / "build_sequence.json"
+
+
+def run_json(capsys, *argv):
+    assert main(list(argv)) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def test_check_sequence_json_names_the_failing_step_and_interface(capsys):
+    out = run_json(capsys, "check", str(EXAMPLE), "--sequence", "--json")
+    steps = out["steps"]
+    assert [s["block"] for s in steps] == ["pillar_left", "pillar_right", "lintel", "block_left",
+                                           "wedge", "cap"]
+    assert [s["stable"] for s in steps] == [True] * 5 + [False]
+    assert out["first_failing_step"] == 5
+    last = steps[-1]
+    assert last["status"] == "TENSION_REQUIRED" and "lintel|cap" in last["message"]
+    assert last["max_tension"] > 100.0
+    flagged = [i for i in last["interfaces"] if i["tension"]]
+    assert [(i["block_a"], i["block_b"]) for i in flagged] == [("lintel", "cap")]
+    # the lintel (1.2 x 0.2 x 0.2 m, 2000 kg/m^3) and what it carries rest on the pillars
+    first = steps[0]["interfaces"][0]
+    assert first["normal_force"] == pytest.approx(0.2 * 0.2 * 0.6 * 2000 * 9.81, rel=1e-6)
+
+
+def test_check_whole_assembly_json_has_the_documented_fields(capsys):
+    out = run_json(capsys, "check", str(EXAMPLE), "--json")
+    assert {"stable", "status", "max_tension", "interfaces"} <= set(out)
+    it = out["interfaces"][0]
+    assert {"block_a", "block_b", "normal_force", "shear_force", "centre_of_pressure",
+            "tension", "friction_exceeded"} <= set(it)
+    assert len(it["shear_force"]) == 3 and len(it["centre_of_pressure"]) == 3
+
+
+def test_check_records_a_bag_that_reads_back(tmp_path, capsys):
+    bag = tmp_path / "run"
+    assert main(["check", str(EXAMPLE), "--sequence", "--bag", str(bag)]) == 0
+    messages = list(read_bag(bag))
+    assert [m.topic for m in messages] == ["/rbe_node/assembly"] + ["/rbe_node/report"] * 6
+    assert len(messages[0].data["blocks"]) == 7
+    assert messages[-1].data["status"] == 1 and messages[-1].data["block_placed"] == "cap"
+    assert main(["check", str(EXAMPLE), "--bag", str(bag)]) == 2      # exists: refuses
+    assert "exists" in capsys.readouterr().err
+
+
+def test_tilt_and_min_friction_json(tmp_path, capsys):
+    scene = tmp_path / "incline.json"
+    assert main(["generate", "two-blocks", "-p", "incline_deg=23.6", "-o", str(scene)]) == 0
+    capsys.readouterr()
+    mu = run_json(capsys, "min-friction", str(scene), "--json")["mu_min"]
+    assert mu == pytest.approx(math.tan(math.radians(23.6)), abs=2e-3)
+    flat = tmp_path / "flat.json"
+    assert main(["generate", "stack", "-p", "n=1", "-p", "height=0.25", "-o", str(flat)]) == 0
+    capsys.readouterr()
+    out = run_json(capsys, "tilt", str(flat), "--direction=-y", "--mu", "0.5", "--json")
+    assert out["tilt_deg"] == pytest.approx(math.degrees(math.atan(0.5)), abs=0.05)
+    assert out["multiplier"] == pytest.approx(0.5, rel=1e-5)
+
+
+BAD_SCENES = {
+    "nan position": ({"blocks": [{"id": "g", "support": True, "density": 1, "box": [1, 1, 1],
+                                  "position": [0, "NaN", 0]}]}, "NaN"),
+    "zero quaternion": ({"blocks": [{"id": "g", "support": True, "density": 1, "box": [1, 1, 1],
+                                     "orientation": [0, 0, 0, 0]}]}, "unit norm"),
+    "duplicate ids": ({"blocks": [{"id": "g", "support": True, "density": 1, "box": [1, 1, 1]},
+                                  {"id": "g", "density": 1, "box": [1, 1, 1]}]}, "duplicate"),
+    "no support": ({"blocks": [{"id": "a", "density": 1, "box": [1, 1, 1]}]}, "support"),
+    "open mesh": ({"blocks": [{"id": "g", "support": True, "density": 1,
+                               "mesh": {"vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]],
+                                        "faces": [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3], [1, 2, 3]]}}]},
+                  "closed"),
+    "unknown sequence id": ({"blocks": [{"id": "g", "support": True, "density": 1, "box": [1, 1, 1]}],
+                             "sequence": ["x"]}, "not in the scene"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_SCENES))
+def test_bad_scene_gives_one_line_error_and_exit_2(case, tmp_path):
+    data, words = BAD_SCENES[case]
+    path = tmp_path / "bad.json"
+    path.write_text(json.dumps(data).replace('"NaN"', "NaN"))
+    proc = subprocess.run([sys.executable, "-m", "rbe_ros.cli", "check", str(path)],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("rbe-ros: error:") and words in lines[0]
+    assert "Traceback" not in proc.stderr
+
+
+def test_unreadable_and_invalid_files(tmp_path, capsys):
+    assert main(["check", str(tmp_path / "missing.json")]) == 2
+    assert "cannot read scene" in capsys.readouterr().err
+    (tmp_path / "broken.json").write_text("{not json")
+    assert main(["check", str(tmp_path / "broken.json")]) == 2
+    assert "invalid JSON at line 1" in capsys.readouterr().err

@@ -1,15 +1,21 @@
-"""A block posed in the scene: world vertices, planar faces, volume, mass and centroid."""
+"""A block posed in the scene: world vertices, planar faces, volume, mass and centroid.
+
+What does not depend on the pose (faces grouped by plane, their 2D outlines, volume and
+centroid) is computed once per distinct shape in the block frame and cached, so a wall of a
+thousand identical bricks costs one shape analysis; posing is then a rigid transform.
+"""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 import shapely
-import trimesh
 from scipy.spatial.transform import Rotation
+from trimesh.triangles import mass_properties
 
 from ..scene import Block, SceneError
-from .polygon import PlaneFrame, newell_normal, tangent_basis
+from .polygon import PlaneFrame, cross, tangent_basis
 
 #: Faces whose normals differ by less than this (radians) and whose planes are within
 #: PLANE_TOL of the block size are one face (a triangulated mesh has several per plane).
@@ -39,36 +45,84 @@ class PosedBlock:
     mass: float
     size: float                 # cube root of the volume: the block's length scale
     aabb: np.ndarray            # (2, 3) min and max corner
+    face_normals: np.ndarray    # (F, 3) the faces' n, for vectorised contact tests
+    face_offsets: np.ndarray    # (F,)
+    face_origins: np.ndarray    # (F, 3)
+
+
+@dataclass(frozen=True)
+class _Shape:
+    """Pose-independent analysis of a block's mesh, in the block frame."""
+
+    normals: np.ndarray
+    offsets: np.ndarray
+    origins: np.ndarray
+    us: np.ndarray
+    vs: np.ndarray
+    outlines: tuple
+    volume: float
+    centroid: np.ndarray
 
 
 def pose_block(block: Block) -> PosedBlock:
     """Place ``block`` in the scene and compute its mass properties (raises SceneError)."""
-    rot = Rotation.from_quat(block.orientation)      # scalar-last (x, y, z, w), as ROS
-    world = block.vertices @ rot.as_matrix().T + block.position
-    triangles = [(f[0], f[i], f[i + 1]) for f in block.faces for i in range(1, len(f) - 1)]
-    mesh = trimesh.Trimesh(world, np.array(triangles), process=False)
-    if not mesh.is_watertight:
-        raise SceneError(f"block {block.id!r}: mesh is not closed (watertight)")
-    volume = float(mesh.volume)
-    scale = float(np.ptp(world, axis=0).max())
+    try:
+        shape = _shape(block.vertices.tobytes(), block.vertices.shape[0], block.faces)
+    except ValueError as exc:
+        raise SceneError(f"block {block.id!r}: {exc}") from None
+    rot = Rotation.from_quat(block.orientation).as_matrix()   # (x, y, z, w), as ROS
+    p = block.position
+    world = block.vertices @ rot.T + p
+    normals, origins = shape.normals @ rot.T, shape.origins @ rot.T + p
+    us, vs = shape.us @ rot.T, shape.vs @ rot.T
+    offsets = shape.offsets + normals @ p
+    faces = tuple(Face(PlaneFrame(origins[k], us[k], vs[k], normals[k]), shape.outlines[k],
+                       float(offsets[k])) for k in range(len(offsets)))
+    mass = block.mass if block.mass > 0 else block.density * shape.volume
+    return PosedBlock(block.id, block.support, world, faces, shape.centroid @ rot.T + p,
+                      shape.volume, float(mass), shape.volume ** (1.0 / 3.0),
+                      np.array([world.min(axis=0), world.max(axis=0)]), normals, offsets, origins)
+
+
+@lru_cache(maxsize=4096)
+def _shape(vertex_bytes: bytes, count: int, faces) -> _Shape:
+    """Cached by the exact mesh, so identical blocks share it (raises ValueError)."""
+    vertices = np.frombuffer(vertex_bytes).reshape(count, 3)
+    tri = np.array([(f[0], f[i], f[i + 1]) for f in faces for i in range(1, len(f) - 1)])
+    if not _is_closed(tri):
+        raise ValueError("mesh is not closed (every edge must join exactly two faces,"
+                         " wound consistently)")
+    volume, centroid = _volume_centroid(vertices[tri])
+    scale = float(np.ptp(vertices, axis=0).max())
     if not volume > 1e-9 * scale ** 3:
-        raise SceneError(f"block {block.id!r}: mesh has no volume or is wound inside out"
-                         f" (volume {volume:.3g} m^3)")
-    mass = block.mass if block.mass > 0 else block.density * volume
-    size = volume ** (1.0 / 3.0)
-    return PosedBlock(block.id, block.support, world, _planar_faces(world, block.faces, size),
-                      np.asarray(mesh.center_mass, dtype=float), volume, float(mass), size,
-                      np.array([world.min(axis=0), world.max(axis=0)]))
+        raise ValueError(f"mesh has no volume or is wound inside out (volume {volume:.3g} m^3)")
+    return _Shape(*_planar_faces(vertices, faces, volume ** (1.0 / 3.0)), volume, centroid)
 
 
-def _planar_faces(world: np.ndarray, faces, size: float) -> tuple[Face, ...]:
-    """Group the polygon faces by plane and merge each group into one 2D outline."""
+def _is_closed(tri: np.ndarray) -> bool:
+    """Every directed edge appears once and its reverse once: closed and consistently wound."""
+    edges = np.concatenate((tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]))
+    n = int(tri.max()) + 1
+    keys = edges[:, 0] * n + edges[:, 1]
+    reverse = edges[:, 1] * n + edges[:, 0]
+    return len(np.unique(keys)) == len(keys) and bool(np.isin(reverse, keys).all())
+
+
+def _volume_centroid(triangles: np.ndarray) -> tuple[float, np.ndarray]:
+    props = mass_properties(triangles, skip_inertia=True)
+    return float(props["volume"]), np.asarray(props["center_mass"], dtype=float)
+
+
+def _planar_faces(vertices: np.ndarray, faces, size: float):
+    """Faces grouped by plane, each with a frame and one merged 2D outline (block frame)."""
     groups: list[tuple[np.ndarray, float, list[np.ndarray]]] = []
     for f in faces:
-        pts = world[list(f)]
-        n = newell_normal(pts)
-        if not np.any(n):
+        pts = vertices[list(f)]
+        area_vector = 0.5 * cross(pts[1:-1] - pts[0], pts[2:] - pts[0]).sum(axis=0)
+        length = np.linalg.norm(area_vector)
+        if length == 0.0:
             continue                                  # degenerate sliver face
+        n = area_vector / length
         d = float(n @ pts.mean(axis=0))
         for gn, gd, members in groups:
             if gn @ n > np.cos(ANGLE_TOL) and abs(gd - d) <= PLANE_TOL * size + 1e-12:
@@ -76,11 +130,20 @@ def _planar_faces(world: np.ndarray, faces, size: float) -> tuple[Face, ...]:
                 break
         else:
             groups.append((n, d, [pts]))
-    out = []
+    normals, offsets, origins, us, vs, outlines = [], [], [], [], [], []
     for n, d, members in groups:
         u, v = tangent_basis(n)
         frame = PlaneFrame(members[0].mean(axis=0), u, v, n)
-        outline = shapely.union_all([shapely.Polygon(frame.to_2d(p)).buffer(0) for p in members])
-        outline = outline.simplify(0.0)               # drop collinear vertices of merged triangles
-        out.append(Face(frame, outline, d))
-    return tuple(out)
+        if len(members) == 1:
+            outline = shapely.Polygon(frame.to_2d(members[0]))
+        else:   # a triangulated face: merge, dropping the collinear vertices of the seams
+            outline = shapely.union_all([shapely.Polygon(frame.to_2d(p)).buffer(0)
+                                         for p in members]).simplify(0.0)
+        normals.append(n)
+        offsets.append(d)
+        origins.append(frame.origin)
+        us.append(u)
+        vs.append(v)
+        outlines.append(outline)
+    return (np.array(normals), np.array(offsets), np.array(origins), np.array(us), np.array(vs),
+            tuple(outlines))

@@ -20,6 +20,7 @@ import scipy.sparse as sp
 
 from ..geometry.block import PosedBlock
 from ..geometry.contacts import Interface
+from ..geometry.polygon import cross
 
 #: Variable kinds in the order they are stacked.
 KINDS = ("fn_pos", "fn_neg", "fu", "fv")
@@ -96,7 +97,7 @@ def build_model(blocks, interfaces, gravity) -> EquilibriumModel:
             continue
         arm = (points[on] - centroids[side[on]]) / length_scale
         force = sign * basis[on]                                       # (k, 4, 3)
-        moment = np.cross(arm[:, None, :], force)                      # (k, 4, 3)
+        moment = cross(arm[:, None, :], force)                      # (k, 4, 3)
         block_rows = 6 * r[on][:, None, None] + np.arange(6)[None, None, :]
         entries = np.concatenate((force, moment), axis=2)              # (k, 4, 6)
         rows.append(np.broadcast_to(block_rows, entries.shape).ravel())

@@ -5,6 +5,7 @@ import math
 
 import numpy as np
 
+from ..geometry.polygon import cross
 from .model import EquilibriumModel
 from .result import InterfaceResult
 from .solver import Solution
@@ -40,7 +41,7 @@ def interface_results(model: EquilibriumModel, solution: Solution, *, mu_thresho
         else:
             cop = it.frame.origin.copy()
         forces = fn[k, None] * n + tangential[k]
-        torque = float(np.cross(pts - cop, forces).sum(axis=0) @ n)
+        torque = float(cross(pts - cop, forces).sum(axis=0) @ n)
         if big_n > NEGLIGIBLE * model.force_scale:
             ratio = shear_norm / big_n
         else:   # no normal force to speak of: any shear needs unbounded friction

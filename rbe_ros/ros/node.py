@@ -1,0 +1,405 @@
+"""``rbe_node``: rigid-block equilibrium checks of assemblies over ROS 2.
+
+Interfaces (relative to the node, e.g. ``/rbe_node/report``):
+
+* subscribes ``~/assembly`` (rbe_msgs/AssemblyState, reliable, depth 5): a state without a
+  sequence is checked as a whole (one report); with a sequence every insertion step is checked
+  and each step's report is published as soon as it is done;
+* publishes ``~/report`` (rbe_msgs/StabilityReport, reliable, transient_local, depth 1) and
+  ``~/markers`` (visualization_msgs/MarkerArray, same QoS) for every report the node makes,
+  whatever asked for it (topic, service or action);
+* serves ``~/check`` (rbe_msgs/srv/CheckAssembly): the assembly as a whole, sequence ignored;
+* serves the action ``~/check_sequence`` (rbe_msgs/action/CheckSequence): feedback per step,
+  all reports and the first failing step as result; cancellable between steps.
+
+Bad input never stops the node: a state that cannot be checked gives a report with status
+INVALID_INPUT and the reason, any other error in a callback is logged and gives
+SOLVER_FAILED with the exception text. With ``mcap_path`` set, every received state and every
+report is recorded (CDR, receive/publish time) in a rosbag2 MCAP bag, closed on shutdown.
+
+Run: ``rbe_node --ros-args -p friction_coefficient:=0.5 -p mcap_path:=bags/run``
+(or ``python -m rbe_ros.ros.node``).
+"""
+from __future__ import annotations
+
+import math
+import os
+import signal
+import threading
+import time
+from pathlib import Path
+
+import rclpy
+from rcl_interfaces.msg import (FloatingPointRange, ParameterDescriptor, ParameterType,
+                                SetParametersResult)
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import serialize_message
+from rclpy.signals import SignalHandlerOptions
+from rbe_msgs.action import CheckSequence
+from rbe_msgs.msg import AssemblyState, StabilityReport
+from rbe_msgs.srv import CheckAssembly
+from visualization_msgs.msg import MarkerArray
+
+from ..analysis.check import CheckOptions, check_scene
+from ..analysis.sequence import check_sequence, sequence_steps
+from ..rbe.cones import CONES, FRICTION_MODELS
+from ..rbe.result import Report, Status
+from ..rbe.solver import OBJECTIVES, SolveOptions
+from ..scene import Scene, SceneError
+from .convert import message_to_dict, report_to_msg, scene_from_msg
+from .markers import report_markers
+
+NODE_NAME = "rbe_node"
+
+STATE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5,
+                       reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.VOLATILE)
+#: Reports and markers are latched: a late subscriber gets the last verdict.
+LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                         reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+#: Allowed values of the string parameters.
+CHOICES = {"objective": OBJECTIVES, "friction_model": FRICTION_MODELS, "friction_cone": CONES}
+#: (lowest, highest, lowest excluded) of the floating point parameters.
+RANGES = {"friction_coefficient": (0.0, 10.0, True), "friction_threshold": (0.0, 10.0, False),
+          "tension_tolerance": (0.0, 1.0, False)}
+
+
+def _double(value: float, description: str, low: float, high: float) -> tuple:
+    return value, ParameterDescriptor(
+        type=ParameterType.PARAMETER_DOUBLE, description=description,
+        floating_point_range=[FloatingPointRange(from_value=low, to_value=high, step=0.0)])
+
+
+def _choice(value: str, description: str, choices) -> tuple:
+    return value, ParameterDescriptor(
+        type=ParameterType.PARAMETER_STRING, description=description,
+        additional_constraints="one of: " + ", ".join(choices))
+
+
+def _string(value: str, description: str, *, read_only: bool = False) -> tuple:
+    return value, ParameterDescriptor(type=ParameterType.PARAMETER_STRING,
+                                      description=description, read_only=read_only)
+
+
+PARAMETERS = {
+    "friction_coefficient": _double(
+        0.6, "Coulomb friction coefficient mu of every interface, in (0, 10]", 0.0, 10.0),
+    "friction_threshold": _double(
+        0.0, "post-check |V| <= threshold * N per interface; 0 means the same as "
+        "friction_coefficient", 0.0, 10.0),
+    "objective": _choice("qp", "objective of the force solve: qp (smooth, unique forces) "
+                         "or lp", OBJECTIVES),
+    "friction_model": _choice("net", "net (friction-net: decides stability) or plus "
+                              "(friction+: always feasible, shows where tension is needed)",
+                              FRICTION_MODELS),
+    "friction_cone": _choice("soc", "friction cone: exact second-order cone or a linearised "
+                             "pyramid", CONES),
+    "tension_tolerance": _double(
+        1e-5, "a vertex tension counts above this share of the free blocks' weight, in [0, 1]",
+        0.0, 1.0),
+    "mcap_path": _string("", "directory of a rosbag2 MCAP bag recording every received state "
+                         "and every report; empty: no recording. An existing directory gets "
+                         "a timestamp suffix", read_only=True),
+    "frame_id": _string("world", "frame of reports and markers when a received state has an "
+                        "empty header frame_id"),
+}
+
+
+class RbeNode(Node):
+    """A thin ROS shell over :func:`check_scene` and :func:`check_sequence`."""
+
+    def __init__(self, **kwargs):
+        super().__init__(NODE_NAME, **kwargs)
+        self._closing = False
+        self._destroyed = False
+        self._action = None
+        self._bag = None
+        self._bag_lock = threading.Lock()
+
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        for name, (value, descriptor) in PARAMETERS.items():
+            self.declare_parameter(name, value, descriptor)
+
+        # States on the topic are checked in order; the service has its own group so that a
+        # long sequence on the topic does not block it; action callbacks are reentrant so a
+        # cancel request (and other goals) are served while a goal executes.
+        self._topic_group = MutuallyExclusiveCallbackGroup()
+        self._service_group = MutuallyExclusiveCallbackGroup()
+        self._action_group = ReentrantCallbackGroup()
+
+        self._report_pub = self.create_publisher(StabilityReport, "~/report", LATCHED_QOS)
+        self._marker_pub = self.create_publisher(MarkerArray, "~/markers", LATCHED_QOS)
+        self._state_sub = self.create_subscription(
+            AssemblyState, "~/assembly", self._on_state, STATE_QOS,
+            callback_group=self._topic_group)
+        self._service = self.create_service(
+            CheckAssembly, "~/check", self._on_check, callback_group=self._service_group)
+        self._action = ActionServer(
+            self, CheckSequence, "~/check_sequence", execute_callback=self._execute_sequence,
+            goal_callback=lambda _goal: GoalResponse.ACCEPT,
+            cancel_callback=lambda _goal: CancelResponse.ACCEPT,
+            callback_group=self._action_group)
+
+        self.state_topic = self._state_sub.topic_name
+        self.report_topic = self._report_pub.topic_name
+        self._open_bag()
+        self.get_logger().info(
+            f"ready: {self.state_topic} -> {self.report_topic}, service "
+            f"{self._service.service_name}, mu {self.get_parameter('friction_coefficient').value}")
+
+    # --- parameters -------------------------------------------------------------------------
+
+    def _validate_parameters(self, params) -> SetParametersResult:
+        for p in params:
+            if p.name in CHOICES and p.value not in CHOICES[p.name]:
+                return SetParametersResult(
+                    successful=False, reason=f"{p.name} must be one of "
+                    f"{', '.join(CHOICES[p.name])}, not {p.value!r}")
+            if p.name in RANGES:
+                low, high, open_low = RANGES[p.name]
+                v = p.value
+                ok = (isinstance(v, (int, float)) and math.isfinite(v)
+                      and (v > low if open_low else v >= low) and v <= high)
+                if not ok:
+                    interval = f"{'(' if open_low else '['}{low:g}, {high:g}]"
+                    return SetParametersResult(
+                        successful=False, reason=f"{p.name} must be in {interval}, not {v!r}")
+        return SetParametersResult(successful=True)
+
+    def check_options(self) -> CheckOptions:
+        """The core's options from the current parameter values."""
+        value = lambda name: self.get_parameter(name).value  # noqa: E731
+        threshold = float(value("friction_threshold"))
+        solve = SolveOptions(objective=value("objective"), friction=value("friction_model"),
+                             cone=value("friction_cone"),
+                             mu=float(value("friction_coefficient")))
+        return CheckOptions(solve=solve, mu_threshold=threshold if threshold > 0 else None,
+                            tension_tol=float(value("tension_tolerance")))
+
+    # --- recording --------------------------------------------------------------------------
+
+    def _open_bag(self) -> None:
+        raw = self.get_parameter("mcap_path").value
+        if not raw:
+            return
+        from ..bag import BagWriter  # deferred: mcap and rosbags only when recording
+
+        path = Path(raw).expanduser()
+        if path.exists():
+            stem, k = f"{path.name}_{time.strftime('%Y%m%d-%H%M%S')}", 0
+            path = path.with_name(stem)
+            while path.exists():
+                k += 1
+                path = path.with_name(f"{stem}_{k}")
+        self._bag = BagWriter(path)
+        self._bag.add_topic(self.state_topic, "rbe_msgs/msg/AssemblyState")
+        self._bag.add_topic(self.report_topic, "rbe_msgs/msg/StabilityReport",
+                            transient_local=True)
+        self.bag_path = path
+        self.get_logger().info(f"recording states and reports to {path}")
+
+    def _record(self, topic: str, msg, stamp_ns: int | None = None) -> None:
+        if self._bag is None:
+            return
+        data = serialize_message(msg)
+        stamp = self.get_clock().now().nanoseconds if stamp_ns is None else stamp_ns
+        with self._bag_lock:
+            if self._bag is None:
+                return
+            try:
+                self._bag.write(topic, data, stamp)
+            except Exception as exc:  # a full disk must not stop the checks
+                self.get_logger().error(f"recording to {self.bag_path} failed, stopped: {exc}")
+                self._close_bag_locked()
+
+    def _close_bag_locked(self) -> None:
+        bag, self._bag = self._bag, None
+        if bag is not None:
+            try:
+                bag.close()
+            except Exception as exc:
+                self.get_logger().error(f"closing the bag {self.bag_path} failed: {exc}")
+
+    def stop(self) -> None:
+        """Ask running checks to stop after their current step (shutdown)."""
+        self._closing = True
+
+    def destroy_node(self):
+        """Close the bag, destroy the action server (not done by Node), then the node.
+        Idempotent."""
+        self.stop()
+        with self._bag_lock:
+            self._close_bag_locked()
+        if self._destroyed:
+            return
+        self._destroyed = True
+        if self._action is not None:
+            self._action.destroy()
+            self._action = None
+        super().destroy_node()
+
+    # --- checks -----------------------------------------------------------------------------
+
+    def _received(self, state: AssemblyState) -> dict:
+        """Record ``state`` and return the header dict its reports carry."""
+        self._record(self.state_topic, state)
+        header = message_to_dict(state.header)
+        if not header["frame_id"]:
+            header["frame_id"] = self.get_parameter("frame_id").value
+        return header
+
+    def _publish(self, scene: Scene | None, report: Report, header: dict) -> StabilityReport:
+        """Publish (and record) ``report`` and its markers; returns the message."""
+        msg = report_to_msg(report, header)
+        self._report_pub.publish(msg)
+        self._record(self.report_topic, msg)
+        self._marker_pub.publish(report_markers(scene, report, header["frame_id"],
+                                                msg.header.stamp))
+        where = f" step {report.step_index} ({report.block_placed})" \
+            if report.step_index >= 0 else ""
+        log = self.get_logger().info if report.status != Status.SOLVER_FAILED \
+            else self.get_logger().error
+        log(f"{header['frame_id']}{where}: {report.status.name}: {report.message}")
+        return msg
+
+    def _error_report(self, exc: Exception) -> Report:
+        if isinstance(exc, SceneError):
+            return Report(False, Status.INVALID_INPUT, f"invalid input: {exc}")
+        self.get_logger().error(f"check failed: {type(exc).__name__}: {exc}")
+        return Report(False, Status.SOLVER_FAILED,
+                      f"check failed: {type(exc).__name__}: {exc}")
+
+    def check_whole(self, state: AssemblyState, header: dict) -> StabilityReport:
+        """Check the assembly of ``state`` as it is (sequence ignored); publish the report."""
+        scene = None
+        try:
+            scene = scene_from_msg(state, sequence=False)
+            report = check_scene(scene, self.check_options())
+        except Exception as exc:
+            report = self._error_report(exc)
+        return self._publish(scene, report, header)
+
+    def _on_state(self, state: AssemblyState) -> None:
+        try:
+            header = self._received(state)
+            if not state.sequence:
+                self.check_whole(state, header)
+                return
+            scene = None
+            try:
+                scene = scene_from_msg(state)
+                check_sequence(scene, self.check_options(),
+                               on_step=lambda report, _total: self._publish(scene, report, header),
+                               cancelled=lambda: self._closing)
+            except Exception as exc:
+                self._publish(scene, self._error_report(exc), header)
+        except Exception as exc:  # publishing itself failed (e.g. during shutdown)
+            self.get_logger().error(f"state not handled: {type(exc).__name__}: {exc}")
+
+    def _on_check(self, request: CheckAssembly.Request, response: CheckAssembly.Response):
+        try:
+            response.report = self.check_whole(request.assembly, self._received(request.assembly))
+        except Exception as exc:
+            self.get_logger().error(f"request not handled: {type(exc).__name__}: {exc}")
+            response.report = StabilityReport(
+                header=request.assembly.header, status=int(Status.SOLVER_FAILED), stable=False,
+                message=f"check failed: {type(exc).__name__}: {exc}")
+        return response
+
+    def _execute_sequence(self, goal_handle) -> CheckSequence.Result:
+        result = CheckSequence.Result(first_failing_step=-1)
+        reports: list[StabilityReport] = []
+        header: dict = {}
+        scene = None
+
+        def on_step(report: Report, total: int) -> None:
+            msg = self._publish(scene, report, header)
+            reports.append(msg)
+            if result.first_failing_step < 0 and not report.stable:
+                result.first_failing_step = report.step_index
+            goal_handle.publish_feedback(CheckSequence.Feedback(
+                steps_done=len(reports), steps_total=total, last_report=msg))
+
+        try:
+            state = goal_handle.request.assembly
+            header = self._received(state)
+            scene = scene_from_msg(state)
+            steps = check_sequence(
+                scene, self.check_options(), on_step=on_step,
+                cancelled=lambda: goal_handle.is_cancel_requested or self._closing)
+            total = len(sequence_steps(scene))
+            finished = len(steps) == total
+        except Exception as exc:
+            try:
+                reports.append(self._publish(scene, self._error_report(exc), header))
+            except Exception as exc2:
+                self.get_logger().error(f"goal not handled: {type(exc2).__name__}: {exc2}")
+            result.reports = reports
+            goal_handle.abort()
+            return result
+        result.reports = reports
+        if finished:
+            goal_handle.succeed()
+        elif goal_handle.is_cancel_requested:
+            self.get_logger().info(f"sequence check canceled after {len(reports)}/{total} steps")
+            goal_handle.canceled()
+        else:  # shutting down
+            goal_handle.abort()
+        return result
+
+
+def _interrupt(signum, _frame):
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
+def _exit_now(signum, _frame):
+    os._exit(128 + signum)
+
+
+def main(args=None) -> None:
+    """Run the node until SIGINT/SIGTERM (or an external shutdown), then close everything.
+
+    rclpy's own signal handling is off: its handler thread triggers the executor's guard
+    condition and races with the executor's destruction at shutdown (a segfault in
+    rcl_trigger_guard_condition in about one shutdown in ten here). Instead SIGINT and
+    SIGTERM raise KeyboardInterrupt in the main thread, which spins in steps of 0.1 s, and
+    the node (bag first) is destroyed before the context is shut down.
+    """
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    signal.signal(signal.SIGINT, _interrupt)
+    signal.signal(signal.SIGTERM, _interrupt)
+    node = None
+    executor = None
+    try:
+        node = RbeNode()
+        executor = MultiThreadedExecutor(num_threads=max(4, os.cpu_count() or 1))
+        executor.add_node(node)
+        while rclpy.ok():
+            executor.spin_once(timeout_sec=0.1)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except ParameterException as exc:  # e.g. -p friction_coefficient:=1 (an integer)
+        rclpy.logging.get_logger(NODE_NAME).fatal(f"bad parameter: {exc}")
+        raise SystemExit(2) from None
+    finally:
+        # A second signal during the clean-up exits at once (the bag stays readable).
+        signal.signal(signal.SIGINT, _exit_now)
+        signal.signal(signal.SIGTERM, _exit_now)
+        if node is not None:
+            node.stop()
+        if executor is not None:
+            executor.shutdown()
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,59 @@
+"""ROS 2 tests: own DDS domain per run, discovery on this host only; skipped without ROS.
+
+ROS_DOMAIN_ID comes from the Makefile (``make test``) or is drawn here (1..100) when unset;
+ROS_AUTOMATIC_DISCOVERY_RANGE is LOCALHOST. Both are set before rclpy is initialised and are
+inherited by the node processes the tests start.
+"""
+from __future__ import annotations
+
+import os
+import random
+
+import pytest
+
+if not os.environ.get("ROS_DOMAIN_ID", "").strip():
+    os.environ["ROS_DOMAIN_ID"] = str(random.randint(1, 100))
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+
+
+def _ros_missing() -> str | None:
+    try:
+        import rbe_msgs.action  # noqa: F401
+        import rbe_msgs.msg  # noqa: F401
+        import rbe_msgs.srv  # noqa: F401
+        import rclpy  # noqa: F401
+        import visualization_msgs.msg  # noqa: F401
+    except Exception as exc:  # ModuleNotFoundError, or a missing native library (OSError)
+        return f"{type(exc).__name__}: {exc}"
+    return None
+
+
+_MISSING = _ros_missing()
+SKIP_REASON = ("ROS 2 tests need rclpy and the built rbe_msgs interfaces (run `make setup`); "
+               f"import failed: {_MISSING}")
+
+if _MISSING:
+    # Each test module of this directory is reported as skipped, without importing it (a
+    # pytest.skip here would be an error when this directory is pytest's argument).
+    class _SkippedModule(pytest.Module):
+        def collect(self):
+            pytest.skip(SKIP_REASON, allow_module_level=True)
+
+    def pytest_pycollect_makemodule(module_path, parent):
+        return _SkippedModule.from_parent(parent, path=module_path)
+
+
+def pytest_report_header(config):
+    return (f"ROS_DOMAIN_ID={os.environ['ROS_DOMAIN_ID']} "
+            f"ROS_AUTOMATIC_DISCOVERY_RANGE={os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE']}")
+
+
+@pytest.fixture(scope="session")
+def rclpy_context():
+    """rclpy initialised once for the test process (its default context)."""
+    import rclpy
+    from rclpy.signals import SignalHandlerOptions
+
+    rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)  # Ctrl-C is pytest's
+    yield rclpy.get_default_context()
+    rclpy.try_shutdown()

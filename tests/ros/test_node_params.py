@@ -1,0 +1,139 @@
+"""RbeNode in-process (not spun): parameters, their mapping to CheckOptions, bag path."""
+from __future__ import annotations
+
+import math
+
+import pytest
+from rcl_interfaces.msg import ParameterType
+from rclpy.exceptions import InvalidParameterValueException
+from rclpy.parameter import Parameter
+from scipy.spatial.transform import Rotation
+
+from rbe_ros.analysis.check import check_scene
+from rbe_ros.rbe.result import Status
+from rbe_ros.ros.node import RbeNode
+from rbe_ros.scene import box_block, make_scene
+
+NAMESPACE = "/rbe_unit_test"   # apart from the node process of test_node.py
+
+
+@pytest.fixture
+def make_node(rclpy_context):
+    nodes = []
+
+    def make(**overrides):
+        node = RbeNode(namespace=NAMESPACE, context=rclpy_context, parameter_overrides=[
+            Parameter(k, value=v) for k, v in overrides.items()])
+        nodes.append(node)
+        return node
+
+    yield make
+    for node in nodes:
+        node.destroy_node()
+
+
+def slope(tan: float):
+    """A box resting on a support slab tilted by atan(tan): it needs |V|/N = tan."""
+    q = Rotation.from_euler("y", math.atan(tan)).as_quat()
+    centre = Rotation.from_quat(q).apply([0, 0, 0.6])
+    return make_scene("slope", [box_block("ground", (4, 4, 0.2), (0, 0, 0), q, support=True,
+                                          density=2000),
+                                box_block("box", (1, 1, 1), centre, q, density=2000)])
+
+
+def test_declared_parameters_and_defaults(make_node):
+    node = make_node()
+    expected = {"friction_coefficient": 0.6, "friction_threshold": 0.0, "objective": "qp",
+                "friction_model": "net", "friction_cone": "soc", "tension_tolerance": 1e-5,
+                "mcap_path": "", "frame_id": "world"}
+    assert {k: node.get_parameter(k).value for k in expected} == expected
+    for name in expected:
+        d = node.describe_parameter(name)
+        assert d.description
+    mu = node.describe_parameter("friction_coefficient")
+    assert mu.type == ParameterType.PARAMETER_DOUBLE
+    assert (mu.floating_point_range[0].from_value, mu.floating_point_range[0].to_value) == (0, 10)
+    assert "pyramid8-outer" in node.describe_parameter("friction_cone").additional_constraints
+    assert node.describe_parameter("mcap_path").read_only
+
+    opts = node.check_options()
+    assert (opts.solve.mu, opts.mu_threshold, opts.tension_tol) == (0.6, None, 1e-5)
+    assert (opts.solve.objective, opts.solve.friction, opts.solve.cone) == ("qp", "net", "soc")
+
+
+def test_set_parameters_validated_and_used(make_node):
+    node = make_node(friction_coefficient=0.4)
+    assert check_scene(slope(0.5), node.check_options()).status == Status.FRICTION_EXCEEDED
+
+    results = node.set_parameters([Parameter("friction_coefficient", value=0.6)])
+    assert results[0].successful
+    assert check_scene(slope(0.5), node.check_options()).status == Status.STABLE
+
+    assert node.set_parameters([Parameter("friction_threshold", value=0.45)])[0].successful
+    opts = node.check_options()
+    assert opts.mu_threshold == 0.45 and opts.threshold == 0.45
+    assert check_scene(slope(0.5), opts).status == Status.FRICTION_EXCEEDED
+
+    for name, value, reason in [("objective", "simplex", "qp, lp"),
+                                ("friction_model", "glue", "net, plus"),
+                                ("friction_cone", "cube", "soc, pyramid8"),
+                                ("friction_coefficient", 0.0, "(0, 10]"),
+                                ("friction_coefficient", math.nan, ""),
+                                ("tension_tolerance", 2.0, ""),
+                                ("friction_threshold", -0.1, "")]:
+        result = node.set_parameters([Parameter(name, value=value)])[0]
+        assert not result.successful and reason in result.reason, (name, result.reason)
+    assert node.get_parameter("objective").value == "qp"
+    assert node.set_parameters([Parameter("friction_cone", value="pyramid4"),
+                                Parameter("objective", value="lp")])[0].successful
+    assert (node.check_options().solve.cone, node.check_options().solve.objective) == \
+        ("pyramid4", "lp")
+
+
+def test_bad_override_is_refused_at_start(make_node):
+    with pytest.raises(InvalidParameterValueException):
+        make_node(friction_cone="cube")
+
+
+def test_existing_bag_path_gets_a_suffix(make_node, tmp_path):
+    target = tmp_path / "bag"
+    target.mkdir()
+    (target / "keep.txt").write_text("old")
+    node = make_node(mcap_path=str(target))
+    assert node.bag_path.parent == tmp_path and node.bag_path.name.startswith("bag_")
+    assert (node.bag_path / "metadata.yaml").is_file()
+    assert (target / "keep.txt").read_text() == "old"
+    second = make_node(mcap_path=str(target))
+    assert second.bag_path != node.bag_path and second.bag_path.name.startswith("bag_")
+    node.destroy_node()
+    assert (node.bag_path / f"{node.bag_path.name}_0.mcap").read_bytes().endswith(b"MCAP0\r\n")
+
+
+def test_unexpected_errors_become_solver_failed_reports(make_node, tmp_path, monkeypatch):
+    from rbe_msgs.msg import AssemblyState, StabilityReport
+    from rbe_msgs.srv import CheckAssembly
+
+    from rbe_client import stacked_boxes
+    from rbe_ros import bag, messages
+    from rbe_ros.ros import node as node_module
+    from rbe_ros.ros.convert import dict_to_message
+
+    def boom(*_args, **_kwargs):
+        raise RuntimeError("boom")
+
+    monkeypatch.setattr(node_module, "check_scene", boom)
+    monkeypatch.setattr(node_module, "check_sequence", boom)
+    node = make_node(mcap_path=str(tmp_path / "bag"), frame_id="site")
+    state = dict_to_message(messages.state_to_dict(stacked_boxes(0.45), "", 42), AssemblyState)
+    response = node._on_check(CheckAssembly.Request(assembly=state), CheckAssembly.Response())
+    r = response.report
+    assert r.status == StabilityReport.SOLVER_FAILED and not r.stable
+    assert "RuntimeError: boom" in r.message
+    assert r.header.frame_id == "site" and r.header.stamp.nanosec == 42
+    state.sequence = ["a", "b"]
+    node._on_state(state)            # the per-step path fails the same way, node unharmed
+    node.destroy_node()
+    recorded = list(bag.read_bag(tmp_path / "bag"))
+    assert [m.topic for m in recorded] == ["/rbe_unit_test/rbe_node/assembly",
+                                           "/rbe_unit_test/rbe_node/report"] * 2
+    assert [m.data["status"] for m in recorded[1::2]] == [StabilityReport.SOLVER_FAILED] * 2

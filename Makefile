@@ -8,7 +8,7 @@ ifeq ($(strip $(ROS_DOMAIN_ID)),)
 ROS_DOMAIN_ID := $(shell echo $$(( RANDOM % 100 + 1 )))
 endif
 
-.PHONY: setup demo test paper lock clean
+.PHONY: setup demo test paper scaling bags lock clean
 
 setup:
 	bash scripts/setup.sh
@@ -21,9 +21,35 @@ test: setup
 	ROS_DOMAIN_ID=$(ROS_DOMAIN_ID) ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST \
 		$(PY) -m pytest tests -q
 
+# The property tests at length: 10,000 random scenes (hypothesis profile "long", see
+# tests/conftest.py; `make test` runs 500, derandomized). 5-15 minutes on 2 cores.
+.PHONY: test-long
+test-long: setup
+	HYPOTHESIS_PROFILE=long $(PY) -m pytest tests/test_properties.py -q \
+		--hypothesis-show-statistics
+
 # Reproduce the paper's numbers and figures: docs/PAPER.md, docs/figures/ (about a minute).
 paper: setup
 	$(PY) benchmarks/paper.py
+
+# Speed against accuracy against compas_cra, PyBullet and MuJoCo: docs/BENCHMARKS.md and
+# docs/bench/ (20-30 minutes). The physics engines go into .venv (requirements/bench.txt,
+# checked with pip check); compas-cra into a scratch venv (RBE_COMPAS_VENV, default
+# /tmp/rbe-compas-venv). make bench BENCH_ARGS=--quick: a subset in under 3 minutes,
+# written to out/bench-quick/.
+.PHONY: bench
+bench: setup
+	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements/bench.txt
+	$(PY) -m pip check --disable-pip-version-check
+	$(PY) benchmarks/bench.py $(BENCH_ARGS)
+
+# Re-record the regression bags of bags/ (deterministic: same code, same files; ~30 s).
+bags: setup
+	$(PY) scripts/make_bags.py
+
+# Cost of a check against size, and of per-step sequence checks: docs/SCALING.md (minutes).
+scaling: setup
+	$(PY) benchmarks/scaling.py
 
 # Regenerate requirements/ros.txt and requirements/py.txt from the .in files
 # (resolves with pip, installs nothing; needs CPython 3.11 as python3).

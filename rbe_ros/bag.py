@@ -206,8 +206,11 @@ class BagWriter:
     sensor streams. ``stamp_ns`` may go backwards (chunks are indexed, readers merge by time).
     """
 
-    def __init__(self, path, *, depth: int = 10, fsync: bool = False):
+    def __init__(self, path, *, depth: int = 10, fsync: bool = False,
+                 custom_data: Mapping[str, str] | None = None):
         self.path = Path(path)
+        # metadata.yaml custom_data (rosbag2: string to string), e.g. the check options
+        self.custom_data = {str(k): str(v) for k, v in (custom_data or {}).items()}
         if self.path.exists():
             raise FileExistsError(f"bag {str(self.path)!r} exists already, not overwriting")
         self.depth, self.fsync = int(depth), fsync
@@ -310,7 +313,7 @@ class BagWriter:
             "files": [{"path": self.mcap_path.name,
                        "starting_time": {"nanoseconds_since_epoch": start},
                        "duration": {"nanoseconds": duration}, "message_count": count}],
-            "custom_data": {},
+            "custom_data": dict(self.custom_data),
             "ros_distro": "jazzy",
         }
 
@@ -321,6 +324,16 @@ class BagWriter:
 
 
 # --- reading ----------------------------------------------------------------------------------
+
+def read_custom_data(path) -> dict[str, str]:
+    """The ``custom_data`` of a bag directory's metadata.yaml (empty if it has none)."""
+    meta = Path(path) / "metadata.yaml"
+    if not meta.is_file():
+        return {}
+    info = YAML(typ="safe", pure=True).load(meta.read_text()) or {}
+    data = (info.get("rosbag2_bagfile_information") or {}).get("custom_data") or {}
+    return {str(k): str(v) for k, v in data.items()}
+
 
 def _mcap_files(path: Path) -> list[Path]:
     return sorted(path.glob("*.mcap")) if path.is_dir() else [path]
@@ -376,5 +389,6 @@ def _scan_mcap(path: Path) -> Iterator[BagMessage]:
                 yield BagMessage(ch.topic, msgtype, rec.log_time, to_dict(store, msgtype, obj))
 
 
-__all__ = ["BagMessage", "BagWriter", "message_definition", "msg_dir", "read_bag", "to_dict",
+__all__ = ["BagMessage", "BagWriter", "message_definition", "msg_dir", "read_bag",
+           "read_custom_data", "to_dict",
            "to_rosbags", "typestore"]

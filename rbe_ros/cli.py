@@ -1,4 +1,5 @@
-"""Command line of rbe_ros: check, tilt, min-friction and analyse a scene JSON file.
+"""Command line of rbe_ros: check, tilt, min-friction, analyse and plan a scene JSON file,
+replay a recorded bag.
 
 Bad input gives one line ``rbe-ros: error: ...`` and exit status 2, never a traceback.
 With ``--strict`` the exit status is 1 when a checked assembly or step is not stable.
@@ -15,16 +16,17 @@ import time
 from pathlib import Path
 
 from .analysis.assembly import Assembly
-from .analysis.check import CheckOptions, check, check_scene
+from .analysis.check import CheckOptions, HoldSearch, check, check_scene
 from .analysis.friction import minimum_friction
 from .analysis.tilt import DIRECTIONS, tilt_capacity
 from .analysis.virtual import ANALYSES, virtual_assembly
 from .analysis.sequence import check_sequence, first_failing_step
+from .analysis.validate import validated_assembly
 from .rbe.cones import CONES
 from .rbe.solver import SolveOptions
 from .report import format_table, json_number, report_json
 from .generators import GENERATORS
-from .scene import Scene, SceneError, load_scene, scene_to_dict
+from .scene import Scene, SceneError, ValidationLimits, load_scene, scene_to_dict
 
 #: Topics under which the CLI records, the names the node uses (node name rbe_node).
 STATE_TOPIC = "/rbe_node/assembly"
@@ -43,14 +45,46 @@ def _solver_arguments(parser: argparse.ArgumentParser) -> None:
                    help="exact second-order cone or a linearised pyramid")
     g.add_argument("--tension-tol", type=float, default=1e-5,
                    help="tension counts above this share of the free weight")
+    g.add_argument("--time-limit", type=float, default=0.0, metavar="S",
+                   help="time limit of each solver call in s (check: a check makes one to "
+                   "three); over it the verdict is SOLVER_FAILED (default 0: none)")
+    g.add_argument("--full-solve", action="store_true",
+                   help="sequences: solve every step's whole assembly (default: local models "
+                   "where they prove the verdict; the report's model says which answered)")
+    g.add_argument("--max-blocks", type=int, default=ValidationLimits().max_blocks,
+                   metavar="N", help="refuse scenes of more blocks (default "
+                   f"{ValidationLimits().max_blocks}; the other sane ranges: README)")
+    h = parser.add_argument_group("suggested holds (unstable checks)")
+    h.add_argument("--no-suggest-holds", action="store_true",
+                   help="do not search the smallest set of blocks to hold")
+    h.add_argument("--hold-max-size", type=int, default=HoldSearch().max_size, metavar="N",
+                   help="exact search up to N held blocks, then a greedy heuristic "
+                   f"(default {HoldSearch().max_size})")
+    h.add_argument("--hold-max-checks", type=int, default=HoldSearch().max_checks, metavar="N",
+                   help="sub-assembly checks the exact search may spend "
+                   f"(default {HoldSearch().max_checks})")
 
 
 def _options(args) -> CheckOptions:
+    if not (math.isfinite(args.time_limit) and args.time_limit >= 0):
+        raise ValueError("--time-limit must be a number of seconds >= 0 (0: no limit)")
+    if args.max_blocks < 1:
+        raise ValueError("--max-blocks must be at least 1")
     solve = SolveOptions(objective=args.objective, friction=args.friction, cone=args.cone,
-                         mu=args.mu)
+                         mu=args.mu, time_limit=args.time_limit or math.inf)
     if args.mu_threshold is not None and not args.mu_threshold > 0:
         raise ValueError("--mu-threshold must be positive")
-    return CheckOptions(solve=solve, mu_threshold=args.mu_threshold, tension_tol=args.tension_tol)
+    holds = HoldSearch(enabled=not args.no_suggest_holds, max_size=args.hold_max_size,
+                       max_checks=args.hold_max_checks)
+    return CheckOptions(solve=solve, mu_threshold=args.mu_threshold, tension_tol=args.tension_tol,
+                        limits=ValidationLimits(max_blocks=args.max_blocks), holds=holds,
+                        full_solve=args.full_solve)
+
+
+def _assembly(args) -> Assembly:
+    """The validated assembly of ``args.scene`` (the limits of the options; SceneError)."""
+    options = _options(args)
+    return validated_assembly(load_scene(args.scene), options.limits, options.contact)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -110,6 +144,38 @@ def build_parser() -> argparse.ArgumentParser:
                           help="generator parameter (JSON value), e.g. -p n=15 -p thickness_ratio=0.12")
     generate.add_argument("-o", "--output", required=True, help="scene JSON file to write")
     generate.set_defaults(run=_run_generate)
+
+    plan = sub.add_parser("plan", help="find an insertion order in which every step stands "
+                          "with at most K held blocks")
+    plan.add_argument("scene")
+    plan.add_argument("--max-held", type=int, required=True, metavar="K",
+                      help="blocks that may be held (by robots or scaffolds) at any step")
+    plan.add_argument("--beam", type=int, default=1, metavar="W",
+                      help="partial plans kept per step (default 1: greedy)")
+    plan.add_argument("--candidates", type=int, default=8, metavar="N",
+                      help="candidates tried per partial plan and step, lowest first")
+    plan.add_argument("--keep-sequence", action="store_true",
+                      help="the scene's sequence is a fixed prefix of the order")
+    plan.add_argument("-o", "--output", metavar="SCENE",
+                      help="write the planned scene (sequence and holds) as JSON")
+    plan.add_argument("--json", action="store_true", help="print one JSON object")
+    _solver_arguments(plan)
+    plan.set_defaults(run=_run_plan)
+
+    replay = sub.add_parser("replay", help="re-check the states of a bag, write a bag of the "
+                            "new reports and compare them with the recorded ones")
+    replay.add_argument("bag", help="rosbag2 MCAP bag directory (or .mcap file)")
+    replay.add_argument("--compare", action="store_true",
+                        help="compare with the recorded reports; exit 1 on a difference")
+    replay.add_argument("--live", action="store_true",
+                        help="replay through an rbe_node (started here unless --node-name)")
+    replay.add_argument("--node-name", metavar="NAME",
+                        help="with --live: use the running node NAME (e.g. rbe_node)")
+    replay.add_argument("-o", "--output", metavar="DIR",
+                        help="bag to write (default: BAG_replay; never overwritten)")
+    replay.add_argument("--timeout", type=float, default=120.0, metavar="S",
+                        help="--live: seconds to wait for each answer (default 120)")
+    replay.set_defaults(run=_run_replay)
     return parser
 
 
@@ -119,18 +185,20 @@ def _run_check(args) -> int:
     if args.bag:
         _prepare_bag_dir(Path(args.bag), args.force)
     if args.sequence:
-        if not args.json:
-            print(f"checking {scene.name}: {len(scene.blocks)} blocks, "
-                  f"{len(scene.sequence) or sum(not b.support for b in scene.blocks)} steps",
-                  file=sys.stderr)
-        reports = check_sequence(scene, options, on_step=None if args.json else _progress)
+        def progress(report, total: int) -> None:
+            if report.step_index == 0:      # after validation: bad input gives one line only
+                print(f"checking {scene.name}: {len(scene.blocks)} blocks, {total} steps",
+                      file=sys.stderr)
+            _progress(report, total)
+
+        reports = check_sequence(scene, options, on_step=None if args.json else progress)
         out = {"scene": scene.name, "first_failing_step": first_failing_step(reports),
                "steps": [report_json(r) for r in reports]}
     else:
         reports = [check_scene(scene, options)]
         out = {"scene": scene.name, **report_json(reports[0])}
     if args.bag:
-        _record(Path(args.bag), scene, reports)
+        _record(Path(args.bag), scene, reports, options, args.sequence)
     if args.json:
         print(json.dumps(out, indent=1))
     else:
@@ -141,7 +209,7 @@ def _run_check(args) -> int:
 
 
 def _run_tilt(args) -> int:
-    result = tilt_capacity(Assembly.from_scene(load_scene(args.scene)), _options(args),
+    result = tilt_capacity(_assembly(args), _options(args),
                            args.direction, args.tol_deg)
     out = {"direction": result.direction, "tilt_deg": json_number(result.tilt_deg),
            "multiplier": json_number(result.multiplier),
@@ -160,7 +228,7 @@ def _run_tilt(args) -> int:
 
 
 def _run_min_friction(args) -> int:
-    mu = minimum_friction(Assembly.from_scene(load_scene(args.scene)), _options(args), args.tol)
+    mu = minimum_friction(_assembly(args), _options(args), args.tol)
     if args.json:
         print(json.dumps({"mu_min": json_number(mu)}))
     else:
@@ -171,7 +239,7 @@ def _run_min_friction(args) -> int:
 
 def _analysed(args):
     """The assembly of ``args.scene`` (on virtual interfaces if ``args.analysis``) and its check."""
-    assembly = Assembly.from_scene(load_scene(args.scene))
+    assembly = _assembly(args)
     if args.analysis:
         assembly = virtual_assembly(assembly, args.analysis, args.factor)
     return assembly, check(assembly, _options(args))
@@ -232,19 +300,87 @@ def _prepare_bag_dir(path: Path, force: bool) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
 
 
-def _record(path: Path, scene: Scene, reports) -> None:
-    """Write the scene's state and every report, as the node would have published them."""
-    from .bag import BagWriter
-    from .messages import header_dict, report_to_dict, state_to_dict
+def _record(path: Path, scene: Scene, reports, options: CheckOptions, sequence: bool) -> None:
+    """Write the scene's state and every report, as the node would have published them, and
+    the options (so that ``rbe-ros replay`` re-checks the same way). The state holds the
+    order checked (``sequence``) or no sequence (a check as a whole)."""
+    from dataclasses import replace
 
+    from .messages import header_dict, report_to_dict, state_to_dict
+    from .replay import Run, write_runs
+
+    order = (scene.sequence or tuple(b.id for b in scene.blocks if not b.support)) \
+        if sequence else ()
     stamp = time.time_ns()
-    with BagWriter(path) as bag:
-        bag.add_topic(STATE_TOPIC, "rbe_msgs/msg/AssemblyState")
-        bag.add_topic(REPORT_TOPIC, "rbe_msgs/msg/StabilityReport", transient_local=True)
-        bag.write(STATE_TOPIC, state_to_dict(scene, "world", stamp), stamp)
-        header = header_dict("world", stamp)
-        for k, report in enumerate(reports):
-            bag.write(REPORT_TOPIC, report_to_dict(report, header), stamp + k + 1)
+    header = header_dict("world", stamp)
+    run = Run(state_to_dict(replace(scene, sequence=order), "world", stamp), stamp,
+              STATE_TOPIC, [report_to_dict(r, header) for r in reports],
+              [stamp + k + 1 for k in range(len(reports))], REPORT_TOPIC)
+    write_runs(path, [run], [run.reports], options)
+
+
+def _run_plan(args) -> int:
+    from .analysis.planning import plan_sequence
+
+    options = _options(args)
+    scene = load_scene(args.scene)
+    if not args.json:
+        print(f"planning {scene.name}: {sum(not b.support for b in scene.blocks)} blocks to "
+              f"place, at most {args.max_held} held", file=sys.stderr)
+    plan = plan_sequence(scene, args.max_held, options, beam=args.beam,
+                         candidates=args.candidates, keep_sequence=args.keep_sequence)
+    if args.output and plan.scene is not None:
+        out_path = Path(args.output)
+        out_path.parent.mkdir(parents=True, exist_ok=True)
+        out_path.write_text(json.dumps(scene_to_dict(plan.scene)))
+    if args.json:
+        out = {"scene": scene.name, "feasible": plan.feasible, "max_held": args.max_held,
+               "order": plan.order, "failed_step": plan.failed_step, "message": plan.message,
+               "holds": scene_to_dict(plan.scene).get("holds", []) if plan.scene else [],
+               "search_checks": plan.checks, "time": plan.time,
+               "steps": [{"held": list(r.held_blocks), **report_json(r)} for r in plan.reports]}
+        print(json.dumps(out, indent=1))
+    else:
+        verdict = "feasible" if plan.feasible else f"NOT feasible (step {plan.failed_step})"
+        print(f"plan: {verdict}: {plan.message}")
+        print(f"order: {', '.join(plan.order)}")
+        if plan.reports:
+            print(format_table(plan.reports))
+        if args.output and plan.scene is not None:
+            print(f"planned scene written to {args.output}")
+    return 0 if plan.feasible else 1
+
+
+def _run_replay(args) -> int:
+    from .replay import default_output, replay_bag
+
+    if args.node_name and not args.live:
+        raise ValueError("--node-name needs --live")
+    out = Path(args.output) if args.output else default_output(args.bag)
+    if out.exists():
+        raise FileExistsError(f"output {str(out)!r} exists already, not overwriting it "
+                              "(give another -o)")
+
+    def progress(i: int, run) -> None:
+        print(f"  run {i}: {run.describe()}: {len(run.reports)} recorded reports",
+              file=sys.stderr)
+
+    try:
+        result = replay_bag(args.bag, out, compare=args.compare, live=args.live,
+                            node_name=args.node_name, timeout=args.timeout, on_run=progress)
+    except RuntimeError as exc:     # the live node failed or exited
+        raise ValueError(str(exc)) from None
+    reports = sum(len(r) for r in result.replayed)
+    print(f"replayed {len(result.runs)} states ({reports} reports{', live' if args.live else ''}"
+          f"); bag written to {result.output}")
+    if not args.compare:
+        return 0
+    if result.matches:
+        print("all recorded reports reproduced (within the tolerances)")
+        return 0
+    print(f"MISMATCH: {len(result.differences)} field(s) differ from the recorded reports:")
+    print(result.diff())
+    return 1
 
 
 def main(argv=None) -> int:

@@ -17,7 +17,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from .rbe.result import InterfaceResult, Report, Status
-from .scene import (BOX_FACES, Scene, SceneError, box_vertices, make_block,
+from .scene import (BOX_FACES, Hold, Scene, SceneError, box_vertices, make_block,
                     make_scene)
 
 SOLID_PRIMITIVE_BOX = 1  # shape_msgs/SolidPrimitive.BOX
@@ -113,6 +113,9 @@ def state_to_dict(scene: Scene, frame_id: str = "world", stamp_ns: int = 0) -> d
         "blocks": [_block_to_dict(b) for b in scene.blocks],
         "sequence": list(scene.sequence),
         "gravity": _vec(scene.gravity),
+        "holds": [{"block": h.block, "from_step": int(h.from_step),
+                   "until_step": -1 if h.until_step is None else int(h.until_step)}
+                  for h in scene.holds],
     }
 
 
@@ -176,7 +179,26 @@ def scene_from_state_dict(d) -> Scene:
         raise SceneError("AssemblyState.sequence must be a list of block ids (strings)")
     gravity = _xyz(_field(d, "gravity", {}, "AssemblyState"), "AssemblyState.gravity")
     name = _field(_field(d, "header", {}, "AssemblyState"), "frame_id", "", "AssemblyState.header")
-    return make_scene(str(name) or "assembly", blocks, gravity, sequence)  # zero gravity: default
+    holds = [_hold_from_dict(i, h) for i, h in enumerate(_list(d, "holds", "AssemblyState"))]
+    return make_scene(str(name) or "assembly", blocks, gravity, sequence,  # zero gravity: default
+                      holds)
+
+
+def _hold_from_dict(index: int, raw) -> Hold:
+    where = f"AssemblyState.holds[{index}]"
+    block = _field(raw, "block", "", where)
+    if not isinstance(block, str) or not block:
+        raise SceneError(f"{where} has no block id (a non-empty string)")
+    steps = []
+    for key, default in (("from_step", 0), ("until_step", -1)):
+        value = _field(raw, key, default, where)
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+            raise SceneError(f"{where}: {key} must be an integer, got {value!r}")
+        steps.append(int(value))
+    from_step, until_step = steps
+    if until_step < -1:
+        raise SceneError(f"{where}: until_step must be -1 (to the end) or a step, got {until_step}")
+    return Hold(block, from_step, None if until_step == -1 else until_step)
 
 
 # --- StabilityReport --------------------------------------------------------------------------
@@ -234,7 +256,11 @@ def report_to_dict(report: Report, header: dict) -> dict:
         "num_blocks": int(report.num_blocks),
         "interfaces": [_interface_to_dict(r) for r in report.interfaces],
         "unstable_blocks": [str(b) for b in report.unstable_blocks],
+        "held_blocks": [str(b) for b in report.held_blocks],
+        "suggested_holds": [str(b) for b in report.suggested_holds],
         "message": str(report.message),
+        "model": str(report.model),
+        "dropped_states": int(report.dropped_states),
     }
 
 
@@ -247,6 +273,10 @@ def report_from_dict(d: Mapping) -> Report:
         interfaces=[_interface_from_dict(i) for i in d["interfaces"]],
         unstable_blocks=[str(b) for b in d["unstable_blocks"]],
         step_index=int(d["step_index"]), block_placed=str(d["block_placed"]),
+        held_blocks=[str(b) for b in d.get("held_blocks", [])],
+        suggested_holds=[str(b) for b in d.get("suggested_holds", [])],
+        model=str(d.get("model", "full")),
+        dropped_states=int(d.get("dropped_states", 0)),
     )
 
 

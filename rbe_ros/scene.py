@@ -21,6 +21,64 @@ class SceneError(ValueError):
 
 
 @dataclass(frozen=True)
+class ValidationLimits:
+    """Sane ranges of a scene, the one place the CLI (``--max-blocks``) and the node
+    (``max_blocks``) take them from; a scene outside them is refused with a
+    :class:`SceneError` naming the block and the limit (:func:`validate_scene`, and the
+    geometric checks of :mod:`rbe_ros.analysis.validate`)."""
+
+    max_blocks: int = 5000           # blocks in one scene
+    max_vertices: int = 10000        # vertices of one block's mesh
+    min_size: float = 1e-3           # m, shortest edge of a block's bounding box (block frame)
+    max_size: float = 100.0          # m, longest edge
+    min_density: float = 1.0         # kg/m^3, given, or implied by a given mass and the volume
+    max_density: float = 30000.0
+    max_distance: float = 1e4        # m, distance of a block's position from the origin
+    min_gravity: float = 0.01        # m/s^2, |gravity| (all zeros means the default)
+    max_gravity: float = 1000.0
+    #: Two blocks overlapping deeper than this share of the smaller one's size (cube root of
+    #: its volume) interpenetrate. Larger than the contact tolerance (1e-3): faces within
+    #: 1 deg of opposite are a contact, and a tilted face's far end overlaps by up to ~1%.
+    penetration_tol: float = 0.01
+
+
+def check_block_count(count: int, limits: ValidationLimits) -> None:
+    """Refuse more than ``limits.max_blocks`` blocks (cheap: before anything is converted)."""
+    if count > limits.max_blocks:
+        raise SceneError(f"the scene has {count} blocks, more than the limit of "
+                         f"{limits.max_blocks} (max_blocks)")
+
+
+def validate_scene(scene: "Scene", limits: ValidationLimits = ValidationLimits()) -> None:
+    """Check ``scene`` against ``limits`` (raises :class:`SceneError` for the first problem):
+    block count, vertices per block, block size, given densities, distances, gravity.
+    Implied densities of given masses and interpenetration need the geometry: see
+    :func:`rbe_ros.analysis.validate.validate_assembly`."""
+    check_block_count(len(scene.blocks), limits)
+    g = float(np.linalg.norm(scene.gravity))
+    if not limits.min_gravity <= g <= limits.max_gravity:
+        raise SceneError(f"|gravity| {g:.6g} m/s^2 is outside the sane range "
+                         f"[{limits.min_gravity:g}, {limits.max_gravity:g}] m/s^2")
+    for b in scene.blocks:
+        where = f"block {b.id!r}"
+        if len(b.vertices) > limits.max_vertices:
+            raise SceneError(f"{where}: {len(b.vertices)} vertices, more than the limit of "
+                             f"{limits.max_vertices}")
+        extent = np.ptp(b.vertices, axis=0)
+        if extent.min() < limits.min_size or extent.max() > limits.max_size:
+            raise SceneError(f"{where}: size {' x '.join(f'{e:.6g}' for e in extent)} m is "
+                             f"outside the sane range [{limits.min_size:g}, {limits.max_size:g}]"
+                             " m per edge")
+        distance = float(np.linalg.norm(b.position))
+        if distance > limits.max_distance:
+            raise SceneError(f"{where}: position {distance:.6g} m from the origin, farther "
+                             f"than the limit of {limits.max_distance:g} m")
+        if b.density > 0 and not limits.min_density <= b.density <= limits.max_density:
+            raise SceneError(f"{where}: density {b.density:.6g} kg/m^3 is outside the sane "
+                             f"range [{limits.min_density:g}, {limits.max_density:g}] kg/m^3")
+
+
+@dataclass(frozen=True)
 class Block:
     """A rigid block: a closed polyhedron in its own frame, posed in the scene frame.
 
@@ -40,13 +98,34 @@ class Block:
 
 
 @dataclass(frozen=True)
+class Hold:
+    """A temporary support during steps ``from_step`` .. ``until_step - 1`` of a sequence.
+
+    On a free block: the block is held (by a robot or a scaffold), i.e. checked as a support,
+    at those steps while it is placed, and free again from ``until_step`` on (released). On a
+    support block (a scaffold, the centring of an arch): the support is present only at those
+    steps (put up at ``from_step``, taken away at ``until_step``). ``until_step`` None: to the
+    end (after the last step too).
+    """
+
+    block: str
+    from_step: int = 0
+    until_step: int | None = None
+
+    def active(self, step: int) -> bool:
+        return self.from_step <= step and (self.until_step is None or step < self.until_step)
+
+
+@dataclass(frozen=True)
 class Scene:
-    """An assembly of blocks under gravity, with an optional insertion sequence of block ids."""
+    """An assembly of blocks under gravity, with an optional insertion sequence of block ids
+    and temporary supports (holds) by step."""
 
     name: str
     blocks: tuple[Block, ...]
     gravity: np.ndarray = field(default_factory=lambda: np.array(DEFAULT_GRAVITY))
     sequence: tuple[str, ...] = ()
+    holds: tuple[Hold, ...] = ()
 
     def block(self, block_id: str) -> Block:
         for b in self.blocks:
@@ -57,7 +136,8 @@ class Scene:
     def subset(self, ids) -> "Scene":
         """The scene restricted to the blocks whose ids are in ``ids`` (order kept)."""
         keep = set(ids)
-        return replace(self, blocks=tuple(b for b in self.blocks if b.id in keep), sequence=())
+        return replace(self, blocks=tuple(b for b in self.blocks if b.id in keep), sequence=(),
+                       holds=())
 
 
 BOX_FACES = ((0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (2, 3, 7, 6), (1, 2, 6, 5), (0, 4, 7, 3))
@@ -124,8 +204,9 @@ def _finite_array(value, shape, what: str) -> np.ndarray:
     return arr
 
 
-def make_scene(name: str, blocks, gravity=DEFAULT_GRAVITY, sequence=()) -> Scene:
-    """A validated scene: unique ids, a support, a sequence of existing free blocks."""
+def make_scene(name: str, blocks, gravity=DEFAULT_GRAVITY, sequence=(), holds=()) -> Scene:
+    """A validated scene: unique ids, a support, a sequence of existing free blocks, holds of
+    existing blocks within the steps."""
     blocks = tuple(blocks)
     if not blocks:
         raise SceneError("the scene has no blocks")
@@ -151,7 +232,36 @@ def make_scene(name: str, blocks, gravity=DEFAULT_GRAVITY, sequence=()) -> Scene
         if s in seq_seen:
             raise SceneError(f"sequence names block {s!r} twice")
         seq_seen.add(s)
-    return Scene(str(name), blocks, g, seq)
+    steps = len(seq) or sum(not b.support for b in blocks)
+    return Scene(str(name), blocks, g, seq, _check_holds(holds, seen, steps))
+
+
+def _check_holds(holds, ids: set[str], steps: int) -> tuple[Hold, ...]:
+    """Validated holds: existing blocks, 0 <= from_step < until_step <= steps (the number of
+    placements; until_step == steps releases after the last placement, at an extra step)."""
+    out = []
+    for h in holds:
+        if not isinstance(h, Hold):
+            raise SceneError(f"a hold must be a Hold, got {type(h).__name__}")
+        where = f"hold of block {h.block!r}"
+        if h.block not in ids:
+            raise SceneError(f"{where}: no such block in the scene")
+        if not _is_int(h.from_step) or h.from_step < 0:
+            raise SceneError(f"{where}: from_step must be an integer >= 0, got {h.from_step!r}")
+        if h.until_step is not None:
+            if not _is_int(h.until_step) or not h.from_step < h.until_step <= steps:
+                raise SceneError(f"{where}: until_step must be an integer in ({h.from_step}, "
+                                 f"{steps}] (the scene has {steps} steps), got {h.until_step!r}")
+        elif h.from_step >= max(steps, 1):
+            raise SceneError(f"{where}: from_step {h.from_step} is past the last step "
+                             f"({steps - 1})")
+        out.append(Hold(h.block, int(h.from_step),
+                        None if h.until_step is None else int(h.until_step)))
+    return tuple(out)
+
+
+def _is_int(x) -> bool:
+    return isinstance(x, (int, np.integer)) and not isinstance(x, bool)
 
 
 def scene_from_dict(data: dict, base_dir: Path | None = None) -> Scene:
@@ -165,7 +275,20 @@ def scene_from_dict(data: dict, base_dir: Path | None = None) -> Scene:
     seq = data.get("sequence") or ()
     if not isinstance(seq, (list, tuple)):
         raise SceneError('"sequence" must be a list of block ids')
-    return make_scene(data.get("name", "scene"), blocks, data.get("gravity", DEFAULT_GRAVITY), seq)
+    holds = data.get("holds") or ()
+    if not isinstance(holds, (list, tuple)):
+        raise SceneError('"holds" must be a list of {"block", "from_step", "until_step"}')
+    return make_scene(data.get("name", "scene"), blocks, data.get("gravity", DEFAULT_GRAVITY), seq,
+                      [_hold_from_dict(i, h) for i, h in enumerate(holds)])
+
+
+def _hold_from_dict(index: int, raw) -> Hold:
+    if not isinstance(raw, dict) or "block" not in raw:
+        raise SceneError(f'hold #{index} must be an object with a "block"')
+    unknown = set(raw) - {"block", "from_step", "until_step"}
+    if unknown:
+        raise SceneError(f"hold #{index}: unknown keys {sorted(unknown)}")
+    return Hold(str(raw["block"]), raw.get("from_step", 0), raw.get("until_step"))
 
 
 def _block_from_dict(index: int, raw, base_dir: Path | None) -> Block:
@@ -231,4 +354,8 @@ def scene_to_dict(scene: Scene) -> dict:
     out = {"name": scene.name, "gravity": scene.gravity.tolist(), "blocks": blocks}
     if scene.sequence:
         out["sequence"] = list(scene.sequence)
+    if scene.holds:
+        out["holds"] = [{"block": h.block, "from_step": h.from_step,
+                         **({} if h.until_step is None else {"until_step": h.until_step})}
+                        for h in scene.holds]
     return out

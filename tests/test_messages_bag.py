@@ -272,3 +272,34 @@ def test_killed_recording_is_recoverable(tmp_path):
     out = list(bag.read_bag(path))
     assert [(m.topic, m.stamp_ns, m.data["step_index"], m.data["message"]) for m in out] == [
         ("/rbe/report", 1000 + i, i, f"step {i}") for i in range(5)]
+
+
+def test_holds_and_hold_report_fields_round_trip():
+    from rbe_ros.scene import Hold
+
+    s = scene()
+    held = make_scene(s.name, s.blocks, s.gravity, s.sequence,
+                      [Hold("a", 1), Hold("t", 0, 1), Hold("ground", 0, 2)])
+    d = messages.state_to_dict(held, "map", 7)
+    assert d["holds"] == [{"block": "a", "from_step": 1, "until_step": -1},
+                          {"block": "t", "from_step": 0, "until_step": 1},
+                          {"block": "ground", "from_step": 0, "until_step": 2}]
+    assert messages.scene_from_state_dict(d).holds == held.holds
+    assert messages.scene_from_state_dict(messages.state_to_dict(s)).holds == ()
+    bad = dict(d, holds=[{"block": "a", "from_step": 0, "until_step": -2}])
+    with pytest.raises(SceneError, match="until_step must be -1"):
+        messages.scene_from_state_dict(bad)
+    with pytest.raises(SceneError, match="no such block"):
+        messages.scene_from_state_dict(dict(d, holds=[{"block": "ghost"}]))
+    r = report()
+    r.held_blocks, r.suggested_holds = ["t"], ["a"]
+    rd = messages.report_to_dict(r, messages.header_dict("world", 1))
+    assert (rd["held_blocks"], rd["suggested_holds"]) == (["t"], ["a"])
+    back = messages.report_from_dict(rd)
+    assert (back.held_blocks, back.suggested_holds) == (["t"], ["a"])
+    # through a bag (CDR) and back
+    store = bag.typestore()
+    raw = store.serialize_cdr(bag.to_rosbags(store, "rbe_msgs/msg/AssemblyState", d),
+                              "rbe_msgs/msg/AssemblyState")
+    obj = store.deserialize_cdr(raw, "rbe_msgs/msg/AssemblyState")
+    assert bag.to_dict(store, "rbe_msgs/msg/AssemblyState", obj)["holds"] == d["holds"]

@@ -1,11 +1,11 @@
 """The stability check of one assembly: solve, and when it fails, say why.
 
 The verdict follows RBE_NOTES: friction-net decides (a vertex can carry no net tension
-under it, so an assembly that needs glue makes it infeasible). When it is infeasible, two
-more solves explain the failure: friction+ (always feasible while every block is connected
-to a support) shows where tension is needed, and the same equilibrium without any friction
-limit tells tipping (still needs tension: TENSION_REQUIRED) from sliding (stands with more
-friction: FRICTION_EXCEEDED).
+under it, so an assembly that needs glue makes it infeasible). When it is infeasible, up to two
+more solves explain the failure: the same equilibrium without any friction limit tells
+sliding (it stands with more friction: FRICTION_EXCEEDED, its forces show where) from tipping
+(it still needs tension: TENSION_REQUIRED), and then friction+ (always feasible while every
+block is connected to a support) shows where tension is needed.
 """
 from __future__ import annotations
 
@@ -19,8 +19,32 @@ from ..rbe.model import build_model
 from ..rbe.result import InterfaceResult, Report, Status
 from ..rbe.resultants import interface_results
 from ..rbe.solver import SolveOptions, solve
-from ..scene import Scene
+from ..scene import Scene, ValidationLimits
 from .assembly import Assembly
+from .validate import validated_assembly
+
+
+@dataclass(frozen=True)
+class HoldSearch:
+    """How an unstable check looks for the smallest set of blocks to hold (suggested_holds;
+    :mod:`rbe_ros.analysis.holds`): exact by increasing size up to ``max_size`` blocks while
+    at most ``max_checks`` sub-assembly checks are spent, then a greedy heuristic that
+    evaluates up to ``greedy_width`` candidates per added block. Counted in checks, not
+    seconds, so that a replay suggests the same holds on any machine. Each trial checks the
+    whole assembly, so assemblies of more than ``max_free_blocks`` free blocks are not searched
+    (a 399-block vault would take minutes)."""
+
+    enabled: bool = True
+    max_size: int = 3
+    max_checks: int = 40
+    greedy_width: int = 4
+    max_free_blocks: int = 60
+
+    def __post_init__(self):
+        for name in ("max_size", "max_checks", "greedy_width", "max_free_blocks"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise ValueError(f"hold search {name} must be an integer >= 0, not {value!r}")
 
 
 @dataclass(frozen=True)
@@ -29,6 +53,10 @@ class CheckOptions:
     mu_threshold: float | None = None   # post-check |V| <= mu_threshold N; None: the solve's mu
     tension_tol: float = 1e-5           # tension counts above this share of the free weight
     contact: ContactOptions = field(default_factory=ContactOptions)
+    full_solve: bool = False            # sequences: always solve the whole partial assembly
+    holds: HoldSearch = field(default_factory=HoldSearch)   # suggested holds of unstable checks
+    #: Sane ranges checked before the geometry stage (None: no validation); see validate.py.
+    limits: ValidationLimits | None = field(default_factory=ValidationLimits)
 
     @property
     def threshold(self) -> float:
@@ -36,10 +64,23 @@ class CheckOptions:
 
 
 def check_scene(scene: Scene, options: CheckOptions = CheckOptions()) -> Report:
-    """Check ``scene`` as a whole (contact detection included in the reported time)."""
+    """Check ``scene`` as a whole (contact detection included in the reported time).
+
+    With holds, the assembly is the state after the last step: supports whose hold ends are
+    taken away, free blocks held to the end are supports (``held_blocks``). An unstable
+    report names the smallest set of blocks to hold (``suggested_holds``, see
+    :class:`HoldSearch`)."""
+    from .holds import annotate_holds            # deferred: holds imports this module
+    from .sequence import final_state
+
     start = time.perf_counter()
-    assembly = Assembly.from_scene(scene, options.contact)
+    assembly = validated_assembly(scene, options.limits, options.contact)
+    held: tuple[str, ...] = ()
+    if scene.holds:
+        present, held = final_state(scene)
+        assembly = assembly.subset(present, held)
     report = check(assembly, options)
+    annotate_holds(report, assembly, held, options)
     report.solve_time = time.perf_counter() - start
     return report
 
@@ -53,7 +94,14 @@ def check(assembly: Assembly, options: CheckOptions = CheckOptions()) -> Report:
     return report
 
 
-def _verdict(assembly: Assembly, options: CheckOptions) -> Report:
+def infeasible_report(assembly: Assembly, options: CheckOptions = CheckOptions()) -> Report | None:
+    """The report of ``assembly`` if its deciding problem is infeasible (it cannot stand,
+    whatever else is checked), None if that problem has a solution."""
+    return _verdict(assembly, options, only_infeasible=True)
+
+
+def _verdict(assembly: Assembly, options: CheckOptions, only_infeasible: bool = False
+             ) -> Report | None:
     floating = assembly.floating_blocks()
     if floating:
         return Report(False, Status.INFEASIBLE,
@@ -62,18 +110,18 @@ def _verdict(assembly: Assembly, options: CheckOptions) -> Report:
     model = build_model(assembly.blocks, assembly.interfaces, assembly.gravity)
     primary = solve(model, options.solve)
     if primary.solved:
-        return _report(model, primary, options)
+        return None if only_infeasible else _report(model, primary, options)
     if primary.status == "failed":
-        return _failed(primary)
+        return None if only_infeasible else _failed(primary)
     if options.solve.friction == "plus":
         return Report(False, Status.INFEASIBLE, "no equilibrium even with tension")
+    unlimited = solve(model, replace(options.solve, mu=math.inf, allow_tension=False))
+    if unlimited.solved:
+        return _report(model, unlimited, options, sliding=True)
     glued = solve(model, replace(options.solve, friction="plus"))
     if not glued.solved:
         return (_failed(glued) if glued.status == "failed" else
                 Report(False, Status.INFEASIBLE, "no equilibrium even with tension"))
-    unlimited = solve(model, replace(options.solve, mu=math.inf, allow_tension=False))
-    if unlimited.solved:
-        return _report(model, unlimited, options, sliding=True)
     return _report(model, glued, options)
 
 

@@ -23,7 +23,7 @@ ANALYSES = ("kern-fitting", "inner-base-fitting", "outer-base-fitting", "max-thr
 
 
 def to_kern(it: Interface) -> Interface:
-    return _with_points(it, it.kern())
+    return _with_points(it, it.kern)
 
 
 def towards_point(it: Interface, factor: float, point: np.ndarray | None = None) -> Interface:

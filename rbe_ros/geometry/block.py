@@ -67,7 +67,9 @@ class _Shape:
 def pose_block(block: Block) -> PosedBlock:
     """Place ``block`` in the scene and compute its mass properties (raises SceneError)."""
     try:
-        shape = _shape(block.vertices.tobytes(), block.vertices.shape[0], block.faces)
+        # rounded to 1e-12 m, so blocks equal but for float noise share one shape analysis
+        shape = _shape(np.round(block.vertices, 12).tobytes(), block.vertices.shape[0],
+                       block.faces)
     except ValueError as exc:
         raise SceneError(f"block {block.id!r}: {exc}") from None
     rot = Rotation.from_quat(block.orientation).as_matrix()   # (x, y, z, w), as ROS
@@ -92,7 +94,7 @@ def _shape(vertex_bytes: bytes, count: int, faces) -> _Shape:
     if not _is_closed(tri):
         raise ValueError("mesh is not closed (every edge must join exactly two faces,"
                          " wound consistently)")
-    volume, centroid = _volume_centroid(vertices[tri])
+    volume, centroid = _volume_centroid(_centre_fans(vertices, faces))
     scale = float(np.ptp(vertices, axis=0).max())
     if not volume > 1e-9 * scale ** 3:
         raise ValueError(f"mesh has no volume or is wound inside out (volume {volume:.3g} m^3)")
@@ -106,6 +108,21 @@ def _is_closed(tri: np.ndarray) -> bool:
     keys = edges[:, 0] * n + edges[:, 1]
     reverse = edges[:, 1] * n + edges[:, 0]
     return len(np.unique(keys)) == len(keys) and bool(np.isin(reverse, keys).all())
+
+
+def _centre_fans(vertices: np.ndarray, faces) -> np.ndarray:
+    """Triangles (m, 3, 3) fanning each face from its vertex mean: the same as any fan for
+    planar faces, and for slightly non-planar ones (scanned or exported meshes) the symmetric
+    choice COMPAS makes too."""
+    out = []
+    for f in faces:
+        pts = vertices[list(f)]
+        if len(f) == 3:
+            out.append(pts[None])
+            continue
+        centre = np.broadcast_to(pts.mean(axis=0), pts.shape)
+        out.append(np.stack((centre, pts, np.concatenate((pts[1:], pts[:1]))), axis=1))
+    return np.concatenate(out)
 
 
 def _volume_centroid(triangles: np.ndarray) -> tuple[float, np.ndarray]:

@@ -7,13 +7,14 @@ the face tests to pairs of blocks that can touch.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 import shapely
 
 from .block import PosedBlock
-from .kern import kern
+from .kern import kern, kerns
 from .polygon import PlaneFrame, cross, drop_collinear
 
 
@@ -47,9 +48,23 @@ class Interface:
     def polygon2d(self) -> np.ndarray:
         return self.frame.to_2d(self.points)
 
+    @cached_property
     def kern(self) -> np.ndarray:
-        """Kern vertices in world coordinates."""
+        """Kern vertices in world coordinates (computed once: results of every solve use it)."""
         return self.frame.to_3d(kern(self.polygon2d()))
+
+    @staticmethod
+    def compute_kerns(interfaces) -> None:
+        """Compute the kerns of many interfaces at once (vectorised) into their caches."""
+        todo = [it for it in interfaces if "kern" not in it.__dict__]
+        for it, k in zip(todo, kerns([it.polygon2d() for it in todo])):
+            it.__dict__["kern"] = it.frame.to_3d(k)
+
+    def between(self, a: int, b: int) -> "Interface":
+        """The same contact between blocks renumbered ``a`` and ``b``, sharing the kern."""
+        out = replace(self, a=a, b=b)
+        out.__dict__["kern"] = self.kern
+        return out
 
 
 def candidate_pairs(blocks: list[PosedBlock], margin: float) -> np.ndarray:

@@ -51,23 +51,27 @@ class PlaneFrame:
         return self.origin + p[:, :1] * self.u + p[:, 1:2] * self.v
 
 
-def area_moments(poly2d: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-    """Area A, centroid G and second-moment tensor J_G = int (r-G)(r-G)^T dA of a simple polygon.
+def area_moments(poly2d: np.ndarray):
+    """Area A, centroid G and second-moment tensor J_G = int (r-G)(r-G)^T dA of a simple polygon
+    (k, 2), or of a batch of polygons with k vertices each (..., k, 2).
 
     Counter-clockwise vertices give a positive area (the Green's-theorem sums of paper Eq. 1-5).
     """
-    x, y = poly2d[:, 0], poly2d[:, 1]
-    xn, yn = np.roll(x, -1), np.roll(y, -1)
+    p = np.asarray(poly2d, dtype=float)
+    x, y = p[..., 0], p[..., 1]
+    xn, yn = np.roll(x, -1, axis=-1), np.roll(y, -1, axis=-1)
     cross = x * yn - xn * y
-    area = 0.5 * cross.sum()
-    cx = ((x + xn) * cross).sum() / (6 * area)
-    cy = ((y + yn) * cross).sum() / (6 * area)
-    ixx = ((x * x + x * xn + xn * xn) * cross).sum() / 12   # int x^2 dA about the origin
-    iyy = ((y * y + y * yn + yn * yn) * cross).sum() / 12
-    ixy = ((x * yn + 2 * x * y + 2 * xn * yn + xn * y) * cross).sum() / 24
-    j = np.array([[ixx - area * cx * cx, ixy - area * cx * cy],
-                  [ixy - area * cx * cy, iyy - area * cy * cy]])
-    return float(area), np.array([cx, cy]), j
+    area = 0.5 * cross.sum(axis=-1)
+    cx = ((x + xn) * cross).sum(axis=-1) / (6 * area)
+    cy = ((y + yn) * cross).sum(axis=-1) / (6 * area)
+    ixx = ((x * x + x * xn + xn * xn) * cross).sum(axis=-1) / 12   # int x^2 dA about the origin
+    iyy = ((y * y + y * yn + yn * yn) * cross).sum(axis=-1) / 12
+    ixy = ((x * yn + 2 * x * y + 2 * xn * yn + xn * y) * cross).sum(axis=-1) / 24
+    j = np.stack((np.stack((ixx - area * cx * cx, ixy - area * cx * cy), axis=-1),
+                  np.stack((ixy - area * cx * cy, iyy - area * cy * cy), axis=-1)), axis=-2)
+    if p.ndim == 2:
+        return float(area), np.array([cx, cy]), j
+    return area, np.stack((cx, cy), axis=-1), j
 
 
 def drop_collinear(points: np.ndarray, tol: float) -> np.ndarray:

@@ -47,6 +47,17 @@ class EquilibriumModel:
     def num_vertices(self) -> int:
         return len(self.points)
 
+    def wrench_load(self, wrenches: dict[int, np.ndarray]) -> np.ndarray:
+        """Scaled load vector p of known wrenches (force, moment about the centroid; 6 numbers
+        in N and N m) on free blocks, by block index: e.g. the fixed forces of interfaces
+        left out of a local model."""
+        row_of = {int(j): r for r, j in enumerate(self.free)}
+        p = np.zeros((len(self.free), 6))
+        for j, w in wrenches.items():
+            p[row_of[j], :3] = w[:3] / self.force_scale
+            p[row_of[j], 3:] = w[3:] / (self.force_scale * self.length_scale)
+        return p.ravel()
+
     def load(self, acceleration: np.ndarray) -> np.ndarray:
         """Scaled load vector p of the free blocks' weights under ``acceleration`` (m/s^2)."""
         return _weights(self.blocks, self.free, acceleration, self.force_scale)

@@ -54,3 +54,7 @@ class Report:
     unstable_blocks: list[str] = field(default_factory=list)
     step_index: int = -1
     block_placed: str = ""
+    model: str = "full"   # which model answered: "full", "local N" or "relaxed N"
+    held_blocks: list[str] = field(default_factory=list)      # free blocks held as supports
+    suggested_holds: list[str] = field(default_factory=list)  # smallest set to hold, if unstable
+    dropped_states: int = 0   # node: states on ~/assembly dropped unchecked so far (overload)

@@ -52,6 +52,6 @@ def interface_results(model: EquilibriumModel, solution: Solution, *, mu_thresho
             block_a=model.blocks[it.a].id, block_b=model.blocks[it.b].id, normal=n.copy(),
             polygon=pts.copy(), normal_forces=fn[k].copy(), tangential_forces=tangential[k].copy(),
             resultant=big_n * n + shear, normal_resultant=big_n, shear=shear,
-            centre_of_pressure=cop, torque=torque, kern=it.kern(), friction_ratio=ratio,
+            centre_of_pressure=cop, torque=torque, kern=it.kern, friction_ratio=ratio,
             tension=tension, friction_exceeded=bool(ratio > mu_threshold * (1 + 1e-6) or slides)))
     return out

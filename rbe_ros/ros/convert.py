@@ -17,7 +17,7 @@ from rosidl_parser.definition import (AbstractGenericString, AbstractNestedType,
 
 from ..messages import report_to_dict, scene_from_state_dict
 from ..rbe.result import Report
-from ..scene import Scene
+from ..scene import Scene, SceneError, ValidationLimits, check_block_count
 
 _FLOATS = {"float", "double", "long double"}
 _INTS = {"int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64", "char"}
@@ -122,11 +122,22 @@ def _cast(typ, value):
 
 # --- the node's conversions -------------------------------------------------------------------
 
-def scene_from_msg(msg, *, sequence: bool = True) -> Scene:
+def scene_from_msg(msg, *, sequence: bool = True, limits: ValidationLimits | None = None) -> Scene:
     """The validated scene of an rbe_msgs/AssemblyState (raises :class:`SceneError`).
 
     ``sequence=False`` drops the state's sequence (not validated then): the assembly as it is.
+    With ``limits``, the counts of blocks and of mesh vertices and triangles are checked on the
+    message first, before anything is converted (a hostile message costs nothing then); the
+    other limits are checked with the scene (:func:`rbe_ros.analysis.validate.validated_assembly`).
     """
+    if limits is not None:
+        check_block_count(len(msg.blocks), limits)
+        for block in msg.blocks:
+            vertices, triangles = len(block.mesh.vertices), len(block.mesh.triangles)
+            if vertices > limits.max_vertices or triangles > 2 * limits.max_vertices:
+                raise SceneError(f"block {block.id!r}: mesh of {vertices} vertices and "
+                                 f"{triangles} triangles, more than the limit of "
+                                 f"{limits.max_vertices} vertices")
     values = message_to_dict(msg)
     if not sequence:
         values["sequence"] = []

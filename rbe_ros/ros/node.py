@@ -2,9 +2,13 @@
 
 Interfaces (relative to the node, e.g. ``/rbe_node/report``):
 
-* subscribes ``~/assembly`` (rbe_msgs/AssemblyState, reliable, depth 5): a state without a
+* subscribes ``~/assembly`` (rbe_msgs/AssemblyState, reliable, depth 1): a state without a
   sequence is checked as a whole (one report); with a sequence every insertion step is checked
-  and each step's report is published as soon as it is done;
+  and each step's report is published as soon as it is done. States are checked by a worker
+  thread from a single-slot buffer: when states arrive faster than they can be checked, the
+  newest replaces the waiting one, and the dropped ones are counted (``dropped_states`` of
+  every report, a throttled warning in the log), so memory stays bounded and the newest state
+  is always answered;
 * publishes ``~/report`` (rbe_msgs/StabilityReport, reliable, transient_local, depth 1) and
   ``~/markers`` (visualization_msgs/MarkerArray, same QoS) for every report the node makes,
   whatever asked for it (topic, service or action);
@@ -12,10 +16,14 @@ Interfaces (relative to the node, e.g. ``/rbe_node/report``):
 * serves the action ``~/check_sequence`` (rbe_msgs/action/CheckSequence): feedback per step,
   all reports and the first failing step as result; cancellable between steps.
 
-Bad input never stops the node: a state that cannot be checked gives a report with status
-INVALID_INPUT and the reason, any other error in a callback is logged and gives
-SOLVER_FAILED with the exception text. With ``mcap_path`` set, every received state and every
-report is recorded (CDR, receive/publish time) in a rosbag2 MCAP bag, closed on shutdown.
+Bad input never stops the node: a state that cannot be checked (outside the limits of
+:class:`rbe_ros.scene.ValidationLimits`, ``max_blocks`` among them) gives a report with status
+INVALID_INPUT and the reason, a solver failure or a solve over ``check_time_limit`` gives
+SOLVER_FAILED with the solver's status, and any other error in a callback is logged and gives
+SOLVER_FAILED with the exception text. With ``mcap_path`` set, every checked state and every
+report is recorded (CDR, receive/publish time) in a rosbag2 MCAP bag, each message flushed
+before the report is published (a report seen on DDS is on disk, even after SIGKILL); the bag
+is closed on shutdown (SIGINT, SIGTERM).
 
 Run: ``rbe_node --ros-args -p friction_coefficient:=0.5 -p mcap_path:=bags/run``
 (or ``python -m rbe_ros.ros.node``).
@@ -25,38 +33,40 @@ from __future__ import annotations
 import math
 import os
 import signal
+import struct
 import threading
 import time
 from pathlib import Path
 
 import rclpy
-from rcl_interfaces.msg import (FloatingPointRange, ParameterDescriptor, ParameterType,
-                                SetParametersResult)
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                ParameterType, SetParametersResult)
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.serialization import serialize_message
+from rclpy.serialization import deserialize_message, serialize_message
 from rclpy.signals import SignalHandlerOptions
 from rbe_msgs.action import CheckSequence
 from rbe_msgs.msg import AssemblyState, StabilityReport
 from rbe_msgs.srv import CheckAssembly
 from visualization_msgs.msg import MarkerArray
 
-from ..analysis.check import CheckOptions, check_scene
+from ..analysis.check import CheckOptions, HoldSearch, check_scene
 from ..analysis.sequence import check_sequence, sequence_steps
 from ..rbe.cones import CONES, FRICTION_MODELS
 from ..rbe.result import Report, Status
 from ..rbe.solver import OBJECTIVES, SolveOptions
-from ..scene import Scene, SceneError
+from ..scene import Scene, SceneError, ValidationLimits
 from .convert import message_to_dict, report_to_msg, scene_from_msg
 from .markers import report_markers
 
 NODE_NAME = "rbe_node"
 
-STATE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5,
+#: Depth 1: under overload only the newest state matters (see the single-slot buffer).
+STATE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                        reliability=ReliabilityPolicy.RELIABLE,
                        durability=DurabilityPolicy.VOLATILE)
 #: Reports and markers are latched: a late subscriber gets the last verdict.
@@ -68,13 +78,21 @@ LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
 CHOICES = {"objective": OBJECTIVES, "friction_model": FRICTION_MODELS, "friction_cone": CONES}
 #: (lowest, highest, lowest excluded) of the floating point parameters.
 RANGES = {"friction_coefficient": (0.0, 10.0, True), "friction_threshold": (0.0, 10.0, False),
-          "tension_tolerance": (0.0, 1.0, False)}
+          "tension_tolerance": (0.0, 1.0, False), "check_time_limit": (0.0, 3600.0, False),
+          "max_blocks": (1, 1_000_000, False), "hold_search_max_size": (0, 1000, False),
+          "hold_search_max_checks": (0, 1_000_000, False)}
 
 
 def _double(value: float, description: str, low: float, high: float) -> tuple:
     return value, ParameterDescriptor(
         type=ParameterType.PARAMETER_DOUBLE, description=description,
         floating_point_range=[FloatingPointRange(from_value=low, to_value=high, step=0.0)])
+
+
+def _integer(value: int, description: str, low: int, high: int) -> tuple:
+    return value, ParameterDescriptor(
+        type=ParameterType.PARAMETER_INTEGER, description=description,
+        integer_range=[IntegerRange(from_value=low, to_value=high, step=1)])
 
 
 def _choice(value: str, description: str, choices) -> tuple:
@@ -109,6 +127,21 @@ PARAMETERS = {
                          "a timestamp suffix", read_only=True),
     "frame_id": _string("world", "frame of reports and markers when a received state has an "
                         "empty header frame_id"),
+    "max_blocks": _integer(ValidationLimits().max_blocks, "largest number of blocks of a state; "
+                           "a larger one gets an INVALID_INPUT report", 1, 1_000_000),
+    "check_time_limit": _double(0.0, "time limit in s of each solver call of a check (a check "
+                                "makes one to three); over it the report is SOLVER_FAILED "
+                                "(MaxTime). 0: no limit", 0.0, 3600.0),
+    "full_solve": (False, ParameterDescriptor(
+        type=ParameterType.PARAMETER_BOOL, description="sequences: solve every step's whole "
+        "assembly instead of local models (a report's model field says which answered)")),
+    "suggest_holds": (HoldSearch().enabled, ParameterDescriptor(
+        type=ParameterType.PARAMETER_BOOL, description="an unstable report names the smallest "
+        "set of blocks to hold (suggested_holds)")),
+    "hold_search_max_size": _integer(HoldSearch().max_size, "suggested holds: exact search up "
+                                     "to this many blocks, then a greedy heuristic", 0, 1000),
+    "hold_search_max_checks": _integer(HoldSearch().max_checks, "suggested holds: sub-assembly "
+                                       "checks the exact search may spend", 0, 1_000_000),
 }
 
 
@@ -122,6 +155,12 @@ class RbeNode(Node):
         self._action = None
         self._bag = None
         self._bag_lock = threading.Lock()
+        # Overload: the subscription callback only puts the state in this one slot (a newer
+        # state replaces a waiting one, counted in _dropped); the worker thread checks it.
+        self._slot: bytes | None = None             # CDR of the newest unchecked state
+        self._slot_cond = threading.Condition()
+        self._dropped = 0
+        self._worker: threading.Thread | None = None
 
         self.add_on_set_parameters_callback(self._validate_parameters)
         for name, (value, descriptor) in PARAMETERS.items():
@@ -136,9 +175,12 @@ class RbeNode(Node):
 
         self._report_pub = self.create_publisher(StabilityReport, "~/report", LATCHED_QOS)
         self._marker_pub = self.create_publisher(MarkerArray, "~/markers", LATCHED_QOS)
+        # raw: the callback gets the CDR bytes; a state is converted to a message only when
+        # the worker checks it (converting a 100-block state costs ~15 ms of the GIL, which
+        # at 100 Hz would starve the checks)
         self._state_sub = self.create_subscription(
             AssemblyState, "~/assembly", self._on_state, STATE_QOS,
-            callback_group=self._topic_group)
+            callback_group=self._topic_group, raw=True)
         self._service = self.create_service(
             CheckAssembly, "~/check", self._on_check, callback_group=self._service_group)
         self._action = ActionServer(
@@ -150,6 +192,8 @@ class RbeNode(Node):
         self.state_topic = self._state_sub.topic_name
         self.report_topic = self._report_pub.topic_name
         self._open_bag()
+        self._worker = threading.Thread(target=self._work, name="rbe_state_worker", daemon=True)
+        self._worker.start()
         self.get_logger().info(
             f"ready: {self.state_topic} -> {self.report_topic}, service "
             f"{self._service.service_name}, mu {self.get_parameter('friction_coefficient').value}")
@@ -177,11 +221,21 @@ class RbeNode(Node):
         """The core's options from the current parameter values."""
         value = lambda name: self.get_parameter(name).value  # noqa: E731
         threshold = float(value("friction_threshold"))
+        time_limit = float(value("check_time_limit"))
         solve = SolveOptions(objective=value("objective"), friction=value("friction_model"),
                              cone=value("friction_cone"),
-                             mu=float(value("friction_coefficient")))
+                             mu=float(value("friction_coefficient")),
+                             time_limit=time_limit if time_limit > 0 else math.inf)
         return CheckOptions(solve=solve, mu_threshold=threshold if threshold > 0 else None,
-                            tension_tol=float(value("tension_tolerance")))
+                            tension_tol=float(value("tension_tolerance")),
+                            limits=self.limits(), full_solve=bool(value("full_solve")),
+                            holds=HoldSearch(enabled=bool(value("suggest_holds")),
+                                             max_size=int(value("hold_search_max_size")),
+                                             max_checks=int(value("hold_search_max_checks"))))
+
+    def limits(self) -> ValidationLimits:
+        """The validation limits: the defaults, with ``max_blocks`` from its parameter."""
+        return ValidationLimits(max_blocks=int(self.get_parameter("max_blocks").value))
 
     # --- recording --------------------------------------------------------------------------
 
@@ -198,7 +252,10 @@ class RbeNode(Node):
             while path.exists():
                 k += 1
                 path = path.with_name(f"{stem}_{k}")
-        self._bag = BagWriter(path)
+        from ..replay import OPTIONS_KEY, options_to_json
+
+        # the options at the start, so that `rbe-ros replay` re-checks the same way
+        self._bag = BagWriter(path, custom_data={OPTIONS_KEY: options_to_json(self.check_options())})
         self._bag.add_topic(self.state_topic, "rbe_msgs/msg/AssemblyState")
         self._bag.add_topic(self.report_topic, "rbe_msgs/msg/StabilityReport",
                             transient_local=True)
@@ -206,9 +263,10 @@ class RbeNode(Node):
         self.get_logger().info(f"recording states and reports to {path}")
 
     def _record(self, topic: str, msg, stamp_ns: int | None = None) -> None:
+        """Write ``msg`` (a message, or its CDR bytes) to the bag, if recording."""
         if self._bag is None:
             return
-        data = serialize_message(msg)
+        data = msg if isinstance(msg, (bytes, bytearray)) else serialize_message(msg)
         stamp = self.get_clock().now().nanoseconds if stamp_ns is None else stamp_ns
         with self._bag_lock:
             if self._bag is None:
@@ -228,13 +286,21 @@ class RbeNode(Node):
                 self.get_logger().error(f"closing the bag {self.bag_path} failed: {exc}")
 
     def stop(self) -> None:
-        """Ask running checks to stop after their current step (shutdown)."""
+        """Ask running checks to stop after their current step (shutdown); the state
+        worker exits, a state still waiting is dropped."""
         self._closing = True
+        with self._slot_cond:
+            self._slot_cond.notify_all()
 
     def destroy_node(self):
         """Close the bag, destroy the action server (not done by Node), then the node.
         Idempotent."""
         self.stop()
+        worker, self._worker = self._worker, None
+        if worker is not None and worker is not threading.current_thread():
+            worker.join(timeout=10.0)       # a running check ends after its current step
+            if worker.is_alive():
+                self.get_logger().warning("the state worker is still checking; closing anyway")
         with self._bag_lock:
             self._close_bag_locked()
         if self._destroyed:
@@ -247,26 +313,34 @@ class RbeNode(Node):
 
     # --- checks -----------------------------------------------------------------------------
 
-    def _received(self, state: AssemblyState) -> dict:
-        """Record ``state`` and return the header dict its reports carry."""
-        self._record(self.state_topic, state)
+    def _received(self, state: AssemblyState, raw: bytes | None = None) -> dict:
+        """Record ``state`` (its CDR bytes ``raw`` if given) and return the header dict its
+        reports carry."""
+        self._record(self.state_topic, state if raw is None else raw)
         header = message_to_dict(state.header)
         if not header["frame_id"]:
             header["frame_id"] = self.get_parameter("frame_id").value
         return header
 
     def _publish(self, scene: Scene | None, report: Report, header: dict) -> StabilityReport:
-        """Publish (and record) ``report`` and its markers; returns the message."""
+        """Record, then publish ``report`` and its markers; returns the message. Recorded
+        first, so that a report anyone received is in the bag even if the node is killed."""
+        report.dropped_states = self._dropped
         msg = report_to_msg(report, header)
-        self._report_pub.publish(msg)
-        self._record(self.report_topic, msg)
+        data = serialize_message(msg)               # once, for the bag and the publisher
+        self._record(self.report_topic, data)
+        self._report_pub.publish(data)
         self._marker_pub.publish(report_markers(scene, report, header["frame_id"],
                                                 msg.header.stamp))
         where = f" step {report.step_index} ({report.block_placed})" \
             if report.step_index >= 0 else ""
-        log = self.get_logger().info if report.status != Status.SOLVER_FAILED \
-            else self.get_logger().error
-        log(f"{header['frame_id']}{where}: {report.status.name}: {report.message}")
+        text = f"{header['frame_id']}{where}: {report.status.name}: {report.message}"
+        # one call site per severity: rclpy refuses a call site whose severity changes
+        # ("Logger severity cannot be changed between calls")
+        if report.status == Status.SOLVER_FAILED:
+            self.get_logger().error(text)
+        else:
+            self.get_logger().info(text)
         return msg
 
     def _error_report(self, exc: Exception) -> Report:
@@ -280,22 +354,60 @@ class RbeNode(Node):
         """Check the assembly of ``state`` as it is (sequence ignored); publish the report."""
         scene = None
         try:
-            scene = scene_from_msg(state, sequence=False)
-            report = check_scene(scene, self.check_options())
+            options = self.check_options()
+            scene = scene_from_msg(state, sequence=False, limits=options.limits)
+            report = check_scene(scene, options)
         except Exception as exc:
             report = self._error_report(exc)
         return self._publish(scene, report, header)
 
-    def _on_state(self, state: AssemblyState) -> None:
+    def _on_state(self, data: bytes) -> None:
+        """Subscription callback (raw CDR): put the state in the slot for the worker (never
+        blocks on a check); a state still waiting there is dropped and counted."""
+        with self._slot_cond:
+            stale, self._slot = self._slot, data
+            if stale is not None:
+                self._dropped += 1
+                dropped = self._dropped
+            self._slot_cond.notify()
+        if stale is not None:
+            self.get_logger().warning(
+                f"overload: state of stamp {_cdr_stamp(stale)} dropped unchecked, a newer one"
+                f" arrived first ({dropped} dropped so far)", throttle_duration_sec=1.0)
+
+    def _work(self) -> None:
+        """The state worker: check the newest waiting state, until the node stops."""
+        while True:
+            with self._slot_cond:
+                while self._slot is None and not self._closing:
+                    self._slot_cond.wait()
+                if self._closing:
+                    return
+                data, self._slot = self._slot, None
+            try:
+                try:
+                    state = deserialize_message(data, AssemblyState)
+                except Exception as exc:
+                    self.get_logger().error(f"state of stamp {_cdr_stamp(data)} not readable:"
+                                            f" {type(exc).__name__}: {exc}")
+                    continue
+                self.check_state(state, data)
+            except Exception:   # only logging can fail here (shutdown): keep the thread quiet
+                pass
+
+    def check_state(self, state: AssemblyState, raw: bytes | None = None) -> None:
+        """Check a state from the topic (as a whole, or every step of its sequence) and
+        publish the reports; never raises. ``raw``: its CDR bytes, recorded as they came."""
         try:
-            header = self._received(state)
+            header = self._received(state, raw)
             if not state.sequence:
                 self.check_whole(state, header)
                 return
             scene = None
             try:
-                scene = scene_from_msg(state)
-                check_sequence(scene, self.check_options(),
+                options = self.check_options()
+                scene = scene_from_msg(state, limits=options.limits)
+                check_sequence(scene, options,
                                on_step=lambda report, _total: self._publish(scene, report, header),
                                cancelled=lambda: self._closing)
             except Exception as exc:
@@ -330,9 +442,10 @@ class RbeNode(Node):
         try:
             state = goal_handle.request.assembly
             header = self._received(state)
-            scene = scene_from_msg(state)
+            options = self.check_options()
+            scene = scene_from_msg(state, limits=options.limits)
             steps = check_sequence(
-                scene, self.check_options(), on_step=on_step,
+                scene, options, on_step=on_step,
                 cancelled=lambda: goal_handle.is_cancel_requested or self._closing)
             total = len(sequence_steps(scene))
             finished = len(steps) == total
@@ -353,6 +466,16 @@ class RbeNode(Node):
         else:  # shutting down
             goal_handle.abort()
         return result
+
+
+def _cdr_stamp(data: bytes) -> str:
+    """``sec.nanosec`` of the header stamp of a CDR-serialised AssemblyState (for the log)."""
+    try:
+        little = data[1] == 1                  # encapsulation CDR_LE (0x0001) or CDR_BE
+        sec, nanosec = struct.unpack_from("<iI" if little else ">iI", data, 4)
+    except (IndexError, struct.error):
+        return "?"
+    return f"{sec}.{nanosec:09d}"
 
 
 def _interrupt(signum, _frame):

@@ -131,7 +131,7 @@ def test_unexpected_errors_become_solver_failed_reports(make_node, tmp_path, mon
     assert "RuntimeError: boom" in r.message
     assert r.header.frame_id == "site" and r.header.stamp.nanosec == 42
     state.sequence = ["a", "b"]
-    node._on_state(state)            # the per-step path fails the same way, node unharmed
+    node.check_state(state)          # the per-step path fails the same way, node unharmed
     node.destroy_node()
     recorded = list(bag.read_bag(tmp_path / "bag"))
     assert [m.topic for m in recorded] == ["/rbe_unit_test/rbe_node/assembly",

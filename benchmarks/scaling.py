@@ -1,0 +1,133 @@
+"""How the cost of a check grows, and what the per-step checks of a sequence cost
+(issue 6): writes docs/SCALING.md and docs/bench/scaling.png.
+
+    .venv/bin/python benchmarks/scaling.py [--quick]      (or: make scaling)
+
+Every figure is a ratio measured in this one run, on this machine (stated in the output):
+- one check of running-bond walls of about 100 to 1000 blocks: total time, time inside the
+  conic solver (Clarabel), the share outside it, and the log-log slope of time against n;
+- the 140-block dome built block by block: every step checked with the local model
+  (rbe_ros.analysis.incremental) and with the full re-solve, against one check of the whole
+  dome, and the steps where the two verdicts differ (there must be none).
+"""
+from __future__ import annotations
+
+import argparse
+import collections
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from machine import machine_summary
+
+from rbe_ros import generators as gen
+from rbe_ros.analysis.assembly import Assembly
+from rbe_ros.analysis.check import check_scene
+from rbe_ros.analysis.incremental import StepChecker
+from rbe_ros.analysis.sequence import sequence_steps
+from rbe_ros.rbe.solver import solver_timing
+
+DOCS = Path(__file__).resolve().parents[1] / "docs"
+
+
+def best_of(repeats: int, fn):
+    """The fastest of ``repeats`` runs (the machine is shared): (value, seconds, solver s)."""
+    best = None
+    for _ in range(repeats):
+        with solver_timing() as spent:
+            start = time.perf_counter()
+            value = fn()
+            elapsed = time.perf_counter() - start
+        if best is None or elapsed < best[1]:
+            best = (value, elapsed, spent[0])
+    return best
+
+
+def walls(sizes, repeats):
+    rows = []
+    for courses, bricks in sizes:
+        scene = gen.running_bond_wall(courses=courses, bricks_per_course=bricks)
+        report, total, solver = best_of(repeats, lambda: check_scene(scene))
+        rows.append((len(scene.blocks), len(report.interfaces), report.status.name, total, solver))
+        print(f"wall {len(scene.blocks)} blocks: {total:.3f} s, solver {solver:.3f} s", flush=True)
+    return rows
+
+
+def dome_sequence():
+    scene = gen.dome()
+    _, whole, _ = best_of(3, lambda: check_scene(scene))
+    out = {}
+    for local in (True, False):
+        def run():
+            start = time.perf_counter()
+            full = Assembly.from_scene(scene)
+            checker = StepChecker(local=local)
+            reports = [checker.check(full.subset(s.present, s.held)) for s in sequence_steps(scene)]
+            return reports, time.perf_counter() - start
+        (reports, elapsed), _, solver = best_of(1, run)
+        out[local] = (reports, elapsed, solver)
+        print(f"dome sequence ({'local' if local else 'full'}): {elapsed:.2f} s", flush=True)
+    mismatches = [a.step_index for a, b in zip(out[True][0], out[False][0]) if a.stable != b.stable]
+    return whole, out, mismatches
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="smaller walls, one repeat")
+    args = parser.parse_args()
+    sizes = ([(10, 10), (20, 15)] if args.quick else
+             [(10, 10), (14, 14), (20, 20), (28, 25), (40, 25)])
+    rows = walls(sizes, 1 if args.quick else 3)
+    n = np.array([r[0] for r in rows], dtype=float)
+    t = np.array([r[3] for r in rows])
+    slope = float(np.polyfit(np.log(n), np.log(t), 1)[0]) if len(rows) > 1 else float("nan")
+    whole, seq, mismatches = dome_sequence()
+
+    lines = ["# Scaling and per-step cost", "",
+             "Made by `benchmarks/scaling.py` (`make scaling`); ratios measured in one run.",
+             "Machine: " + machine_summary(), "",
+             "## One check of a running-bond wall (contacts, model, solve, results)", "",
+             "| blocks | interfaces | verdict | total [s] | in the solver [s] | outside the solver |",
+             "|---|---|---|---|---|---|"]
+    lines += [f"| {b} | {i} | {v} | {tt:.3f} | {s:.3f} | {1 - s / tt:.0%} |" for b, i, v, tt, s in rows]
+    lines += ["", f"Log-log slope of total time against blocks: **{slope:.2f}** "
+              "(target: no faster than about 1.3).", "",
+              "## The 140-block dome, every step checked", "",
+              f"One check of the whole dome (contacts included): {whole:.3f} s.", "",
+              "| per-step model | time [s] | ratio to one whole check | in the solver [s] | models used |",
+              "|---|---|---|---|---|"]
+    for local in (True, False):
+        reports, elapsed, solver = seq[local]
+        used = collections.Counter(r.model.split()[0] for r in reports)
+        lines.append(f"| {'local (default)' if local else 'full re-solve'} | {elapsed:.2f} |"
+                     f" {elapsed / whole:.1f} | {solver:.2f} | "
+                     f"{', '.join(f'{k} {v}' for k, v in sorted(used.items()))} |")
+    lines += ["", f"Steps where the local and the full verdicts differ: {mismatches or 'none'}.",
+              f"Unstable steps: {sum(not r.stable for r in seq[False][0])} of {len(seq[False][0])}.", ""]
+    (DOCS / "SCALING.md").write_text("\n".join(lines))
+    plot(rows, DOCS / "bench" / "scaling.png")
+    print("\n".join(lines))
+    return 0
+
+
+def plot(rows, path: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    n = [r[0] for r in rows]
+    fig, ax = plt.subplots(figsize=(5.5, 4), dpi=120)
+    ax.loglog(n, [r[3] for r in rows], "o-", label="whole check")
+    ax.loglog(n, [r[4] for r in rows], "s--", label="inside Clarabel")
+    ax.set(xlabel="blocks (running-bond wall)", ylabel="time per check [s]")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    fig.savefig(path, bbox_inches="tight")
+    plt.close(fig)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

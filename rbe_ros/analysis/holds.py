@@ -1,0 +1,273 @@
+"""The smallest set of blocks to hold so that an unstable assembly (or step) stands.
+
+Holding a block makes it a support (a robot or a scaffold takes any force on it). The free
+blocks of an assembly fall apart into *components*: sets of free blocks joined by contacts
+between free blocks; supports and held blocks separate them. The equilibrium problem is
+separable by component (the objective and the constraints of one component do not involve
+the others), so the assembly stands exactly when every component, with the supports it
+touches, stands. :class:`StabilityOracle` checks components with the plain checker
+(:func:`rbe_ros.analysis.check.check`) and caches each verdict by (free blocks, supports
+touched), so a hold that splits one component does not re-solve the others.
+
+Exact search (:func:`minimal_holds`): iterative deepening on the number of held blocks with
+a hitting-set branching rule. If holding S leaves a failing component C, every hold set
+T containing S that stands must hold a block of C (a superset of S that holds nothing in C
+leaves C, and the supports it touches, unchanged, so C still fails). So the search branches
+on the blocks of the smallest failing component only, and prunes a set S when it leaves
+more failing components (which are disjoint) than the blocks it may still add. Every
+minimal set is reachable that way, so the first set found at depth d is a minimum. The
+search is exact while it stays within ``HoldSearch.max_size`` blocks and
+``HoldSearch.max_checks`` component checks.
+
+Beyond that budget, a greedy heuristic: repeatedly hold the candidate that leaves the
+fewest free blocks in failing components (ties: least tension, then candidate order),
+evaluating up to ``greedy_width`` candidates: first the blocks the failed check names as
+moving (``unstable_blocks``, from the friction+ explanation), then the other blocks of the
+smallest failing component, each group highest first. Finally each held block whose release keeps the
+assembly standing is released (the result is minimal by inclusion, not necessarily in
+size). Both parts count checks, not seconds, so results do not depend on the machine.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..rbe.model import build_model
+from ..rbe.result import Report, Status
+from ..rbe.resultants import interface_results
+from ..rbe.solver import solve
+from .assembly import Assembly
+from .check import CheckOptions, HoldSearch, check
+
+#: Reports whose verdict a hold can change (not solver failures or bad input).
+HOLDABLE = (Status.TENSION_REQUIRED, Status.FRICTION_EXCEEDED, Status.INFEASIBLE)
+
+
+class _Budget(Exception):
+    pass
+
+
+@dataclass(frozen=True)
+class HoldResult:
+    """Blocks to hold (assembly order), whether the set is a proven minimum, and the
+    number of component checks spent."""
+
+    blocks: tuple[str, ...]
+    exact: bool
+    checks: int
+    stands: bool = True        # False: even the returned set does not make it stand
+
+
+class StabilityOracle:
+    """Verdicts of an assembly with extra blocks held, by component, cached.
+
+    ``cache``: a dict shared by oracles of sub-assemblies of one assembly (the steps of a
+    plan): a component's problem depends only on the ids of its blocks and of the supports
+    it touches, so verdicts carry over from step to step."""
+
+    def __init__(self, assembly: Assembly, options: CheckOptions = CheckOptions(),
+                 cache: dict | None = None):
+        self.assembly = assembly
+        self.options = options
+        n = len(assembly.blocks)
+        self.ids = [b.id for b in assembly.blocks]
+        self.index = {bid: k for k, bid in enumerate(self.ids)}
+        self.support = np.array([b.support for b in assembly.blocks], dtype=bool)
+        self.adjacent: list[set[int]] = [set() for _ in range(n)]
+        for it in assembly.interfaces:
+            self.adjacent[it.a].add(it.b)
+            self.adjacent[it.b].add(it.a)
+        self.height = np.array([-(b.centroid @ assembly.gravity) for b in assembly.blocks]) \
+            if n else np.zeros(0)
+        self.free = [k for k in range(n) if not self.support[k]]
+        self.checks = 0
+        self._shared = {} if cache is None else cache   # (free ids, touched ids) -> verdict
+        self._cache: dict[tuple[frozenset, frozenset], Report] = {}
+
+    def components(self, held) -> list[tuple[frozenset, frozenset]]:
+        """(free blocks, supports and held blocks they touch) of each component, by index."""
+        held = set(held)
+        seen: set[int] = set()
+        out = []
+        for k in self.free:
+            if k in held or k in seen:
+                continue
+            comp, touched, stack = {k}, set(), [k]
+            while stack:
+                j = stack.pop()
+                for m in self.adjacent[j]:
+                    if self.support[m] or m in held:
+                        touched.add(m)
+                    elif m not in comp:
+                        comp.add(m)
+                        stack.append(m)
+            seen |= comp
+            out.append((frozenset(comp), frozenset(touched)))
+        return out
+
+    def _sub(self, component) -> Assembly:
+        free, touched = component
+        ids = [self.ids[k] for k in sorted(free | touched)]
+        return self.assembly.subset(ids, [self.ids[k] for k in touched if not self.support[k]])
+
+    def _key(self, component) -> tuple[frozenset, frozenset]:
+        free, touched = component
+        return (frozenset(self.ids[k] for k in free), frozenset(self.ids[k] for k in touched))
+
+    def verdict(self, component: tuple[frozenset, frozenset]) -> bool:
+        """Whether one component, with the supports it touches, stands (cached). The verdict
+        of the plain check without its explanation: the primary solve and the post-check."""
+        key = self._key(component)
+        found = self._shared.get(key)
+        if found is None:
+            found = _stands(self._sub(component), self.options)
+            self._shared[key] = found
+            self.checks += 1
+        return found
+
+    def report(self, component: tuple[frozenset, frozenset]) -> Report:
+        """The plain check of one component (cached): the explanation of a failure."""
+        found = self._cache.get(component)
+        if found is None:
+            found = check(self._sub(component), self.options)
+            self._cache[component] = found
+            self._shared.setdefault(self._key(component), found.stable)
+            self.checks += 1
+        return found
+
+    def failing(self, held, *, explain: bool = True) -> list[tuple[frozenset, Report | None]]:
+        """The components that do not stand with ``held`` (indices) held, smallest first,
+        with their reports (``explain``) or None."""
+        out = []
+        for comp in self.components(held):
+            if not self.verdict(comp):
+                out.append((comp[0], self.report(comp) if explain else None))
+        return sorted(out, key=lambda c: (len(c[0]), min(c[0])))
+
+    def stands(self, held) -> bool:
+        return all(self.verdict(comp) for comp in self.components(held))
+
+
+def minimal_holds(assembly: Assembly, options: CheckOptions = CheckOptions(), *,
+                  search: HoldSearch | None = None, prefer=(),
+                  oracle: StabilityOracle | None = None) -> HoldResult:
+    """The smallest set of free blocks of ``assembly`` to hold so that it stands (empty if
+    it stands). ``prefer``: block ids tried first (e.g. the blocks held at the previous
+    step, so that a robot keeps its grip). See the module docstring for the method."""
+    search = options.holds if search is None else search
+    oracle = oracle or StabilityOracle(assembly, options)
+    first = oracle.failing(())
+    if not first:
+        return HoldResult((), True, oracle.checks)
+    preferred = [oracle.index[b] for b in prefer if b in oracle.index
+                 and not oracle.support[oracle.index[b]]]
+    budget = oracle.checks + search.max_checks
+    lower = len(first)            # disjoint failing components: one block each at least
+    for depth in range(lower, search.max_size + 1):
+        try:
+            found = _deepen(oracle, frozenset(), depth, preferred, budget, set())
+        except _Budget:
+            break
+        if found is not None:
+            return HoldResult(_names(oracle, found), True, oracle.checks)
+    held = _greedy(oracle, preferred, search.greedy_width)
+    return HoldResult(_names(oracle, held), False, oracle.checks, oracle.stands(held))
+
+
+def _names(oracle: StabilityOracle, held) -> tuple[str, ...]:
+    return tuple(oracle.ids[k] for k in sorted(held))
+
+
+def _order(oracle: StabilityOracle, comp: frozenset, report: Report, preferred) -> list[int]:
+    """Candidates of a failing component: preferred, then the blocks the check names as
+    moving, then the rest, each group highest first."""
+    def top_down(ks):
+        return sorted(ks, key=lambda k: (-oracle.height[k], k))
+
+    named = top_down(oracle.index[b] for b in report.unstable_blocks if b in oracle.index)
+    rest = top_down(comp)
+    out, seen = [], set()
+    for k in [*preferred, *named, *rest]:
+        if k in comp and k not in seen:
+            seen.add(k)
+            out.append(k)
+    return out
+
+
+def _deepen(oracle, held: frozenset, depth: int, preferred, budget: int, visited: set):
+    fails = oracle.failing(held, explain=False)
+    if not fails:
+        return held
+    if len(fails) > depth - len(held):
+        return None
+    comp = fails[0][0]
+    report = oracle.report(next(c for c in oracle.components(held) if c[0] == comp))
+    for k in _order(oracle, comp, report, preferred):
+        nxt = held | {k}
+        if nxt in visited:
+            continue
+        visited.add(nxt)
+        if oracle.checks >= budget:
+            raise _Budget
+        found = _deepen(oracle, nxt, depth, preferred, budget, visited)
+        if found is not None:
+            return found
+    return None
+
+
+def _greedy(oracle: StabilityOracle, preferred, width: int) -> frozenset:
+    held: list[int] = []
+    while True:
+        fails = oracle.failing(held)
+        if not fails:
+            break
+        candidates: list[int] = []
+        for comp, report in fails:
+            for k in _order(oracle, comp, report, preferred):
+                if k not in candidates:
+                    candidates.append(k)
+        best, best_score = None, None
+        for rank, k in enumerate(candidates[:max(width, 1)]):
+            after = oracle.failing(held + [k], explain=True)
+            score = (sum(len(c) for c, _ in after), sum(r.max_tension for _, r in after), rank)
+            if best_score is None or score < best_score:
+                best, best_score = k, score
+        held.append(best)
+    for k in list(held):          # release what is not needed, earliest hold first
+        trial = [j for j in held if j != k]
+        if oracle.stands(trial):
+            held = trial
+    return frozenset(held)
+
+
+def _stands(assembly: Assembly, options: CheckOptions) -> bool:
+    """The verdict of :func:`check` (stable or not) without the explanation solves."""
+    if assembly.floating_blocks():
+        return False
+    model = build_model(assembly.blocks, assembly.interfaces, assembly.gravity)
+    solution = solve(model, options.solve)
+    if not solution.solved:
+        return False
+    return not any(r.tension or r.friction_exceeded for r in interface_results(
+        model, solution, mu_threshold=options.threshold, tension_tol=options.tension_tol,
+        mu=options.solve.mu))
+
+
+def annotate_holds(report: Report, assembly: Assembly, held, options: CheckOptions) -> Report:
+    """Set ``report.held_blocks`` to ``held`` and, when the report is unstable in a way a hold
+    can change, ``report.suggested_holds`` to the smallest set of further blocks to hold
+    (time added to ``solve_time``). ``assembly`` is the checked one (``held`` as supports)."""
+    report.held_blocks = [str(b) for b in held]
+    free = sum(not b.support for b in assembly.blocks)
+    if (options.holds.enabled and not report.stable and report.status in HOLDABLE
+            and free <= options.holds.max_free_blocks):
+        start = time.perf_counter()
+        result = minimal_holds(assembly, options)
+        report.suggested_holds = list(result.blocks) if result.stands else []
+        report.solve_time += time.perf_counter() - start
+    return report
+
+
+__all__ = ["HoldResult", "StabilityOracle", "annotate_holds", "minimal_holds"]

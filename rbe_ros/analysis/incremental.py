@@ -1,0 +1,190 @@
+"""Per-step checks that model no more of the assembly than the step needs.
+
+A step adds blocks to an assembly that stood, at an earlier step, with admissible forces.
+Two small problems on a region R of free blocks around the new ones often settle the verdict
+without the full problem:
+
+* restriction (sufficient, by the safe theorem): keep the earlier forces on every interface
+  outside R, apply those on R's boundary as known loads, and solve R alone. Feasible: an
+  admissible state of the whole assembly exists, so it stands (STABLE, model "local N").
+* relaxation (necessary): solve R with every neighbour outside it made rigid (a support).
+  Infeasible: the whole assembly is infeasible too, so it does not stand (model "relaxed N").
+
+R starts as the new blocks, their free neighbours and a shortest chain of contacts down to a
+support, and grows by layers of neighbours until one of the two answers; past half of the
+free blocks the full problem is solved (and always below MIN_LOCAL_BLOCKS free blocks). The
+verdict (stable or not) is therefore always the full problem's; a local report's forces are
+one admissible state, not the full QP optimum, and a relaxed report's interfaces are those of
+the region only.
+"""
+from __future__ import annotations
+
+import time
+from collections import deque
+from dataclasses import replace
+
+import numpy as np
+
+from ..geometry.polygon import cross
+from ..rbe.model import build_model
+from ..rbe.result import InterfaceResult, Report, Status
+from ..rbe.resultants import interface_results
+from ..rbe.solver import solve
+from .assembly import Assembly
+from .check import CheckOptions, check, infeasible_report
+
+#: Local regions larger than this share of the free blocks go to the full problem.
+MAX_LOCAL_SHARE = 0.5
+#: Below this many free blocks the full problem is as cheap as the local ones, and its
+#: report (all interfaces, the QP optimum) is the more useful: no local models.
+MIN_LOCAL_BLOCKS = 20
+
+
+def _key(assembly: Assembly, it) -> tuple:
+    return assembly.blocks[it.a].id, assembly.blocks[it.b].id, it.frame.origin.tobytes()
+
+
+class StepChecker:
+    """Checks successive, growing assemblies, reusing the last admissible state."""
+
+    def __init__(self, options: CheckOptions = CheckOptions(), *, local: bool = True):
+        self.options = options
+        self.local = local
+        self._results: dict[tuple, InterfaceResult] | None = None   # last admissible state
+        self._present: frozenset[str] = frozenset()
+        self._supports: frozenset[str] = frozenset()
+        self._last_failed = False
+
+    def check(self, assembly: Assembly) -> Report:
+        start = time.perf_counter()
+        report = self._local(assembly) if self.local and self._extends(assembly) else None
+        if report is None:
+            report = check(assembly, self.options)
+        self._last_failed = not report.stable
+        if report.stable:
+            self._remember(assembly, report)
+        report.num_blocks = len(assembly.blocks)
+        report.solve_time = time.perf_counter() - start
+        return report
+
+    def _extends(self, assembly: Assembly) -> bool:
+        """Whether the last admissible state is a sub-assembly with the same supports."""
+        if self._results is None:
+            return False
+        ids = {b.id for b in assembly.blocks}
+        supports = {b.id for b in assembly.blocks if b.support}
+        return self._present <= ids and supports & self._present == self._supports
+
+    def _remember(self, assembly: Assembly, report: Report) -> None:
+        self._results = {_key(assembly, it): r for it, r in zip(assembly.interfaces, report.interfaces)}
+        self._present = frozenset(b.id for b in assembly.blocks)
+        self._supports = frozenset(b.id for b in assembly.blocks if b.support)
+
+    def _local(self, assembly: Assembly) -> Report | None:
+        graph = _Graph(assembly)
+        new = [k for k, b in enumerate(assembly.blocks) if b.id not in self._present]
+        if not new or len(graph.free) < MIN_LOCAL_BLOCKS:
+            return None
+        # after a failure the next step tends to fail too: then try the cheap proof of that
+        # first (the new blocks on rigid neighbours); after a success, the proof of stability
+        if self._last_failed:
+            report = self._relaxed(assembly, graph, set(new))
+            if report is not None:
+                return report
+        region = set(new) | graph.free_neighbours(new) | graph.path_to_support(new)
+        limit = MAX_LOCAL_SHARE * len(graph.free)
+        while len(region) <= limit:
+            report = (self._restricted(assembly, graph, region)
+                      or self._relaxed(assembly, graph, region))
+            if report is not None:
+                return report
+            grown = region | graph.free_neighbours(region)
+            if grown == region:
+                break
+            region = grown
+        return None
+
+    def _restricted(self, assembly: Assembly, graph: "_Graph", region: set[int]) -> Report | None:
+        """Stable report if R alone, loaded by the kept forces on its boundary, stands."""
+        supports = {k for k in graph.neighbours(region) if assembly.blocks[k].support}
+        ids = {assembly.blocks[k].id for k in region | supports}
+        local = assembly.subset(ids)
+        index = {b.id: k for k, b in enumerate(local.blocks)}
+        wrenches: dict[int, np.ndarray] = {}
+        for it in assembly.interfaces:
+            inside_a, inside_b = it.a in region, it.b in region
+            if inside_a == inside_b or (assembly.blocks[it.b if inside_a else it.a].support):
+                continue                      # internal, outside, or to a support (in the model)
+            kept = self._results.get(_key(assembly, it))
+            if kept is None:
+                return None                   # a new contact to the outside: not this region
+            j, sign = (it.b, 1.0) if inside_b else (it.a, -1.0)
+            wrench = wrenches.setdefault(index[assembly.blocks[j].id], np.zeros(6))
+            forces = sign * (kept.normal_forces[:, None] * kept.normal + kept.tangential_forces)
+            wrench[:3] += forces.sum(axis=0)
+            wrench[3:] += cross(kept.polygon - assembly.blocks[j].centroid, forces).sum(axis=0)
+        model = build_model(local.blocks, local.interfaces, local.gravity)
+        solution = solve(model, self.options.solve, load=model.dead_load + model.wrench_load(wrenches))
+        if not solution.solved:
+            return None
+        results = interface_results(model, solution, mu_threshold=self.options.threshold,
+                                    tension_tol=self.options.tension_tol, mu=self.options.solve.mu)
+        if any(r.tension or r.friction_exceeded for r in results):
+            return None
+        solved = {_key(local, it): r for it, r in zip(local.interfaces, results)}
+        merged = [solved.get(_key(assembly, it)) or self._results[_key(assembly, it)]
+                  for it in assembly.interfaces]
+        worst = max((r.friction_ratio for r in merged), default=0.0)
+        return Report(True, Status.STABLE,
+                      f"stable: {len(region)} blocks around the new one re-solved, the forces"
+                      f" elsewhere kept; worst |V|/N {worst:.3f} (mu {self.options.solve.mu:.3g})",
+                      max(float(solution.forces[1].max(initial=0.0)), 0.0), worst,
+                      interfaces=merged, model=f"local {len(region)}")
+
+    def _relaxed(self, assembly: Assembly, graph: "_Graph", region: set[int]) -> Report | None:
+        """Unstable report if R cannot stand even with every neighbour rigid."""
+        rigid = graph.neighbours(region)
+        ids = {assembly.blocks[k].id for k in region | rigid}
+        relaxed = assembly.subset(ids, held={assembly.blocks[k].id for k in rigid})
+        report = infeasible_report(relaxed, self.options)
+        if report is None or report.status == Status.SOLVER_FAILED:
+            return None
+        return replace(report, message=f"{report.message} [even with the blocks around it rigid]",
+                       model=f"relaxed {len(region)}")
+
+
+class _Graph:
+    """Contacts of an assembly as adjacency sets (block indices)."""
+
+    def __init__(self, assembly: Assembly):
+        self.blocks = assembly.blocks
+        self.adjacent: list[set[int]] = [set() for _ in assembly.blocks]
+        for it in assembly.interfaces:
+            self.adjacent[it.a].add(it.b)
+            self.adjacent[it.b].add(it.a)
+        self.free = [k for k, b in enumerate(assembly.blocks) if not b.support]
+
+    def neighbours(self, region) -> set[int]:
+        return {n for k in region for n in self.adjacent[k]} - set(region)
+
+    def free_neighbours(self, region) -> set[int]:
+        return {n for n in self.neighbours(region) if not self.blocks[n].support}
+
+    def path_to_support(self, start) -> set[int]:
+        """Free blocks on a shortest chain of contacts from ``start`` to a support."""
+        parent = {k: None for k in start}
+        queue = deque(start)
+        while queue:
+            k = queue.popleft()
+            for n in sorted(self.adjacent[k]):
+                if n in parent:
+                    continue
+                parent[n] = k
+                if self.blocks[n].support:
+                    path, node = set(), k
+                    while node is not None:
+                        path.add(node)
+                        node = parent[node]
+                    return path
+                queue.append(n)
+        return set()

@@ -1,0 +1,254 @@
+"""Sequence planning: an insertion order in which every step stands with at most K blocks
+held, found by beam search (width 1: greedy).
+
+Steps: every free block of the scene is placed once (blocks "present from the start" do
+not exist in a plan). With ``keep_sequence`` the scene's sequence is a fixed prefix of the
+order (a partial order: those blocks first, in that order; the planner orders the rest).
+Holds of free blocks in the scene are ignored (the planner chooses them); holds of support
+blocks (a scaffold, a centring present for some steps) apply by step index as in a check.
+
+At each step, the candidates of a partial plan are the unplaced blocks that rest on a
+present block (an interface whose normal into the candidate points up, against gravity;
+any contact when no block rests on one), lowest first (centroid along gravity), then the
+largest contact area with present blocks, then scene order. For a candidate the holds are
+found as a robot would keep them: nothing, if the step stands so; else the blocks held at
+the previous step plus the new block, with more blocks added greedily while the step does
+not stand (those the failed check names as moving first), then every hold whose release
+keeps the step standing is released, oldest first; if that leaves more than K, the exact
+minimal hold search (:func:`rbe_ros.analysis.holds.minimal_holds`, within its budget). A
+candidate is feasible with at most K holds. Each partial plan keeps the first ``beam``
+feasible candidates; of all children the ``beam`` best survive (fewest hold-steps so far,
+then fewest holds now, then candidate rank). No child at a step: the plan fails there.
+
+The finished assembly must stand with nothing held; if the last step holds blocks, a release
+step follows. The planned scene (sequence = order, holds = the runs of steps each block is
+held) is finally checked step by step with :func:`check_sequence`.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..rbe.result import Report
+from ..scene import Hold, Scene, SceneError, make_scene
+from .assembly import Assembly
+from .check import CheckOptions
+from .holds import StabilityOracle, minimal_holds
+from .sequence import check_sequence
+
+#: A contact carries a block when its normal into the block points up by at least this
+#: cosine (87 deg from vertical).
+RESTS_ON = 0.05
+
+
+@dataclass(frozen=True)
+class PlanOptions:
+    max_held: int = 2            # K: blocks held at any step
+    beam: int = 1                # partial plans kept per step (1: greedy)
+    candidates: int = 8          # candidates tried per partial plan and step, lowest first
+    keep_sequence: bool = False  # the scene's sequence is a fixed prefix of the order
+
+    def __post_init__(self):
+        for name, low in (("max_held", 0), ("beam", 1), ("candidates", 1)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < low:
+                raise ValueError(f"{name} must be an integer >= {low}, not {value!r}")
+
+
+@dataclass
+class Plan:
+    """The result of :func:`plan_sequence`. ``held[k]``: blocks held at step k (one more
+    entry than ``order`` when a release step follows the last placement)."""
+
+    feasible: bool
+    order: list[str]
+    held: list[tuple[str, ...]]
+    message: str
+    failed_step: int = -1                  # first step no candidate can be placed at
+    scene: Scene | None = None             # the planned scene (sequence, holds)
+    reports: list[Report] = field(default_factory=list)   # check_sequence of ``scene``
+    checks: int = 0                        # component checks spent by the search
+    time: float = 0.0                      # s
+
+    @property
+    def max_held(self) -> int:
+        return max((len(h) for h in self.held), default=0)
+
+
+@dataclass(frozen=True)
+class _Partial:
+    order: tuple[str, ...]
+    held: tuple[tuple[str, ...], ...]
+    score: tuple
+
+
+class _Planner:
+    def __init__(self, scene: Scene, options: CheckOptions, plan: PlanOptions):
+        self.scene, self.options, self.plan = scene, options, plan
+        # holds of free blocks are the planner's; those of supports stay (scaffolds)
+        supports = {b.id for b in scene.blocks if b.support}
+        self.base = make_scene(scene.name, scene.blocks, scene.gravity, (),
+                               [h for h in scene.holds if h.block in supports])
+        self.full = Assembly.from_scene(self.base, options.contact)
+        self.ids = [b.id for b in self.full.blocks]
+        self.position = {bid: k for k, bid in enumerate(self.ids)}
+        self.free = [b.id for b in self.full.blocks if not b.support]
+        up = -np.asarray(self.full.gravity, dtype=float)
+        up = up / (np.linalg.norm(up) or 1.0)
+        self.height = {b.id: float(b.centroid @ up) for b in self.full.blocks}
+        # contacts by block: (other block, area, rests on it)
+        self.contacts: dict[str, list[tuple[str, float, bool]]] = {i: [] for i in self.ids}
+        for it in self.full.interfaces:
+            a, b = self.ids[it.a], self.ids[it.b]
+            n_up = float(it.frame.n @ up)           # n points from a into b
+            self.contacts[b].append((a, it.area, n_up >= RESTS_ON))
+            self.contacts[a].append((b, it.area, -n_up >= RESTS_ON))
+        self.cache: dict = {}
+        self.checks = 0
+
+    def present(self, order, k: int) -> tuple[str, ...]:
+        """The supports present at step ``k`` (those with holds while active) and ``order``."""
+        active = {h.block for h in self.base.holds if h.active(k)}
+        timed = {h.block for h in self.base.holds}
+        return tuple([b.id for b in self.base.blocks
+                      if b.support and (b.id not in timed or b.id in active)] + list(order))
+
+    def candidates(self, order: tuple[str, ...]) -> list[str]:
+        k = len(order)
+        prefix = self.scene.sequence if self.plan.keep_sequence else ()
+        if k < len(prefix):
+            return [prefix[k]]
+        placed = set(order)
+        present = set(self.present(order, k))
+        left = [b for b in self.free if b not in placed and b not in prefix[k:]]
+        resting, touching = [], []
+        for b in left:
+            near = [(area, rests) for other, area, rests in self.contacts[b] if other in present]
+            if not near:
+                continue
+            key = (round(self.height[b], 6), -round(sum(a for a, _ in near), 9), self.position[b])
+            (resting if any(r for _, r in near) else touching).append((key, b))
+        chosen = resting or touching
+        return [b for _, b in sorted(chosen)][:self.plan.candidates]
+
+    def holds_for(self, order: tuple[str, ...], previous: tuple[str, ...]):
+        """(held blocks, within K) for the step that places ``order[-1]``."""
+        k = len(order) - 1
+        assembly = self.full.subset(self.present(order, k))
+        oracle = StabilityOracle(assembly, self.options, self.cache)
+        try:
+            held = self._repair(oracle, order[-1], previous)
+            if len(held) > self.plan.max_held:
+                result = minimal_holds(assembly, self.options, prefer=(*previous, order[-1]),
+                                       oracle=oracle)
+                if result.stands and len(result.blocks) < len(held):
+                    held = result.blocks
+        finally:
+            self.checks += oracle.checks
+        return held, len(held) <= self.plan.max_held
+
+    def _repair(self, oracle: StabilityOracle, new: str, previous) -> tuple[str, ...]:
+        if oracle.stands(()):
+            return ()
+        held = [oracle.index[b] for b in previous if b in oracle.index] + [oracle.index[new]]
+        while True:
+            fails = oracle.failing(held)
+            if not fails:
+                break
+            comp, report = fails[0]
+            named = [oracle.index[b] for b in report.unstable_blocks
+                     if b in oracle.index and oracle.index[b] in comp]
+            held.append(sorted(named or comp, key=lambda j: (-oracle.height[j], j))[0])
+        for j in list(held):
+            trial = [i for i in held if i != j]
+            if oracle.stands(trial):
+                held = trial
+        return tuple(oracle.ids[j] for j in sorted(held))
+
+    def run(self) -> Plan:
+        n = len(self.free)
+        beam = [_Partial((), (), (0, 0, 0))]
+        final = self.full.subset(self.present(self.free, n + 1))
+        if not StabilityOracle(final, self.options, self.cache).stands(()):
+            return Plan(False, [], [], "the finished assembly does not stand without holds "
+                        "(rbe-ros check names why): no build order can end stable",
+                        failed_step=n)
+        for k in range(n):
+            children: dict[frozenset, _Partial] = {}
+            best_rejected = None
+            for partial in beam:
+                found = 0
+                previous = partial.held[-1] if partial.held else ()
+                for rank, b in enumerate(self.candidates(partial.order)):
+                    order = (*partial.order, b)
+                    held, ok = self.holds_for(order, previous)
+                    if not ok:
+                        if best_rejected is None or len(held) < len(best_rejected[1]):
+                            best_rejected = (b, held)
+                        continue
+                    total, worst, ranks = partial.score
+                    child = _Partial(order, (*partial.held, held),
+                                     (total + len(held), len(held), ranks + rank))
+                    key = frozenset(order)
+                    if key not in children or child.score < children[key].score:
+                        children[key] = child
+                    found += 1
+                    if found >= self.plan.beam:
+                        break
+            if not children:
+                best = beam[0]
+                why = (f"; the best candidate, {best_rejected[0]}, needs {len(best_rejected[1])}"
+                       f" held blocks ({', '.join(best_rejected[1])})" if best_rejected else
+                       "; no unplaced block rests on the placed ones")
+                return self._finish(best, False, k, f"no block can be placed at step {k} with "
+                                    f"at most {self.plan.max_held} held{why}")
+            beam = sorted(children.values(), key=lambda p: (p.score, p.order))[:self.plan.beam]
+        best = beam[0]
+        return self._finish(best, True, -1, f"every step stands with at most "
+                            f"{max((len(h) for h in best.held), default=0)} held blocks "
+                            f"(limit {self.plan.max_held})")
+
+    def _finish(self, partial: _Partial, feasible: bool, failed: int, message: str) -> Plan:
+        order, held = list(partial.order), list(partial.held)
+        n = len(order)
+        if feasible and held and held[-1]:
+            held.append(())                          # release step
+        holds = []
+        for block in self.free:
+            k = 0
+            while k < n:
+                if block in held[k]:
+                    start = k
+                    while k < n and block in held[k]:
+                        k += 1
+                    # a failed plan's last holds stay (no release step after it)
+                    holds.append(Hold(block, start, k if feasible or k < n else None))
+                k += 1
+        placed = set(order) | {b.id for b in self.base.blocks if b.support}
+        keep = [h for h in self.base.holds if h.until_step is None or h.until_step <= n]
+        try:
+            scene = make_scene(self.scene.name, [b for b in self.scene.blocks if b.id in placed],
+                               self.scene.gravity, order, [*keep, *holds]) if order else None
+        except SceneError:
+            scene = None
+        reports = check_sequence(scene, self.options) if scene is not None else []
+        if feasible and not all(r.stable for r in reports):
+            bad = next(r for r in reports if not r.stable)
+            feasible, failed = False, bad.step_index
+            message = f"the plan does not re-check stable at step {failed}: {bad.message}"
+        return Plan(feasible, order, held, message, failed, scene, reports, self.checks)
+
+
+def plan_sequence(scene: Scene, max_held: int = 2, options: CheckOptions = CheckOptions(), *,
+                  beam: int = 1, candidates: int = 8, keep_sequence: bool = False) -> Plan:
+    """An insertion order of every free block of ``scene`` in which each step stands with at
+    most ``max_held`` blocks held (see the module docstring), or where none was found."""
+    start = time.perf_counter()
+    result = _Planner(scene, options, PlanOptions(max_held, beam, candidates, keep_sequence)).run()
+    result.time = time.perf_counter() - start
+    return result
+
+
+__all__ = ["Plan", "PlanOptions", "plan_sequence"]

@@ -1,0 +1,42 @@
+"""Validation of a scene before a check: limits, mass consistency, interpenetration.
+
+:func:`validated_assembly` is the geometry stage of every check with validation on: the
+scene's limits (:func:`rbe_ros.scene.validate_scene`), then the posed blocks (closed,
+positive-volume meshes), the densities implied by given masses, and no two blocks overlapping
+beyond the penetration tolerance. Each problem raises one :class:`SceneError` naming it.
+A block that touches nothing is not invalid: the check's verdict says so (INFEASIBLE).
+"""
+from __future__ import annotations
+
+from ..geometry.contacts import ContactOptions
+from ..geometry.overlap import find_penetration
+from ..scene import Scene, SceneError, ValidationLimits, validate_scene
+from .assembly import Assembly
+
+
+def validate_assembly(assembly: Assembly, limits: ValidationLimits = ValidationLimits(),
+                      contact: ContactOptions = ContactOptions()) -> None:
+    """Implied densities of mass-given blocks, and interpenetration (raises SceneError)."""
+    for b in assembly.blocks:
+        density = b.mass / b.volume
+        if not limits.min_density <= density <= limits.max_density:
+            raise SceneError(
+                f"block {b.id!r}: mass {b.mass:.6g} kg in {b.volume:.6g} m^3 is a density of "
+                f"{density:.6g} kg/m^3, outside the sane range [{limits.min_density:g}, "
+                f"{limits.max_density:g}] kg/m^3")
+    hit = find_penetration(list(assembly.blocks), max(limits.penetration_tol, contact.distance_tol))
+    if hit is not None:
+        a, b = assembly.blocks[hit.a], assembly.blocks[hit.b]
+        raise SceneError(f"blocks {a.id!r} and {b.id!r} interpenetrate: they overlap by "
+                         f"{hit.depth:.4g} m, more than the tolerance {hit.tol:.4g} m")
+
+
+def validated_assembly(scene: Scene, limits: ValidationLimits | None = ValidationLimits(),
+                       contact: ContactOptions = ContactOptions()) -> Assembly:
+    """The assembly of ``scene`` after every validation (none with ``limits=None``)."""
+    if limits is not None:
+        validate_scene(scene, limits)
+    assembly = Assembly.from_scene(scene, contact)
+    if limits is not None:
+        validate_assembly(assembly, limits, contact)
+    return assembly

@@ -1,0 +1,524 @@
+"""Replay of recorded runs: re-check the states of a bag and compare with its reports.
+
+A *run* is one rbe_msgs/AssemblyState of a bag with the StabilityReports recorded for it
+(matched by header stamp: a report carries the stamp of the state it answers). Replaying a
+run re-checks the state exactly as ``rbe_node`` does: a state with a sequence step by step
+(:func:`check_sequence`), one without as a whole (:func:`check_scene`), a state that cannot
+be checked as an INVALID_INPUT report; reports get the state's header (frame "world" when
+empty, the node's default ``frame_id``).
+
+The check options are those stored in the bag (``custom_data`` key ``rbe_ros.check_options``
+of metadata.yaml, JSON, written by :func:`record_bag`), else the defaults (the node's
+default parameters), unless given.
+
+:func:`compare_runs` compares recorded and replayed reports field by field (message dicts):
+
+* exact: header, step index, block placed, stable, status, number of blocks, the model that
+  answered, unstable / held / suggested blocks, the interface pairs (in order), their
+  tension and friction flags and polygon / kern vertex counts;
+* forces (vertex normal and tangential forces, resultant, N, V, max tension): within
+  ``force`` (1e-6) times the free weight W of the step (the weight of its free blocks that
+  are not held), the scale the solver works in;
+* positions (polygon, kern vertices) and the unit normal: within ``position`` (1e-6 m);
+  vertices are matched by position (their order, and so the order of the per-vertex forces,
+  is not part of the result);
+  centre of pressure: the same plus F d / max(|N|, F) (F the force tolerance, d the polygon
+  diameter: it is a ratio of forces, ill-conditioned on an interface that carries little);
+  torque: within F d;
+* ratios |V|/N: within ``ratio`` (1e-6) plus F (1 + |V|/N) / max(N, F); infinite equals
+  infinite;
+* not compared: ``solve_time`` (wall time), ``dropped_states`` (the node's load) and, unless
+  ``Tolerances.message`` is set, the message: it names one of the most loaded interfaces,
+  and of equally loaded ones (a symmetric arch) rounding picks which; with a tolerance (e.g.
+  1e-3) the text with its numbers taken out must be equal and the numbers (printed to 3-4
+  significant digits) equal within it, relative.
+"""
+from __future__ import annotations
+
+import json
+import math
+import re
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .analysis.check import CheckOptions, HoldSearch, check_scene
+from .analysis.sequence import check_sequence, final_state, sequence_steps
+from .geometry.contacts import ContactOptions
+from .messages import header_stamp_ns, report_to_dict, scene_from_state_dict, state_to_dict
+from .rbe.result import Report, Status
+from .rbe.solver import SolveOptions, Weights
+from .scene import Scene, SceneError
+
+OPTIONS_KEY = "rbe_ros.check_options"
+STATE_TYPE = "rbe_msgs/msg/AssemblyState"
+REPORT_TYPE = "rbe_msgs/msg/StabilityReport"
+#: Topics of bags written here: the names rbe_node uses (node name rbe_node).
+STATE_TOPIC = "/rbe_node/assembly"
+REPORT_TOPIC = "/rbe_node/report"
+#: Report fields that are not compared.
+IGNORED = frozenset({"solve_time", "dropped_states"})
+
+
+# --- check options <-> JSON ------------------------------------------------------------------
+
+def options_to_json(options: CheckOptions) -> str:
+    """The options that decide a check's result, as JSON (stored in a bag's metadata)."""
+    s = options.solve
+    data = {"solve": {"objective": s.objective, "friction": s.friction, "cone": s.cone,
+                      "mu": s.mu, "weights": asdict(s.weights),
+                      "allow_tension": s.allow_tension},
+            "mu_threshold": options.mu_threshold, "tension_tol": options.tension_tol,
+            "contact": asdict(options.contact), "full_solve": options.full_solve,
+            "holds": asdict(options.holds)}
+    return json.dumps(data, sort_keys=True)
+
+
+def options_from_json(text: str) -> CheckOptions:
+    """Inverse of :func:`options_to_json` (missing keys: defaults)."""
+    data = json.loads(text)
+    solve = dict(data.get("solve", {}))
+    weights = Weights(**solve.pop("weights", {}))
+    return CheckOptions(solve=SolveOptions(weights=weights, **solve),
+                        mu_threshold=data.get("mu_threshold"),
+                        tension_tol=data.get("tension_tol", 1e-5),
+                        contact=ContactOptions(**data.get("contact", {})),
+                        full_solve=data.get("full_solve", False),
+                        holds=HoldSearch(**data.get("holds", {})))
+
+
+def bag_options(path) -> CheckOptions:
+    """The check options recorded in the bag at ``path``, else the defaults."""
+    from .bag import read_custom_data
+
+    text = read_custom_data(path).get(OPTIONS_KEY)
+    return options_from_json(text) if text else CheckOptions()
+
+
+# --- runs ------------------------------------------------------------------------------------
+
+@dataclass
+class Run:
+    """One recorded state (a message dict) and the reports recorded for it."""
+
+    state: dict
+    stamp_ns: int                                   # log time of the state in the bag
+    topic: str = STATE_TOPIC
+    reports: list[dict] = field(default_factory=list)
+    report_stamps: list[int] = field(default_factory=list)
+    report_topic: str = REPORT_TOPIC
+
+    @property
+    def key(self) -> tuple[int, int]:
+        stamp = self.state.get("header", {}).get("stamp", {})
+        return int(stamp.get("sec", 0)), int(stamp.get("nanosec", 0))
+
+    def describe(self) -> str:
+        header = self.state.get("header", {})
+        seq = self.state.get("sequence") or []
+        what = f"{len(seq)}-block sequence" if seq else "whole assembly"
+        return (f"state stamp {header_stamp_ns(header) / 1e9:.9f} s frame "
+                f"{header.get('frame_id', '')!r} ({len(self.state.get('blocks', []))} blocks, "
+                f"{what})")
+
+
+def read_runs(path) -> list[Run]:
+    """The runs of a bag: every AssemblyState in log-time order, each with the reports whose
+    header stamp is its stamp (a report goes to the latest such state before it)."""
+    from .bag import read_bag
+
+    runs: list[Run] = []
+    by_key: dict[tuple[int, int], list[Run]] = {}
+    for m in read_bag(path):
+        if m.msgtype == STATE_TYPE:
+            run = Run(m.data, m.stamp_ns, m.topic)
+            runs.append(run)
+            by_key.setdefault(run.key, []).append(run)
+        elif m.msgtype == REPORT_TYPE:
+            stamp = m.data.get("header", {}).get("stamp", {})
+            key = int(stamp.get("sec", 0)), int(stamp.get("nanosec", 0))
+            owners = [r for r in by_key.get(key, []) if r.stamp_ns <= m.stamp_ns] or \
+                by_key.get(key, [])
+            if not owners:
+                raise ValueError(f"{path}: a report at {m.stamp_ns} ns has no state with its "
+                                 f"header stamp {key}")
+            owners[-1].reports.append(m.data)
+            owners[-1].report_stamps.append(m.stamp_ns)
+            owners[-1].report_topic = m.topic
+    return runs
+
+
+def check_state(state: dict, options: CheckOptions = CheckOptions()) -> list[Report]:
+    """The reports ``rbe_node`` makes for ``state`` (a message dict), in order."""
+    try:
+        if state.get("sequence"):
+            return check_sequence(scene_from_state_dict(state), options)
+        return [check_scene(scene_from_state_dict({**state, "sequence": []}), options)]
+    except SceneError as exc:
+        return [Report(False, Status.INVALID_INPUT, f"invalid input: {exc}")]
+    except Exception as exc:        # as the node: a failed check is a report, not a crash
+        return [Report(False, Status.SOLVER_FAILED, f"check failed: {type(exc).__name__}: {exc}")]
+
+
+def report_header(state: dict, frame_id: str = "world") -> dict:
+    header = json.loads(json.dumps(state.get("header") or {}))
+    header.setdefault("stamp", {"sec": 0, "nanosec": 0})
+    if not header.get("frame_id"):
+        header["frame_id"] = frame_id
+    return header
+
+
+def replay_run(run: Run, options: CheckOptions = CheckOptions()) -> list[dict]:
+    """The report dicts of re-checking ``run.state``."""
+    header = report_header(run.state)
+    return [report_to_dict(r, header) for r in check_state(run.state, options)]
+
+
+def free_weights(state: dict) -> dict[int, float]:
+    """Free weight W (N) by step index (-1: the whole assembly) of a state: the weight of the
+    free blocks present and not held. Empty if the state cannot be read."""
+    from .geometry.block import pose_block
+
+    try:
+        scene = scene_from_state_dict(state)
+        whole = scene_from_state_dict({**state, "sequence": []})
+    except SceneError:
+        return {}
+    g = float(np.linalg.norm(scene.gravity))
+    mass = {b.id: pose_block(b).mass for b in scene.blocks}
+    support = {b.id for b in scene.blocks if b.support}
+
+    def weight(present, held) -> float:
+        return g * sum(mass[i] for i in present if i not in support and i not in set(held))
+
+    out = {-1: weight(*final_state(whole))}
+    if state.get("sequence"):
+        for step in sequence_steps(scene):
+            out[step.index] = weight(step.present, step.held)
+    return out
+
+
+# --- comparison ------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Tolerances:
+    force: float = 1e-6          # share of the step's free weight
+    position: float = 1e-6       # m
+    ratio: float = 1e-6          # |V|/N, absolute (plus the force tolerance's share)
+    message: float | None = None  # None: the message is not compared; else the relative
+                                  # tolerance of the numbers in its text
+
+
+@dataclass(frozen=True)
+class Difference:
+    """One field that differs: where (run, step, interface), what, and the two values."""
+
+    run: int
+    step: int
+    block: str
+    where: str
+    field: str
+    recorded: object
+    replayed: object
+    tolerance: float | None = None
+
+    def __str__(self) -> str:
+        step = "whole assembly" if self.step < 0 else f"step {self.step} ({self.block or '-'})"
+        tol = "" if self.tolerance is None else f" (tolerance {self.tolerance:.3g})"
+        where = f" {self.where}" if self.where else ""
+        return (f"run {self.run} {step}{where}: {self.field}: recorded {_short(self.recorded)}"
+                f", replayed {_short(self.replayed)}{tol}")
+
+
+def _short(value) -> str:
+    text = repr(value)
+    return text if len(text) <= 120 else text[:117] + "..."
+
+
+_NUMBER = re.compile(r"[-+]?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][-+]?\d+)?|inf|nan")
+
+
+def _points(points) -> np.ndarray:
+    return np.array([[p["x"], p["y"], p["z"]] for p in points], dtype=float).reshape(-1, 3)
+
+
+def _match(a, b, tol: float) -> list[int] | None:
+    """For each point of ``a`` the index of the point of ``b`` within ``tol`` of it (a
+    permutation), or None when the two point sets differ."""
+    pa, pb = _points(a), _points(b)
+    if len(pa) != len(pb):
+        return None
+    if not len(pa):
+        return []
+    dist = np.linalg.norm(pa[:, None, :] - pb[None, :, :], axis=2)
+    order = [int(j) for j in dist.argmin(axis=1)]
+    if len(set(order)) != len(order) or dist[np.arange(len(pa)), order].max() > tol:
+        return None
+    return order
+
+
+def _diameter(polygon) -> float:
+    pts = np.array([[p["x"], p["y"], p["z"]] for p in polygon], dtype=float).reshape(-1, 3)
+    if len(pts) < 2:
+        return 0.0
+    return float(np.max(np.linalg.norm(pts[:, None, :] - pts[None, :, :], axis=2)))
+
+
+class _Comparer:
+    def __init__(self, run: int, step: int, block: str, weight: float, tol: Tolerances):
+        self.run, self.step, self.block = run, step, block
+        self.force = tol.force * (weight if weight > 0 else 1.0)
+        self.tol = tol
+        self.out: list[Difference] = []
+
+    def diff(self, where, name, recorded, replayed, tolerance=None):
+        self.out.append(Difference(self.run, self.step, self.block, where, name, recorded,
+                                   replayed, tolerance))
+
+    def exact(self, where, name, a, b):
+        if a != b:
+            self.diff(where, name, a, b)
+
+    def number(self, where, name, a, b, tol):
+        a, b = float(a), float(b)
+        if math.isinf(a) or math.isinf(b) or math.isnan(a) or math.isnan(b):
+            if not (a == b or (math.isnan(a) and math.isnan(b))):
+                self.diff(where, name, a, b, tol)
+        elif abs(a - b) > tol:
+            self.diff(where, name, a, b, tol)
+
+    def vectors(self, where, name, a, b, tol):
+        """Lists of numbers, of vector dicts, or single vector dicts."""
+        if isinstance(a, dict):
+            a, b = [a], [b]
+        if len(a) != len(b):
+            self.diff(where, f"{name} (count)", len(a), len(b))
+            return
+        for i, (x, y) in enumerate(zip(a, b)):
+            label = f"{name}[{i}]" if len(a) > 1 else name
+            if isinstance(x, dict):
+                worst = max(abs(float(x[k]) - float(y[k])) for k in x)
+                if not worst <= tol:
+                    self.diff(where, label, x, y, tol)
+            else:
+                self.number(where, label, x, y, tol)
+
+    def ratio(self, where, name, a, b, normal):
+        a, b = float(a), float(b)
+        scale = max(abs(normal), self.force)
+        finite = a if math.isfinite(a) else 0.0
+        self.number(where, name, a, b, self.tol.ratio + self.force * (1 + abs(finite)) / scale)
+
+    def message(self, a: str, b: str):
+        if _NUMBER.sub("#", a) != _NUMBER.sub("#", b):
+            self.diff("", "message", a, b)
+            return
+        for x, y in zip(_NUMBER.findall(a), _NUMBER.findall(b)):
+            fx, fy = float(x), float(y)
+            if not (fx == fy or abs(fx - fy) <= (self.tol.message or 0.0) * max(abs(fx), abs(fy))):
+                self.diff("", "message", a, b, self.tol.message)
+                return
+
+
+_TOP_EXACT = ("step_index", "block_placed", "stable", "status", "num_blocks", "unstable_blocks",
+              "held_blocks", "suggested_holds", "model")
+_TOP_DONE = set(_TOP_EXACT) | {"header", "message", "max_tension", "worst_friction_ratio",
+                               "interfaces"} | IGNORED
+_IF_DONE = {"block_a", "block_b", "normal", "polygon", "normal_forces", "tangential_forces",
+            "resultant_force", "normal_resultant", "shear_resultant", "centre_of_pressure",
+            "torque", "kern", "friction_ratio", "tension", "friction_exceeded"}
+
+
+def compare_report(recorded: dict, replayed: dict, *, run: int = 0, free_weight: float = 1.0,
+                   tolerances: Tolerances = Tolerances()) -> list[Difference]:
+    """The differences between two StabilityReport dicts (see the module docstring)."""
+    c = _Comparer(run, int(recorded.get("step_index", -1)), str(recorded.get("block_placed", "")),
+                  free_weight, tolerances)
+    c.exact("", "header", recorded.get("header"), replayed.get("header"))
+    for name in _TOP_EXACT:
+        c.exact("", name, recorded.get(name), replayed.get(name))
+    if tolerances.message is not None:
+        c.message(str(recorded.get("message", "")), str(replayed.get("message", "")))
+    c.number("", "max_tension", recorded.get("max_tension", 0.0),
+             replayed.get("max_tension", 0.0), c.force)
+    a_ifs, b_ifs = recorded.get("interfaces", []), replayed.get("interfaces", [])
+    pairs_a = [(i["block_a"], i["block_b"]) for i in a_ifs]
+    pairs_b = [(i["block_a"], i["block_b"]) for i in b_ifs]
+    if pairs_a != pairs_b:
+        c.diff("", "interface pairs", [f"{a}|{b}" for a, b in pairs_a],
+               [f"{a}|{b}" for a, b in pairs_b])
+    ratio_tol = tolerances.ratio
+    for k, (x, y) in enumerate(zip(a_ifs, b_ifs)):
+        if (x["block_a"], x["block_b"]) != (y["block_a"], y["block_b"]):
+            continue
+        where = f"interface {x['block_a']}|{x['block_b']}"
+        if pairs_a.count((x["block_a"], x["block_b"])) > 1:
+            where += f" #{k}"
+        for flag in ("tension", "friction_exceeded"):
+            c.exact(where, flag, x.get(flag), y.get(flag))
+        pos = tolerances.position
+        c.vectors(where, "normal", x["normal"], y["normal"], pos)
+        # vertices are matched by position: their order is not part of the result
+        order = _match(x["polygon"], y["polygon"], pos)
+        if order is None:
+            c.diff(where, "polygon", x["polygon"], y["polygon"], pos)
+        else:
+            for name in ("normal_forces", "tangential_forces"):
+                c.vectors(where, name, x[name], [y[name][j] for j in order], c.force)
+        if _match(x["kern"], y["kern"], pos) is None:
+            c.diff(where, "kern", x["kern"], y["kern"], pos)
+        for name in ("resultant_force", "shear_resultant"):
+            c.vectors(where, name, x[name], y[name], c.force)
+        c.number(where, "normal_resultant", x["normal_resultant"], y["normal_resultant"], c.force)
+        d = _diameter(x["polygon"])
+        n = float(x["normal_resultant"])
+        c.vectors(where, "centre_of_pressure", x["centre_of_pressure"], y["centre_of_pressure"],
+                  pos + c.force * d / max(abs(n), c.force))
+        c.number(where, "torque", x["torque"], y["torque"], c.force * max(d, pos))
+        c.ratio(where, "friction_ratio", x["friction_ratio"], y["friction_ratio"], n)
+        ratio_tol = max(ratio_tol, tolerances.ratio + c.force * (1 + (
+            abs(float(x["friction_ratio"])) if math.isfinite(float(x["friction_ratio"])) else 0.0))
+            / max(abs(n), c.force))
+        for name in sorted(set(x) - _IF_DONE):
+            c.exact(where, name, x.get(name), y.get(name))
+    c.number("", "worst_friction_ratio", recorded.get("worst_friction_ratio", 0.0),
+             replayed.get("worst_friction_ratio", 0.0), ratio_tol)
+    for name in sorted(set(recorded) - _TOP_DONE):     # fields added later: exact
+        c.exact("", name, recorded.get(name), replayed.get(name))
+    return c.out
+
+
+def compare_runs(runs: list[Run], replayed: list[list[dict]], *,
+                 tolerances: Tolerances = Tolerances()) -> list[Difference]:
+    """Differences between each run's recorded reports and ``replayed[i]`` (the same
+    comparison offline and live)."""
+    out: list[Difference] = []
+    for i, (run, new) in enumerate(zip(runs, replayed)):
+        weights = free_weights(run.state)
+        for rec, rep in zip(run.reports, new):
+            w = weights.get(int(rec.get("step_index", -1)), 1.0)
+            out += compare_report(rec, rep, run=i, free_weight=w, tolerances=tolerances)
+        for rec in run.reports[len(new):]:
+            out.append(Difference(i, int(rec.get("step_index", -1)), rec.get("block_placed", ""),
+                                  "", "report", "recorded", "missing in the replay"))
+        for rep in new[len(run.reports):]:
+            out.append(Difference(i, int(rep.get("step_index", -1)), rep.get("block_placed", ""),
+                                  "", "report", "missing in the recording", "replayed"))
+    return out
+
+
+def format_differences(runs: list[Run], differences: list[Difference], limit: int = 50) -> str:
+    """A readable diff: the runs concerned, then one line per differing field."""
+    lines = []
+    for i in sorted({d.run for d in differences}):
+        lines.append(f"run {i}: {runs[i].describe()}")
+        shown = [d for d in differences if d.run == i]
+        lines += [f"  {d}" for d in shown[:limit]]
+        if len(shown) > limit:
+            lines.append(f"  ... and {len(shown) - limit} more differences")
+    return "\n".join(lines)
+
+
+# --- writing ---------------------------------------------------------------------------------
+
+def write_runs(path, runs: list[Run], replayed: list[list[dict]], options: CheckOptions) -> None:
+    """A bag with every run's state and its ``replayed`` reports (at the recorded report
+    times where there are as many, else just after the state); the options in custom_data."""
+    from .bag import BagWriter
+
+    with BagWriter(path, custom_data={OPTIONS_KEY: options_to_json(options)}) as bag:
+        topics: set[str] = set()
+        for run, reports in zip(runs, replayed):
+            for topic, kind, latched in ((run.topic, STATE_TYPE, False),
+                                         (run.report_topic, REPORT_TYPE, True)):
+                if topic not in topics:
+                    bag.add_topic(topic, kind, transient_local=latched)
+                    topics.add(topic)
+            bag.write(run.topic, run.state, run.stamp_ns)
+            stamps = run.report_stamps if len(run.report_stamps) == len(reports) else \
+                [run.stamp_ns + k + 1 for k in range(len(reports))]
+            for report, stamp in zip(reports, stamps):
+                bag.write(run.report_topic, report, stamp)
+
+
+def record_bag(path, scenes: list[tuple[Scene, str, int]], options: CheckOptions = CheckOptions(),
+               *, zero_times: bool = False) -> list[Run]:
+    """Check ``(scene, frame_id, stamp_ns)`` states as the node would and record states and
+    reports in a new bag at ``path`` (reports 1 ns apart after their state). ``zero_times``:
+    solve_time 0 in every report, so that reruns write identical files."""
+    runs = []
+    for scene, frame, stamp in scenes:
+        run = Run(state_to_dict(scene, frame, stamp), stamp)
+        run.reports = replay_run(run, options)
+        if zero_times:
+            for r in run.reports:
+                r["solve_time"] = 0.0
+        run.report_stamps = [stamp + k + 1 for k in range(len(run.reports))]
+        runs.append(run)
+    write_runs(path, runs, [r.reports for r in runs], options)
+    return runs
+
+
+# --- the whole replay ------------------------------------------------------------------------
+
+@dataclass
+class ReplayResult:
+    runs: list[Run]
+    replayed: list[list[dict]]
+    differences: list[Difference]
+    output: Path | None
+    options: CheckOptions
+
+    @property
+    def matches(self) -> bool:
+        return not self.differences
+
+    def diff(self, limit: int = 50) -> str:
+        return format_differences(self.runs, self.differences, limit)
+
+
+def default_output(path) -> Path:
+    path = Path(path)
+    return path.with_name(path.name + "_replay")
+
+
+def replay_bag(path, output=None, *, options: CheckOptions | None = None, compare: bool = True,
+               live: bool = False, node_name: str | None = None,
+               tolerances: Tolerances = Tolerances(), write: bool = True,
+               context=None, timeout: float = 120.0,
+               on_run: Callable[[int, Run], None] | None = None) -> ReplayResult:
+    """Re-check every state of the bag at ``path`` (offline, or ``live`` through an rbe_node:
+    started here, or the running one named ``node_name``), write the states and the new
+    reports to ``output`` (default: path + "_replay"; never overwritten; ``write=False``:
+    no bag), and with ``compare`` list the differences from the recorded reports."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"no bag at {str(path)!r}")
+    out = Path(output) if output is not None else default_output(path)
+    if write and out.exists():
+        raise FileExistsError(f"{str(out)!r} exists already, not overwriting it")
+    options = options or bag_options(path)
+    runs = read_runs(path)
+    if live:
+        from .ros.live import live_reports
+
+        replayed = live_reports(runs, options, node_name=node_name, context=context,
+                                timeout=timeout, on_run=on_run)
+    else:
+        replayed = []
+        for i, run in enumerate(runs):
+            replayed.append(replay_run(run, options))
+            if on_run is not None:
+                on_run(i, run)
+    if write:
+        write_runs(out, runs, replayed, options)
+    differences = compare_runs(runs, replayed, tolerances=tolerances) if compare else []
+    return ReplayResult(runs, replayed, differences, out if write else None, options)
+
+
+__all__ = ["Difference", "OPTIONS_KEY", "ReplayResult", "Run", "Tolerances", "bag_options",
+           "check_state", "compare_report", "compare_runs", "default_output", "free_weights",
+           "options_from_json", "options_to_json", "read_runs", "record_bag", "replay_bag",
+           "replay_run", "write_runs"]

@@ -1,0 +1,217 @@
+"""Live replay: play recorded states into a running ``rbe_node`` and collect its reports.
+
+Used by :func:`rbe_ros.replay.replay_bag` with ``live=True``. The node is started here
+(``python -m rbe_ros.ros.node`` under a unique node name, with the parameters of the bag's
+check options, in the ROS_DOMAIN_ID of the environment) or, with ``node_name``, the running
+node of that name is used as it is (its parameters must match the bag's options).
+
+States are sent one at a time, each after the previous one is answered (the node checks the
+newest state on its topic and drops a waiting one under load): a state with a sequence as a
+``~/check_sequence`` goal (the result holds one report per step), a state without on the
+``~/assembly`` topic, answered by the report on ``~/report`` with its header stamp.
+"""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import rclpy
+from rbe_msgs.action import CheckSequence
+from rbe_msgs.msg import AssemblyState, StabilityReport
+from rclpy.action import ActionClient
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+
+from ..analysis.check import CheckOptions, HoldSearch
+from ..geometry.contacts import ContactOptions
+from ..rbe.solver import Weights
+from .convert import dict_to_message, message_to_dict
+
+
+def node_parameters(options: CheckOptions) -> dict[str, object]:
+    """rbe_node parameters for ``options`` (ValueError if the node cannot be set to them)."""
+    s = options.solve
+    fixed = {"contact options": options.contact == ContactOptions(),
+             "solve weights": s.weights == Weights(), "allow_tension": s.allow_tension,
+             "full_solve": not options.full_solve,
+             "hold search greedy_width": options.holds.greedy_width == HoldSearch().greedy_width}
+    bad = [name for name, ok in fixed.items() if not ok]
+    if bad:
+        raise ValueError(f"rbe_node has no parameters for the bag's {', '.join(bad)}: "
+                         "replay it offline")
+    return {"friction_coefficient": float(s.mu),
+            "friction_threshold": float(options.mu_threshold or 0.0),
+            "objective": s.objective, "friction_model": s.friction, "friction_cone": s.cone,
+            "tension_tolerance": float(options.tension_tol),
+            "suggest_holds": bool(options.holds.enabled),
+            "hold_search_max_size": int(options.holds.max_size),
+            "hold_search_max_checks": int(options.holds.max_checks)}
+
+
+def _ros_value(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return f"{value:.17e}"
+    return str(value)
+
+
+class NodeProcess:
+    """An ``rbe_node`` process named ``name`` with ``parameters``, output in a log file."""
+
+    def __init__(self, name: str, parameters: dict[str, object]):
+        self.name = name
+        self.log = Path(tempfile.mkstemp(prefix=f"{name}_", suffix=".log")[1])
+        args = [sys.executable, "-m", "rbe_ros.ros.node", "--ros-args", "-r", f"__node:={name}"]
+        for key, value in parameters.items():
+            args += ["-p", f"{key}:={_ros_value(value)}"]
+        self._out = self.log.open("wb")
+        self.proc = subprocess.Popen(args, stdout=self._out, stderr=subprocess.STDOUT,
+                                     env=dict(os.environ))
+
+    def output(self) -> str:
+        self._out.flush()
+        return self.log.read_text(errors="replace")
+
+    def stop(self, timeout: float = 15.0) -> None:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self._out.close()
+        self.log.unlink(missing_ok=True)
+
+
+class _Client:
+    def __init__(self, context, node_name: str):
+        base = "/" + node_name.strip("/")
+        self.node = Node(f"rbe_replay_client_{os.getpid()}", context=context)
+        self.lock = threading.Condition()
+        self.reports: list[StabilityReport] = []
+        qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.VOLATILE)
+        self.publisher = self.node.create_publisher(AssemblyState, f"{base}/assembly", qos)
+        self.node.create_subscription(StabilityReport, f"{base}/report", self._on_report, qos)
+        self.action = ActionClient(self.node, CheckSequence, f"{base}/check_sequence")
+        self.base = base
+        self.executor = SingleThreadedExecutor(context=context)
+        self.executor.add_node(self.node)
+        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self.thread.start()
+
+    def _on_report(self, msg) -> None:
+        with self.lock:
+            self.reports.append(msg)
+            self.lock.notify_all()
+
+    def close(self) -> None:
+        self.executor.shutdown(timeout_sec=5.0)
+        self.thread.join(5.0)
+        self.action.destroy()
+        self.node.destroy_node()
+
+    def _wait(self, future, timeout: float, what: str):
+        done = threading.Event()
+        future.add_done_callback(lambda _f: done.set())
+        if not (future.done() or done.wait(timeout)):
+            raise TimeoutError(f"no {what} from {self.base} within {timeout:g} s")
+        return future.result()
+
+    def _in_executor(self, fn, timeout: float, what: str):
+        # rclpy's ActionClient registers a request after sending it, without a lock: every
+        # request is made from the executor thread so no response can overtake it.
+        return self._wait(self.executor.create_task(fn), timeout, what)
+
+    def wait_ready(self, timeout: float, alive: Callable[[], None]) -> None:
+        end = time.monotonic() + timeout
+        while True:
+            alive()
+            if (self.action.server_is_ready()
+                    and self.publisher.get_subscription_count() >= 1
+                    and self.node.count_publishers(f"{self.base}/report") >= 1):
+                return
+            if time.monotonic() > end:
+                raise TimeoutError(f"{self.base} is not up after {timeout:g} s (is it running, "
+                                   "in this ROS_DOMAIN_ID?)")
+            time.sleep(0.05)
+
+    def check_sequence(self, state, timeout: float) -> list[dict]:
+        future = self._in_executor(lambda: self.action.send_goal_async(
+            CheckSequence.Goal(assembly=state)), timeout, "goal response")
+        handle = self._wait(future, timeout, "goal response")
+        if not handle.accepted:
+            raise RuntimeError(f"{self.base} rejected the check_sequence goal")
+        result = self._wait(self._in_executor(handle.get_result_async, timeout, "result"),
+                            timeout, "check_sequence result")
+        return [message_to_dict(r) for r in result.result.reports]
+
+    def check_whole(self, state, timeout: float) -> list[dict]:
+        key = (state.header.stamp.sec, state.header.stamp.nanosec)
+        with self.lock:
+            self.reports.clear()
+        self.publisher.publish(state)
+        end = time.monotonic() + timeout
+        with self.lock:
+            while True:
+                for r in self.reports:
+                    if (r.header.stamp.sec, r.header.stamp.nanosec) == key and r.step_index == -1:
+                        return [message_to_dict(r)]
+                left = end - time.monotonic()
+                if left <= 0:
+                    raise TimeoutError(f"no report for the state of stamp {key} on "
+                                       f"{self.base}/report within {timeout:g} s")
+                self.lock.wait(left)
+
+
+def live_reports(runs, options: CheckOptions, *, node_name: str | None = None, context=None,
+                 timeout: float = 120.0, on_run=None) -> list[list[dict]]:
+    """The reports a live rbe_node returns for each run's state (message dicts)."""
+    own_context = context is None
+    if own_context:
+        context = rclpy.Context()
+        rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    process = None
+    client = None
+    try:
+        if node_name is None:
+            node_name = f"rbe_replay_{os.getpid()}"
+            process = NodeProcess(node_name, node_parameters(options))
+
+        def alive() -> None:
+            if process is not None and process.proc.poll() is not None:
+                raise RuntimeError(f"rbe_node exited ({process.proc.returncode}):\n"
+                                   f"{process.output()}")
+
+        client = _Client(context, node_name)
+        client.wait_ready(60.0 if process is not None else 30.0, alive)
+        out = []
+        for i, run in enumerate(runs):
+            state = dict_to_message(run.state, AssemblyState)
+            out.append(client.check_sequence(state, timeout) if run.state.get("sequence")
+                       else client.check_whole(state, timeout))
+            alive()
+            if on_run is not None:
+                on_run(i, run)
+        return out
+    finally:
+        if client is not None:
+            client.close()
+        if process is not None:
+            process.stop()
+        if own_context:
+            rclpy.try_shutdown(context=context)
+
+
+__all__ = ["NodeProcess", "live_reports", "node_parameters"]

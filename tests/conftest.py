@@ -1,0 +1,17 @@
+"""Hypothesis profiles of the property tests (tests/test_properties.py).
+
+``ci`` (default): 100 examples per property test (5 tests: 500 generated scenes),
+derandomized and without an example database, so every run checks the same scenes.
+``long``: 2,000 examples per test (10,000 scenes, random, 5-15 minutes on 2 cores):
+``HYPOTHESIS_PROFILE=long make test-long``. ``dev``: 20 examples per test, for a quick look.
+"""
+import os
+
+from hypothesis import HealthCheck, settings
+
+_COMMON = dict(deadline=None, database=None, print_blob=True,
+               suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
+settings.register_profile("ci", max_examples=100, derandomize=True, **_COMMON)
+settings.register_profile("long", max_examples=2000, **_COMMON)
+settings.register_profile("dev", max_examples=20, **_COMMON)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))

@@ -1,0 +1,60 @@
+"""Every bag of bags/ replayed through a live rbe_node (one node process for the module, in
+the test run's ROS_DOMAIN_ID): the node's reports match the recorded ones; a perturbed
+recorded force fails the live replay the same way it fails offline."""
+from __future__ import annotations
+
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+from rbe_client import NodeProcess
+from rbe_ros.cli import main
+from rbe_ros.replay import bag_options, read_runs, write_runs
+from rbe_ros.testing import assert_bag_replays, parametrize_bags
+
+REPO = Path(__file__).resolve().parents[2]
+BAGS = REPO / "bags"
+NAME = "rbe_replay_test"
+
+
+@pytest.fixture(scope="module")
+def node(rclpy_context, tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("rbe_replay")
+    proc = NodeProcess(["-r", f"__node:={NAME}"], tmp / "node.log")
+    try:
+        yield SimpleNamespace(proc=proc, name=NAME, context=rclpy_context)
+    finally:
+        proc.stop()
+        out = proc.output()
+        assert "Traceback" not in out, out
+
+
+@parametrize_bags(BAGS)
+def test_bag_replays_live(node, bag):
+    result = assert_bag_replays(bag, live=True, node_name=node.name, context=node.context)
+    assert [len(r) for r in result.replayed] == [len(run.reports) for run in result.runs]
+    assert node.proc.proc.poll() is None
+
+
+def test_perturbed_force_fails_the_live_replay(node, tmp_path):
+    runs = read_runs(BAGS / "stack_tips")
+    report = runs[0].reports[3]                        # the stack tips
+    iface = report["interfaces"][-1]
+    iface["normal_resultant"] *= 1.001
+    path = tmp_path / "perturbed"
+    write_runs(path, runs, [r.reports for r in runs], bag_options(BAGS / "stack_tips"))
+    with pytest.raises(AssertionError) as err:
+        assert_bag_replays(path, live=True, node_name=node.name, context=node.context)
+    text = str(err.value)
+    assert "(live)" in text and "1 field(s)" in text
+    assert (f"step 3 (b03) interface {iface['block_a']}|{iface['block_b']}: "
+            "normal_resultant: recorded") in text
+
+
+def test_cli_live_starts_its_own_node(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["replay", str(BAGS / "stack_tips"), "--live", "--compare", "-o", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "6 reports, live" in text and "all recorded reports reproduced" in text
+    assert (out / "metadata.yaml").is_file()

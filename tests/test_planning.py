@@ -1,0 +1,118 @@
+"""Sequence planning: every step of a returned order is re-checked with the plain checker
+(the step's held blocks as supports); infeasible plans name the step."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from rbe_ros import generators
+from rbe_ros.analysis.assembly import Assembly
+from rbe_ros.analysis.check import CheckOptions, HoldSearch, check
+from rbe_ros.analysis.planning import plan_sequence
+from rbe_ros.analysis.sequence import check_sequence, sequence_steps
+from rbe_ros.cli import main
+from rbe_ros.scene import make_scene, scene_to_dict
+
+
+def recheck(plan, original, max_held):
+    """Every step of ``plan.scene`` stands by the plain checker; returns the steps."""
+    assert plan.feasible, plan.message
+    free = sorted(b.id for b in original.blocks if not b.support)
+    assert sorted(plan.order) == free and list(plan.scene.sequence) == plan.order
+    full = Assembly.from_scene(plan.scene)
+    steps = sequence_steps(plan.scene)
+    assert [s.held for s in steps] == list(plan.held)
+    for step in steps:
+        assert len(step.held) <= max_held
+        report = check(full.subset(step.present, step.held))
+        assert report.stable, (step.index, step.block, step.held, report.message)
+    last = steps[-1]
+    assert last.held == () and set(last.present) == {b.id for b in original.blocks}
+    assert all(r.stable for r in plan.reports) and len(plan.reports) == len(steps)
+    return steps
+
+
+def test_wall_is_planned_course_by_course_without_holds():
+    wall = generators.running_bond_wall(3, 4)
+    plan = plan_sequence(wall, 0)
+    steps = recheck(plan, wall, 0)
+    assert plan.max_held == 0 and len(steps) == 13     # 4 + 5 + 4 bricks
+    courses = [int(b[6:8]) for b in plan.order]
+    assert courses == sorted(courses)                   # bottom up
+
+
+def test_dome_is_planned_with_the_holds_it_needs():
+    dome = generators.dome(8, 5)
+    plan = plan_sequence(dome, 2)
+    steps = recheck(plan, dome, 2)
+    assert plan.max_held == 2
+    courses = [int(b[6]) for b in plan.order]
+    assert courses == sorted(courses)                   # course by course
+    # holds are needed: the same order with nothing held fails (at the first block of a ring)
+    bare = make_scene(dome.name, dome.blocks, dome.gravity, plan.order)
+    seen: list = []
+    check_sequence(bare, CheckOptions(holds=HoldSearch(enabled=False)),
+                   on_step=lambda r, _total: seen.append(r),
+                   cancelled=lambda: any(not r.stable for r in seen))
+    assert [r.stable for r in seen] == [False] and seen[0].block_placed == "course1_slice00"
+    # an open ring of the top course is held at both ends: its first block and the newest
+    top = [s for s in steps if s.block.startswith("course4")]
+    assert top[0].held == ("course4_slice00",)
+    assert all(s.held == ("course4_slice00", s.block) for s in top[1:-1])
+    assert top[-1].held == ()                           # the closed ring stands
+
+
+def test_arch_with_two_holds_and_the_step_where_one_is_not_enough():
+    arch = generators.semicircular_arch(7)
+    plan = plan_sequence(arch, 2)
+    recheck(plan, arch, 2)
+    assert plan.max_held == 2 and plan.order[-1] == "v03"      # the key-stone last
+    one = plan_sequence(arch, 1)
+    assert not one.feasible and one.failed_step == 5
+    assert one.order == ["v00", "v06", "v01", "v02", "v03"]
+    assert "at step 5" in one.message and "needs 2 held blocks" in one.message
+    # the partial plan stands up to the step that fails
+    assert len(one.reports) == 5 and all(r.stable for r in one.reports)
+
+
+def test_a_finished_assembly_that_does_not_stand_has_no_plan():
+    stack = generators.stack(5, offsets=[0.3 * k for k in range(5)])
+    plan = plan_sequence(stack, 3)
+    assert not plan.feasible and plan.failed_step == 5 and plan.order == []
+    assert "finished assembly does not stand" in plan.message
+
+
+def test_keep_sequence_fixes_the_prefix():
+    arch = generators.semicircular_arch(7)
+    fixed = make_scene(arch.name, arch.blocks, arch.gravity, ["v06", "v00"])
+    plan = plan_sequence(fixed, 2, keep_sequence=True)
+    recheck(plan, arch, 2)
+    assert plan.order[:2] == ["v06", "v00"]
+
+
+def test_cli_plan_json_and_exit_status(tmp_path, capsys):
+    scene = tmp_path / "arch.json"
+    scene.write_text(json.dumps(scene_to_dict(generators.semicircular_arch(7))))
+    out_scene = tmp_path / "planned.json"
+    assert main(["plan", str(scene), "--max-held", "2", "--json", "-o", str(out_scene)]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["feasible"] and out["failed_step"] == -1 and out["max_held"] == 2
+    assert out["order"] == ["v00", "v06", "v01", "v05", "v02", "v04", "v03"]
+    assert [s["held"] for s in out["steps"]] == [[], [], ["v01"], ["v01", "v05"],
+                                                 ["v02", "v05"], ["v02", "v04"], []]
+    assert all(s["stable"] and s["status"] == "STABLE" for s in out["steps"])
+    planned = json.loads(out_scene.read_text())
+    assert planned["sequence"] == out["order"] and planned["holds"] == out["holds"]
+    assert {"block": "v05", "from_step": 3, "until_step": 5} in planned["holds"]
+    assert main(["plan", str(scene), "--max-held", "1"]) == 1
+    text = capsys.readouterr().out
+    assert "NOT feasible (step 5)" in text and "order: v00, v06, v01, v02, v03" in text
+
+
+@pytest.mark.parametrize("bad", [["--max-held", "-1"], ["--max-held", "1", "--beam", "0"]])
+def test_cli_plan_bad_options(tmp_path, capsys, bad):
+    scene = tmp_path / "arch.json"
+    scene.write_text(json.dumps(scene_to_dict(generators.semicircular_arch(5))))
+    assert main(["plan", str(scene), *bad]) == 2
+    assert "rbe-ros: error:" in capsys.readouterr().err

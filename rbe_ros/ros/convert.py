@@ -50,24 +50,8 @@ def _value_to_dict(typ, value):
             return [message_to_dict(v) for v in value]
         if isinstance(item, BasicType) and item.typename == "octet":
             return [bytes(v) for v in value]
-        return [_basic(item, v) for v in value]
-    return _basic(typ, value)
-
-
-def _basic(typ, value):
-    if isinstance(typ, AbstractGenericString):
-        return str(value)
-    if isinstance(typ, BasicType):
-        name = typ.typename
-        if name in _FLOATS:
-            return float(value)
-        if name in _INTS:
-            return int(value)
-        if name == "boolean":
-            return bool(value)
-        if name == "octet":
-            return bytes(value)
-    return value
+        return [_cast(item, v) for v in value]
+    return _cast(typ, value)
 
 
 # --- dict -> message --------------------------------------------------------------------------

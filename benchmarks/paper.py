@@ -128,7 +128,7 @@ def write(rows, figs) -> None:
              "buttresses, how the 12 buttress elements are split) is chosen and written down in",
              "`rbe_ros/generators.py` (`buttressed_arch`, `dome`).", "",
              "| quantity | paper | rbe_ros | time [s] |", "|---|---|---|---|"]
-    lines += [f"| {q} | {p} | {o} | {t} |" for q, p, o, t in rows]
+    lines += ["| " + " | ".join(str(c).replace("|", "\\|") for c in row) + " |" for row in rows]
     lines += ["", "Notes:",
               "- The buttressed arch springs from the middle of the 0.70 m buttress tops; with the",
               "  buttress inner faces flush with the intrados the tilt capacity is 13.5 deg instead",

@@ -1,5 +1,5 @@
 """How the cost of a check grows, and what the per-step checks of a sequence cost
-(issue 6): writes docs/SCALING.md and docs/bench/scaling.png.
+(issue 6): writes docs/SCALING.md and docs/bench/check_scaling.png.
 
     .venv/bin/python benchmarks/scaling.py [--quick]      (or: make scaling)
 
@@ -93,7 +93,7 @@ def main() -> int:
              "|---|---|---|---|---|---|"]
     lines += [f"| {b} | {i} | {v} | {tt:.3f} | {s:.3f} | {1 - s / tt:.0%} |" for b, i, v, tt, s in rows]
     lines += ["", f"Log-log slope of total time against blocks: **{slope:.2f}** "
-              "(target: no faster than about 1.3).", "",
+              "(target: no faster than about 1.3).", "", "![time per check](bench/check_scaling.png)", "",
               "## The 140-block dome, every step checked", "",
               f"One check of the whole dome (contacts included): {whole:.3f} s.", "",
               "| per-step model | time [s] | ratio to one whole check | in the solver [s] | models used |",
@@ -107,7 +107,7 @@ def main() -> int:
     lines += ["", f"Steps where the local and the full verdicts differ: {mismatches or 'none'}.",
               f"Unstable steps: {sum(not r.stable for r in seq[False][0])} of {len(seq[False][0])}.", ""]
     (DOCS / "SCALING.md").write_text("\n".join(lines))
-    plot(rows, DOCS / "bench" / "scaling.png")
+    plot(rows, DOCS / "bench" / "check_scaling.png")
     print("\n".join(lines))
     return 0
 

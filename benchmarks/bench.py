@@ -536,6 +536,11 @@ def armadillo(cra, engines) -> dict | None:
     a, t_det = best_of(2, lambda: Assembly.from_scene(scene, ARMADILLO_CONTACT))
     out["time_detect_ours"] = t_det
     out["interfaces_ours"] = len(a.interfaces)
+    model, t_model = best_of(2, lambda: build_model(a.blocks, a.interfaces, a.gravity))
+    from rbe_ros.rbe.solver import solve
+    sol, t_solve = best_of(2, lambda: solve(model, runs["ours-qp-soc"]))
+    out["breakdown"] = {"detect": t_det, "model": t_model, "solve": t_solve, "clarabel": sol.time,
+                        "vertices": model.num_vertices, "vertices_cra": r.get("vertices")}
     bodies = physics.bodies_from_scene(scene)
     for mid in engines:
         out[mid] = physics_time(bodies, mid, False, mu=ARMADILLO_MU)

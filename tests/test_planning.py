@@ -63,6 +63,16 @@ def test_dome_is_planned_with_the_holds_it_needs():
     assert top[-1].held == ()                           # the closed ring stands
 
 
+def test_the_papers_dome_is_planned_with_at_most_two_holds():
+    """The full 14 x 10 dome (126 blocks to place): every step of the plan stands by the plain
+    checker, with at most two blocks held at once (about 30 s)."""
+    dome = generators.dome()
+    plan = plan_sequence(dome, 2)
+    steps = recheck(plan, dome, 2)
+    assert len(steps) == 126 and plan.max_held == 2
+    assert sum(bool(s.held) for s in steps) > 0
+
+
 def test_arch_with_two_holds_and_the_step_where_one_is_not_enough():
     arch = generators.semicircular_arch(7)
     plan = plan_sequence(arch, 2)

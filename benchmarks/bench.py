@@ -23,7 +23,6 @@ import argparse
 import json
 import math
 import os
-import statistics
 import subprocess
 import sys
 import tempfile
@@ -41,6 +40,7 @@ sys.path.insert(0, str(HERE))
 import _arch_limit as arch_limit  # noqa: E402
 import _physics as physics  # noqa: E402
 from machine import machine_summary  # noqa: E402
+from timing import best_of  # noqa: E402
 
 from rbe_ros import generators as gen  # noqa: E402
 from rbe_ros.analysis.assembly import Assembly  # noqa: E402
@@ -49,7 +49,7 @@ from rbe_ros.analysis.tilt import horizontal, tilt_capacity  # noqa: E402
 from rbe_ros.geometry.contacts import ContactOptions  # noqa: E402
 from rbe_ros.rbe.model import build_model  # noqa: E402
 from rbe_ros.rbe.solver import SolveOptions  # noqa: E402
-from rbe_ros.scene import Block, Scene, box_block, make_scene  # noqa: E402
+from rbe_ros.scene import Scene, box_block, make_scene  # noqa: E402
 
 G = 9.81
 #: Ours: (objective, cone); the first is the default configuration.
@@ -235,17 +235,6 @@ def paper_cases(quick: bool) -> list[Case]:
 
 def ours_options(obj: str, cone: str, mu: float, contact=None) -> CheckOptions:
     return CheckOptions(SolveOptions(objective=obj, cone=cone, mu=mu), contact=contact or ContactOptions())
-
-
-def best_of(n: int, fn):
-    best, value = math.inf, None
-    for _ in range(max(1, n)):
-        start = time.perf_counter()
-        out = fn()
-        elapsed = time.perf_counter() - start
-        if elapsed < best:
-            best, value = elapsed, out
-    return value, best
 
 
 def run_ours(case: Case, repeat: int) -> None:

@@ -26,12 +26,13 @@ import os
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 DRIVER = HERE / "_compas_driver.py"
+sys.path.insert(0, str(HERE))
+from timing import best_of  # noqa: E402
 DOCS = ROOT / "docs"
 PROJECT_PYTHON = ROOT / ".venv" / "bin" / "python"
 DEFAULT_VENV = Path("/tmp/rbe-compas-venv")
@@ -238,18 +239,6 @@ def _solve_with_weights(model, mu: float, weights):
     return np.asarray(result.x).reshape(4, nv) * model.force_scale
 
 
-def _best_of(repeat: int, fn):
-    """(value of the fastest run, its wall time) over ``repeat`` runs of ``fn``."""
-    best, value = math.inf, None
-    for _ in range(max(1, repeat)):
-        start = time.perf_counter()
-        out = fn()
-        elapsed = time.perf_counter() - start
-        if elapsed < best:
-            best, value = elapsed, out
-    return value, best
-
-
 def _prepare(record: dict):
     """Everything our side needs for one sample: the scene, the posed blocks (ours and as
     compas_cra computes their volumes and centres), compas_cra's interfaces as ours, options."""
@@ -322,8 +311,8 @@ def _check_own(prep):
 def time_ours(record: dict, repeat: int = 1) -> dict:
     """Our times on one sample, best of ``repeat``: full check, model + solve, Clarabel."""
     prep = _prepare(record)
-    (_, solution), t_solve = _best_of(repeat, lambda: _solve_same(prep))
-    _, t_full = _best_of(repeat, lambda: _check_own(prep))
+    (_, solution), t_solve = best_of(repeat, lambda: _solve_same(prep))
+    _, t_full = best_of(repeat, lambda: _check_own(prep))
     return {"time_ours_full": t_full, "time_ours_solve": t_solve, "time_ours_clarabel": solution.time}
 
 
@@ -341,7 +330,7 @@ def compare_sample(record: dict, repeat: int = 3) -> dict:
     volume_err, centroid_err = prep.volume_err, prep.centroid_err
 
     # 1. the same interface polygons, frames and vertex order
-    (model, solution), t_solve = _best_of(repeat, lambda: _solve_same(prep))
+    (model, solution), t_solve = best_of(repeat, lambda: _solve_same(prep))
     if not solution.solved:
         raise RuntimeError(f"{name}: our solve on compas_cra's interfaces: {solution.solver_status}")
     ours = np.empty_like(solution.forces)
@@ -383,7 +372,7 @@ def compare_sample(record: dict, repeat: int = 3) -> dict:
         n_imitation = None
 
     # 2. from the blocks alone: our own contact detection, the full check
-    report, t_full = _best_of(repeat, lambda: _check_own(prep))
+    report, t_full = best_of(repeat, lambda: _check_own(prep))
     own = _match_own(record, interfaces, index, scene, report, g)
     if volume_err > 1e-6:   # the same detection, with compas_cra's volumes and centres
         from rbe_ros.analysis.assembly import Assembly

@@ -6,32 +6,12 @@ distribution that bench.in adds is written pinned with ``==``. Run it with the p
 Python 3.11: ``.venv/bin/python benchmarks/lock_bench.py``.
 """
 import hashlib
-import json
 import os
-import subprocess
 import sys
-import tempfile
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-REQ = os.path.join(ROOT, "requirements")
-
-
-def canon(name):
-    return name.lower().replace("_", "-").replace(".", "-")
-
-
-def resolve(*files):
-    with tempfile.TemporaryDirectory() as tmp:
-        report = os.path.join(tmp, "report.json")
-        cmd = [sys.executable, "-m", "pip", "install", "--quiet", "--dry-run", "--ignore-installed",
-               "--disable-pip-version-check", "--report", report]
-        for f in files:
-            cmd += ["-r", os.path.join(REQ, f)]
-        subprocess.run(cmd, check=True)
-        with open(report) as fh:
-            data = json.load(fh)
-    return {canon(i["metadata"]["name"]): (i["metadata"]["name"], i["metadata"]["version"])
-            for i in data["install"]}
+sys.path.insert(0, os.path.join(ROOT, "scripts"))
+from lock import REQ, resolve  # noqa: E402  (the same pip resolution as the project's locks)
 
 
 def main():

@@ -7,7 +7,7 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from ..geometry.block import PosedBlock, pose_block
+from ..geometry.block import PosedBlock, pose_blocks
 from ..geometry.contacts import ContactOptions, Interface, detect_interfaces
 from ..scene import Scene
 
@@ -22,7 +22,7 @@ class Assembly:
 
     @classmethod
     def from_scene(cls, scene: Scene, contact: ContactOptions = ContactOptions()) -> "Assembly":
-        blocks = tuple(pose_block(b) for b in scene.blocks)
+        blocks = tuple(pose_blocks(scene.blocks))
         interfaces = tuple(it for it in detect_interfaces(list(blocks), contact)
                            if not (blocks[it.a].support and blocks[it.b].support))
         Interface.compute_kerns(interfaces)

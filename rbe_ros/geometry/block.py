@@ -7,7 +7,7 @@ thousand identical bricks costs one shape analysis; posing is then a rigid trans
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import numpy as np
 import shapely
@@ -34,12 +34,14 @@ class Face:
 
 @dataclass(frozen=True)
 class PosedBlock:
-    """A block in scene coordinates, with what contacts and equilibrium need of it."""
+    """A block in scene coordinates, with what contacts and equilibrium need of it.
+
+    The faces are stored as arrays (one row per face) for the vectorised contact tests;
+    :attr:`faces` gives them as :class:`Face` objects, built on first use."""
 
     id: str
     support: bool
     vertices: np.ndarray        # (n, 3) world
-    faces: tuple[Face, ...]
     centroid: np.ndarray        # (3,) world centre of mass
     volume: float
     mass: float
@@ -48,6 +50,17 @@ class PosedBlock:
     face_normals: np.ndarray    # (F, 3) the faces' n, for vectorised contact tests
     face_offsets: np.ndarray    # (F,)
     face_origins: np.ndarray    # (F, 3)
+    face_us: np.ndarray         # (F, 3) the faces' frame axes u and v
+    face_vs: np.ndarray         # (F, 3)
+    face_outlines: np.ndarray   # (F,) shapely outlines in face frame coordinates (shared,
+                                #      read-only: they do not depend on the pose)
+
+    @cached_property
+    def faces(self) -> tuple[Face, ...]:
+        """The planar faces (frame with n outward, 2D outline, plane offset)."""
+        return tuple(Face(PlaneFrame(o, u, v, n), outline, float(d)) for o, u, v, n, outline, d
+                     in zip(self.face_origins, self.face_us, self.face_vs, self.face_normals,
+                            self.face_outlines, self.face_offsets))
 
 
 @dataclass(frozen=True)
@@ -59,31 +72,66 @@ class _Shape:
     origins: np.ndarray
     us: np.ndarray
     vs: np.ndarray
-    outlines: tuple
+    outlines: np.ndarray        # (F,) object array, read-only
     volume: float
     centroid: np.ndarray
 
 
 def pose_block(block: Block) -> PosedBlock:
     """Place ``block`` in the scene and compute its mass properties (raises SceneError)."""
-    try:
-        # rounded to 1e-12 m, so blocks equal but for float noise share one shape analysis
-        shape = _shape(np.round(block.vertices, 12).tobytes(), block.vertices.shape[0],
-                       block.faces)
-    except ValueError as exc:
-        raise SceneError(f"block {block.id!r}: {exc}") from None
-    rot = Rotation.from_quat(block.orientation).as_matrix()   # (x, y, z, w), as ROS
-    p = block.position
-    world = block.vertices @ rot.T + p
-    normals, origins = shape.normals @ rot.T, shape.origins @ rot.T + p
-    us, vs = shape.us @ rot.T, shape.vs @ rot.T
-    offsets = shape.offsets + normals @ p
-    faces = tuple(Face(PlaneFrame(origins[k], us[k], vs[k], normals[k]), shape.outlines[k],
-                       float(offsets[k])) for k in range(len(offsets)))
-    mass = block.mass if block.mass > 0 else block.density * shape.volume
-    return PosedBlock(block.id, block.support, world, faces, shape.centroid @ rot.T + p,
-                      shape.volume, float(mass), shape.volume ** (1.0 / 3.0),
-                      np.array([world.min(axis=0), world.max(axis=0)]), normals, offsets, origins)
+    return pose_blocks([block])[0]
+
+
+def pose_blocks(blocks) -> list[PosedBlock]:
+    """:func:`pose_block` of every block, with the rigid transforms of all blocks applied in
+    a few array operations (raises SceneError for the first block that cannot be posed)."""
+    blocks = list(blocks)
+    if not blocks:
+        return []
+    n_vert = np.array([len(b.vertices) for b in blocks])
+    v0 = np.cumsum(n_vert) - n_vert
+    vertices = np.concatenate([b.vertices for b in blocks])
+    # rounded to 1e-12 m, so blocks equal but for float noise share one shape analysis
+    rounded = np.round(vertices, 12)
+    shapes = []
+    for block, s, n in zip(blocks, v0.tolist(), n_vert.tolist()):
+        try:
+            shapes.append(_shape(rounded[s:s + n].tobytes(), n, block.faces))
+        except ValueError as exc:
+            raise SceneError(f"block {block.id!r}: {exc}") from None
+    rot = Rotation.from_quat(np.array([b.orientation for b in blocks])).as_matrix()  # x, y, z, w
+    pos = np.array([b.position for b in blocks], dtype=float)
+    n_face = np.array([len(s.offsets) for s in shapes])
+    of_vert = np.repeat(np.arange(len(blocks)), n_vert)         # the block of each row
+    of_face = np.repeat(np.arange(len(blocks)), n_face)
+    rv, rf = rot[of_vert], rot[of_face]
+    world = _rotate(vertices, rv) + pos[of_vert]
+    normals = _rotate(np.concatenate([s.normals for s in shapes]), rf)
+    origins = _rotate(np.concatenate([s.origins for s in shapes]), rf) + pos[of_face]
+    us = _rotate(np.concatenate([s.us for s in shapes]), rf)
+    vs = _rotate(np.concatenate([s.vs for s in shapes]), rf)
+    p = pos[of_face]
+    offsets = np.concatenate([s.offsets for s in shapes]) + (
+        normals[:, 0] * p[:, 0] + normals[:, 1] * p[:, 1] + normals[:, 2] * p[:, 2])
+    centroids = _rotate(np.array([s.centroid for s in shapes]), rot) + pos
+    aabb = np.stack((np.minimum.reduceat(world, v0), np.maximum.reduceat(world, v0)), axis=1)
+    vert_ends, face_ends = np.cumsum(n_vert).tolist(), np.cumsum(n_face).tolist()
+    out = []
+    for k, (block, shape) in enumerate(zip(blocks, shapes)):
+        vb, ve = vert_ends[k] - len(block.vertices), vert_ends[k]
+        fb, fe = face_ends[k] - len(shape.offsets), face_ends[k]
+        mass = block.mass if block.mass > 0 else block.density * shape.volume
+        out.append(PosedBlock(block.id, block.support, world[vb:ve], centroids[k], shape.volume,
+                              float(mass), shape.volume ** (1.0 / 3.0), aabb[k], normals[fb:fe],
+                              offsets[fb:fe], origins[fb:fe], us[fb:fe], vs[fb:fe],
+                              shape.outlines))
+    return out
+
+
+def _rotate(x: np.ndarray, rot: np.ndarray) -> np.ndarray:
+    """Rows of ``x`` (n, 3) rotated by their matrices ``rot`` (n, 3, 3): ``x[i] @ rot[i].T``,
+    the same sums in the same order as a matrix product row by row."""
+    return x[:, 0:1] * rot[:, :, 0] + x[:, 1:2] * rot[:, :, 1] + x[:, 2:3] * rot[:, :, 2]
 
 
 @lru_cache(maxsize=4096)
@@ -162,5 +210,8 @@ def _planar_faces(vertices: np.ndarray, faces, size: float):
         us.append(u)
         vs.append(v)
         outlines.append(outline)
+    shared = np.empty(len(outlines), dtype=object)
+    shared[:] = outlines
+    shared.flags.writeable = False
     return (np.array(normals), np.array(offsets), np.array(origins), np.array(us), np.array(vs),
-            tuple(outlines))
+            shared)

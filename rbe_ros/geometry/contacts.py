@@ -3,32 +3,65 @@
 Two blocks touch face to face where a face of one and a face of the other have opposite
 normals and lie in one plane, within tolerances relative to the smaller block; the interface
 is the intersection of the two face outlines. A sweep over axis-aligned bounding boxes keeps
-the face tests to pairs of blocks that can touch.
+the face tests to pairs of blocks that can touch. Overlaps thinner than an edge contact are
+dropped and vertices that add no corner are removed (:class:`ContactOptions`: min_width,
+vertex_tol), so the equilibrium problem is no larger than the answer needs.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+import math
+import numbers
+from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
 import shapely
 
 from .block import PosedBlock
-from .kern import kern, kerns
-from .polygon import PlaneFrame, cross, drop_collinear
-
-
-#: Vertices closer than this share of the block size to the line of their neighbours go.
-COLLINEAR_TOL = 1e-6
+from .kern import kern, kerns_ragged
+from .polygon import (PlaneFrame, cross, drop_collinear_rings, first_argmin, ring_neighbours,
+                      ring_widths)
 
 
 @dataclass(frozen=True)
 class ContactOptions:
-    """Tolerances, relative to the smaller block's size (cube root of its volume)."""
+    """Tolerances, relative to the smaller block's size (cube root of its volume).
+
+    Fidelity: a contact is modelled no finer than the answer needs, since the conic problem
+    grows with every interface vertex (its solve time roughly with their number).
+
+    - ``min_width``: an overlap polygon thinner than this (its smallest extent perpendicular
+      to one of its edges) is dropped. Within the tolerances it is an edge contact (the
+      faces meet along a line, as at the slivers an imperfect mesh leaves between two faces
+      that only touch at a rim): it has next to no area, so its compression cannot carry a
+      moment worth modelling, yet it would add a full interface to the problem.
+    - ``vertex_tol``: a vertex closer than this to the line through its neighbours is
+      dropped (greedily, the least significant first, down to 3 vertices). Clipping leaves
+      such vertices on straight edges, and meshes exported with noise leave almost straight
+      corners; as force points they add unknowns but no moment capacity. For a convex
+      polygon the result lies inside the original (an inner approximation: the polygon only
+      shrinks, so a stable verdict stays safe). As ``min_width >= vertex_tol``, the corners
+      that give a kept polygon its width (about that width away from their neighbours'
+      chord) survive. The interface's ``area`` and frame origin (centroid) remain those of
+      the exact overlap.
+
+    Both compare strictly ("thinner than", "closer than"): at 0 they keep everything. All
+    options must be finite and >= 0 (ValueError).
+    """
 
     distance_tol: float = 1e-3      # gap or overlap between the two face planes
     angle_tol_deg: float = 1.0      # deviation of the normals from exactly opposite
     min_area: float = 1e-6          # smallest interface area, relative to size^2
+    min_width: float = 1e-3         # thinnest interface polygon kept (edge contacts go)
+    vertex_tol: float = 1e-3        # vertices this close to their neighbours' chord go
+
+    def __post_init__(self):
+        for name in ("distance_tol", "angle_tol_deg", "min_area", "min_width", "vertex_tol"):
+            value = getattr(self, name)
+            if (isinstance(value, bool) or not isinstance(value, numbers.Real)
+                    or not math.isfinite(value) or value < 0):
+                raise ValueError(f"contact option {name} must be a finite number >= 0, "
+                                 f"not {value!r}")
 
 
 @dataclass(frozen=True)
@@ -57,12 +90,27 @@ class Interface:
     def compute_kerns(interfaces) -> None:
         """Compute the kerns of many interfaces at once (vectorised) into their caches."""
         todo = [it for it in interfaces if "kern" not in it.__dict__]
-        for it, k in zip(todo, kerns([it.polygon2d() for it in todo])):
-            it.__dict__["kern"] = it.frame.to_3d(k)
+        if not todo:
+            return
+        counts = np.array([len(it.points) for it in todo])
+        rep = np.repeat(np.arange(len(todo)), counts)
+        origin = np.array([it.frame.origin for it in todo])[rep]
+        u = np.array([it.frame.u for it in todo])[rep]
+        v = np.array([it.frame.v for it in todo])[rep]
+        d = np.concatenate([it.points for it in todo]) - origin
+        ring2d = np.column_stack((np.einsum("ij,ij->i", d, u), np.einsum("ij,ij->i", d, v)))
+        pts, counts = kerns_ragged(ring2d, counts)
+        rep = np.repeat(np.arange(len(todo)), counts)
+        world = _lift(pts, *(np.array([getattr(it.frame, k) for it in todo])[rep]
+                             for k in ("origin", "u", "v")))
+        for it, k in zip(todo, np.split(world, np.cumsum(counts)[:-1])):
+            it.__dict__["kern"] = k
 
     def between(self, a: int, b: int) -> "Interface":
-        """The same contact between blocks renumbered ``a`` and ``b``, sharing the kern."""
-        out = replace(self, a=a, b=b)
+        """The same contact between blocks renumbered ``a`` and ``b``, sharing the kern
+        (direct construction: dataclasses.replace costs 5x more, and a sequence check
+        renumbers every interface at every step)."""
+        out = Interface(a, b, self.frame, self.points, self.area)
         out.__dict__["kern"] = self.kern
         return out
 
@@ -75,8 +123,8 @@ def candidate_pairs(blocks: list[PosedBlock], margin: float) -> np.ndarray:
     """
     if len(blocks) < 2:
         return np.zeros((0, 2), dtype=int)
-    lo = np.array([b.aabb[0] for b in blocks]) - margin
-    hi = np.array([b.aabb[1] for b in blocks]) + margin
+    boxes = np.array([b.aabb for b in blocks])
+    lo, hi = boxes[:, 0] - margin, boxes[:, 1] + margin
     axis = int(np.argmax(np.ptp(lo + hi, axis=0)))
     order = np.argsort(lo[:, axis], kind="stable")
     starts = lo[order, axis]
@@ -85,7 +133,9 @@ def candidate_pairs(blocks: list[PosedBlock], margin: float) -> np.ndarray:
     first = np.repeat(np.arange(len(order)), counts)
     second = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts) + first + 1
     i, j = order[first], order[second]
-    keep = np.all(lo[i] <= hi[j], axis=1) & np.all(lo[j] <= hi[i], axis=1)
+    keep = np.ones(len(i), dtype=bool)
+    for lo_k, hi_k in zip(lo.T, hi.T):        # one axis at a time: 1D gathers are cheaper
+        keep &= (lo_k[i] <= hi_k[j]) & (lo_k[j] <= hi_k[i])
     pairs = np.sort(np.column_stack((i[keep], j[keep])), axis=1)
     return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
 
@@ -95,88 +145,218 @@ def detect_interfaces(blocks: list[PosedBlock], options: ContactOptions = Contac
     """Every face-to-face interface between the blocks (deterministic order).
 
     Batched: face pairs of all candidate block pairs are screened in one numpy pass (opposite
-    normals, one plane), and the polygon work of the survivors runs in vectorised shapely calls.
+    normals, one plane), the overlaps of the survivors are computed in one vectorised shapely
+    call, and the overlap polygons are then treated all at once as ragged arrays (vertices
+    one polygon after another): width and vertex filters (see :class:`ContactOptions`),
+    frames, lifting to 3D and the kerns, which are cached on the interfaces.
     """
     if len(blocks) < 2:
         return []
     margin = options.distance_tol * max(b.size for b in blocks)
     pairs = candidate_pairs(blocks, margin)
-    face_count = np.array([len(b.faces) for b in blocks])
+    face_count = np.array([len(b.face_offsets) for b in blocks])
     face_start = np.concatenate(([0], np.cumsum(face_count)[:-1]))
     normals = np.concatenate([b.face_normals for b in blocks])
     origins = np.concatenate([b.face_origins for b in blocks])
     offsets = np.concatenate([b.face_offsets for b in blocks])
-    faces = [f for b in blocks for f in b.faces]
+    us = np.concatenate([b.face_us for b in blocks])
+    vs = np.concatenate([b.face_vs for b in blocks])
+    outlines = np.concatenate([b.face_outlines for b in blocks])
     sizes = np.array([b.size for b in blocks])
 
-    # every face of block i against every face of block j, for all candidate pairs
-    fa_n, fb_n = face_count[pairs[:, 0]], face_count[pairs[:, 1]]
-    combos = fa_n * fb_n
-    pair_of = np.repeat(np.arange(len(pairs)), combos)
-    k = np.arange(combos.sum()) - np.repeat(np.cumsum(combos) - combos, combos)
-    fa = face_start[pairs[pair_of, 0]] + k // fb_n[pair_of]
-    fb = face_start[pairs[pair_of, 1]] + k % fb_n[pair_of]
+    # faces of the candidate pairs with opposite normals, then those in one plane
+    pair_of, fa, fb = _facing(pairs, face_count, face_start, normals,
+                              -np.cos(np.radians(options.angle_tol_deg)))
     scale = np.minimum(sizes[pairs[pair_of, 0]], sizes[pairs[pair_of, 1]])
-    facing = np.einsum("ij,ij->i", normals[fa], normals[fb]) < -np.cos(np.radians(options.angle_tol_deg))
     gap = np.abs(np.einsum("ij,ij->i", normals[fa], origins[fb]) - offsets[fa])
-    keep = facing & (gap <= options.distance_tol * scale)
+    keep = gap <= options.distance_tol * scale
     fa, fb, pair_of, scale = fa[keep], fb[keep], pair_of[keep], scale[keep]
     if not len(fa):
         return []
 
-    outline_a = np.array([faces[f].outline for f in fa], dtype=object)
-    outline_b = _in_frames([faces[f] for f in fb], [faces[f].frame for f in fa])
-    overlap = shapely.intersection(outline_a, outline_b)
+    # the overlap of the two outlines, in the frame of face a
+    outline_a = outlines[fa]
+    outline_b, coords_b, index_b = _in_frames(outlines[fb], origins[fb], us[fb], vs[fb],
+                                              origins[fa], us[fa], vs[fa])
+    coords_a, index_a = shapely.get_coordinates(outline_a, return_index=True)
+    box_a, box_b = shapely.bounds(outline_a), shapely.bounds(outline_b)
+    meet = (np.all(box_a[:, :2] <= box_b[:, 2:], axis=1)
+            & np.all(box_b[:, :2] <= box_a[:, 2:], axis=1))
+    simple = ((shapely.get_type_id(outline_a) == shapely.GeometryType.POLYGON)
+              & (shapely.get_num_interior_rings(outline_a) == 0)
+              & (shapely.get_type_id(outline_b) == shapely.GeometryType.POLYGON)
+              & (shapely.get_num_interior_rings(outline_b) == 0))
+    meet = np.flatnonzero(meet & ~_apart_or_thin(coords_a, index_a, coords_b, index_b, simple,
+                                                 scale, 0.5 * options.min_width * scale))
+    overlap = shapely.intersection(outline_a[meet], outline_b[meet])
     pieces, owner = shapely.get_parts(overlap, return_index=True)
+    owner = meet[owner]
     is_polygon = shapely.get_type_id(pieces) == shapely.GeometryType.POLYGON
     area = shapely.area(pieces)
     ok = is_polygon & (area > options.min_area * scale[owner] ** 2)
     pieces, owner, area = pieces[ok], owner[ok], area[ok]
-    rings, ring_of = shapely.get_coordinates(shapely.get_exterior_ring(pieces), return_index=True)
-    bounds = np.searchsorted(ring_of, np.arange(len(pieces) + 1))
-    ccw = shapely.is_ccw(shapely.get_exterior_ring(pieces))
-    centroids = shapely.get_coordinates(shapely.centroid(pieces))
+    if not len(pieces):
+        return []
+
+    # exterior rings, counter-clockwise, without the closing vertex
+    exterior = shapely.get_exterior_ring(pieces)
+    coords, ring_of = shapely.get_coordinates(exterior, return_index=True)
+    counts = np.bincount(ring_of, minlength=len(pieces)) - 1
+    begin = np.cumsum(counts + 1) - counts - 1
+    ccw = np.repeat(shapely.is_ccw(exterior), counts)
+    step = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+    step = np.where(ccw, step, np.repeat(counts, counts) - 1 - step)      # reversed if clockwise
+    ring = coords[np.repeat(begin, counts) + step]
+    centroid2d = shapely.get_coordinates(shapely.centroid(pieces))
+    tol = scale[owner]
+
+    # edge contacts go: area <= width * diameter <= width * bounding-box diagonal, so only
+    # rings with area < min width * diagonal need their width measured
+    least = options.min_width * tol
+    starts = np.cumsum(counts) - counts
+    extent = np.maximum.reduceat(ring, starts) - np.minimum.reduceat(ring, starts)
+    thick = area >= least * np.sqrt(extent[:, 0] ** 2 + extent[:, 1] ** 2)
+    if not thick.all():
+        maybe = np.flatnonzero(~thick)
+        thick[maybe] = ring_widths(ring[np.repeat(~thick, counts)], counts[maybe]) >= least[maybe]
+    if not thick.all():
+        ring, counts = ring[np.repeat(thick, counts)], counts[thick]
+        owner, area, centroid2d, tol = owner[thick], area[thick], centroid2d[thick], tol[thick]
+        if not len(owner):
+            return []
+    ring, counts = drop_collinear_rings(ring, counts, options.vertex_tol * tol)
+
+    # lifted to 3D; frames: n of face a, u along the longest edge, origin at the centroid
+    face = fa[owner]
+    rep = np.repeat(np.arange(len(counts)), counts)
+    f_o, f_u, f_v, f_n = origins[face], us[face], vs[face], normals[face]
+    pts = _lift(ring, f_o[rep], f_u[rep], f_v[rep])
+    _, nxt = ring_neighbours(counts)
+    edges = pts[nxt] - pts
+    lengths = np.sqrt(np.einsum("ij,ij->i", edges, edges))
+    longest = first_argmin(-lengths, counts)
+    u = edges[longest] / lengths[longest][:, None]
+    v = cross(f_n, u)
+    centroid = _lift(centroid2d, f_o, f_u, f_v)
+    # the kerns, in the interface frames (centred: best conditioned for the moments)
+    d = pts - centroid[rep]
+    local = np.column_stack((np.einsum("ij,ij->i", d, u[rep]), np.einsum("ij,ij->i", d, v[rep])))
+    kern2d, kern_counts = kerns_ragged(local, counts)
+    kern_rep = np.repeat(np.arange(len(counts)), kern_counts)
+    kern3d = _lift(kern2d, centroid[kern_rep], u[kern_rep], v[kern_rep])
+
+    pair = pairs[pair_of[owner]]
+    ends, kern_ends = np.cumsum(counts).tolist(), np.cumsum(kern_counts).tolist()
     out = []
-    for m in range(len(pieces)):
-        ring = rings[bounds[m]:bounds[m + 1] - 1]          # the closing point repeats the first
-        pair = pairs[pair_of[owner[m]]]
-        out.append(_interface(int(pair[0]), int(pair[1]), faces[fa[owner[m]]].frame,
-                              ring if ccw[m] else ring[::-1], centroids[m], float(area[m]),
-                              COLLINEAR_TOL * scale[owner[m]]))
+    for i, j, o, uu, vv, n, s, e, a, ks, ke in zip(
+            pair[:, 0].tolist(), pair[:, 1].tolist(), centroid, u, v, f_n, [0] + ends[:-1], ends,
+            area.tolist(), [0] + kern_ends[:-1], kern_ends):
+        it = Interface(i, j, PlaneFrame(o, uu, vv, n), pts[s:e], a)
+        it.__dict__["kern"] = kern3d[ks:ke]
+        out.append(it)
     return out
 
 
-def _in_frames(faces, frames) -> np.ndarray:
-    """Each face's outline in the 2D coordinates of the matching frame (affine maps of the
-    plane, applied to all coordinates at once)."""
-    geoms = np.array([f.outline for f in faces], dtype=object)
-    _, index = shapely.get_coordinates(geoms, return_index=True)
-    src_o = np.array([f.frame.origin for f in faces])
-    src_u = np.array([f.frame.u for f in faces])
-    src_v = np.array([f.frame.v for f in faces])
-    dst_o = np.array([f.origin for f in frames])
-    dst_u = np.array([f.u for f in frames])
-    dst_v = np.array([f.v for f in frames])
+def _facing(pairs: np.ndarray, face_count: np.ndarray, face_start: np.ndarray,
+            normals: np.ndarray, limit: float):
+    """Every face a of block i and face b of block j, for each candidate pair (i, j), whose
+    normals' dot product is below ``limit``, in order (pair, a, b): the pair indices and the
+    two face indices. One batched matrix product of the pairs' normals (faces padded to
+    the largest count) when that is not much more work than the face pairs themselves."""
+    fa_n, fb_n = face_count[pairs[:, 0]], face_count[pairs[:, 1]]
+    combos = fa_n * fb_n
+    most = int(face_count.max())
+    if len(pairs) * most * most <= 4 * int(combos.sum()):
+        padded = np.full((len(face_count), most, 3), np.nan)     # NaN: never below limit
+        owner = np.repeat(np.arange(len(face_count)), face_count)
+        padded[owner, np.arange(len(normals)) - face_start[owner]] = normals
+        dots = np.matmul(padded[pairs[:, 0]], padded[pairs[:, 1]].transpose(0, 2, 1))
+        pair_of, a, b = np.nonzero(dots < limit)
+        return pair_of, face_start[pairs[pair_of, 0]] + a, face_start[pairs[pair_of, 1]] + b
+    pair_of = np.repeat(np.arange(len(pairs)), combos)
+    k = np.arange(combos.sum()) - np.repeat(np.cumsum(combos) - combos, combos)
+    fa = face_start[pairs[pair_of, 0]] + k // fb_n[pair_of]
+    fb = face_start[pairs[pair_of, 1]] + k % fb_n[pair_of]
+    keep = np.einsum("ij,ij->i", normals[fa], normals[fb]) < limit
+    return pair_of[keep], fa[keep], fb[keep]
 
-    def to_dst(coords):
-        world = (src_o[index] + coords[:, :1] * src_u[index] + coords[:, 1:2] * src_v[index]
-                 - dst_o[index])
-        return np.column_stack((np.einsum("ij,ij->i", world, dst_u[index]),
-                                np.einsum("ij,ij->i", world, dst_v[index])))
 
-    return shapely.transform(geoms, to_dst)
+def _lift(points2d: np.ndarray, origin: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """2D points to 3D, row by row in the frame (origin, u, v) of each row (as PlaneFrame.to_3d)."""
+    return origin + points2d[:, :1] * u + points2d[:, 1:2] * v
 
 
-def _interface(i: int, j: int, face_frame: PlaneFrame, ring: np.ndarray, centroid2d: np.ndarray,
-               area: float, collinear_tol: float) -> Interface:
-    """The interface of one overlap polygon (counter-clockwise ``ring`` in the face frame).
-    Near-collinear vertices, which clipping leaves on straight edges, are dropped: as force
-    points they would skew the QP's spread of forces."""
-    pts = face_frame.to_3d(drop_collinear(ring, collinear_tol))
-    edges = np.concatenate((pts[1:], pts[:1])) - pts
-    lengths = np.sqrt(np.einsum("ij,ij->i", edges, edges))
-    longest = int(np.argmax(lengths))
-    u = edges[longest] / lengths[longest]
-    n = face_frame.n
-    centroid = face_frame.to_3d(centroid2d[None, :])[0]
-    return Interface(i, j, PlaneFrame(centroid, u, cross(n, u), n), pts, area)
+def _in_frames(geoms: np.ndarray, src_o, src_u, src_v, dst_o, dst_u, dst_v):
+    """Each outline, given in the 2D coordinates of the frame (src_o, src_u, src_v) of its
+    row, in the 2D coordinates of the matching destination frame (affine maps of the plane,
+    applied to all coordinates at once); also their coordinates and the row of each."""
+    coords, index = shapely.get_coordinates(geoms, return_index=True)
+    world = (src_o[index] + coords[:, :1] * src_u[index] + coords[:, 1:2] * src_v[index]
+             - dst_o[index])
+    coords = np.column_stack((np.einsum("ij,ij->i", world, dst_u[index]),
+                              np.einsum("ij,ij->i", world, dst_v[index])))
+    return shapely.set_coordinates(geoms.copy(), coords), coords, index
+
+
+#: Outlines of more coordinates than this are not screened by _apart_or_thin.
+_SCREEN_MAX = 16
+
+
+def _apart_or_thin(coords_a, index_a, coords_b, index_b, simple, scale, thin) -> np.ndarray:
+    """Per pair of outlines (coordinates of a and b with the pair of each), whether their
+    overlap certainly yields no interface, so that shapely need not compute it: they are
+    apart (their projections on an edge normal of either are separated by more than 1e-9 of
+    ``scale``), or they are both convex simple polygons (``simple``: one exterior ring each)
+    and their overlap, convex too, is thinner than ``thin`` (its width is at most the
+    overlap of the projections on any direction; ``thin`` is half the width below which
+    the overlap is dropped, a margin for rounding). Vectorised over the outlines of at most
+    _SCREEN_MAX coordinates, padded to one count (arrays with the vertex or edge first: numpy
+    reduces fastest over the first axis); larger ones are not screened."""
+    n = len(simple)
+    out = np.zeros(n, dtype=bool)
+    count_a, count_b = np.bincount(index_a, minlength=n), np.bincount(index_b, minlength=n)
+    rows = np.flatnonzero((count_a <= _SCREEN_MAX) & (count_b <= _SCREEN_MAX)
+                          & (count_a > 0) & (count_b > 0))
+    if not len(rows):
+        return out
+    count_a, count_b = count_a[rows], count_b[rows]
+    k = int(max(count_a.max(), count_b.max()))
+    ax, ay = _padded(coords_a, index_a, rows, count_a, k)               # (k, m) each
+    bx, by = _padded(coords_b, index_b, rows, count_b, k)
+    eax, eay, ebx, eby = ax[1:] - ax[:-1], ay[1:] - ay[:-1], bx[1:] - bx[:-1], by[1:] - by[:-1]
+    ex, ey = np.concatenate((eax, ebx)), np.concatenate((eay, eby))    # (d, m): all edges
+    length = np.sqrt(ex * ex + ey * ey)
+    safe = np.where(length > 0, length, 1.0)
+    nx, ny = -ey / safe, ex / safe
+    proj_a = ax[:, None] * nx + ay[:, None] * ny                        # (k, d, m)
+    proj_b = bx[:, None] * nx + by[:, None] * ny
+    overlap = (np.minimum(proj_a.max(axis=0), proj_b.max(axis=0))
+               - np.maximum(proj_a.min(axis=0), proj_b.min(axis=0)))    # (d, m)
+    bound = np.where(length > 0, overlap, np.inf).min(axis=0)
+    size = scale[rows]
+    convex = (simple[rows] & _convex_ring(eax, eay, count_a, size)
+              & _convex_ring(ebx, eby, count_b, size))
+    out[rows] = (bound < -1e-9 * size) | (convex & (bound < thin[rows]))
+    return out
+
+
+def _padded(coords: np.ndarray, index: np.ndarray, rows: np.ndarray, count: np.ndarray,
+            k: int) -> tuple[np.ndarray, np.ndarray]:
+    """x and y (k, m) of the geometries ``rows`` (``count`` coordinates each), each padded
+    by repeating its first coordinate (which adds no edge and no extreme)."""
+    start = np.searchsorted(index, rows)
+    j = np.arange(k)[:, None]
+    take = np.where(j < count, start + j, start)
+    return coords[:, 0][take], coords[:, 1][take]
+
+
+def _convex_ring(ex: np.ndarray, ey: np.ndarray, count: np.ndarray, size: np.ndarray
+                 ) -> np.ndarray:
+    """Whether each closed ring, given by its padded edges (x and y, k - 1 by m; ``count``
+    coordinates with the closing one), turns one way only (to rounding: 1e-12 of size^2)."""
+    turn = ex[:-1] * ey[1:] - ey[:-1] * ex[1:]
+    m = np.arange(len(count))
+    last_x, last_y = ex[count - 2, m], ey[count - 2, m]        # the closing edge, into the start
+    turn = np.concatenate((turn, (last_x * ey[0] - last_y * ex[0])[None]))
+    eps = 1e-12 * size ** 2
+    return np.all(turn >= -eps, axis=0) | np.all(turn <= eps, axis=0)

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import time
+from array import array
 from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass, field, replace
@@ -89,11 +90,47 @@ class Solution:
 
 
 _SOLVED = {"Solved", "AlmostSolved"}
-#: Numerical trouble worth one more attempt, with this static regularisation (default 1e-8).
+#: Numerical trouble worth another attempt (see _attempts).
 _RETRY = {"InsufficientProgress", "NumericalError"}
 RETRY_REGULARIZATION = 1e-7
 _DEFAULT_REGULARIZATION = clarabel.DefaultSettings().static_regularization_constant
 _INFEASIBLE = {"PrimalInfeasible", "AlmostPrimalInfeasible"}
+#: Clarabel's "auto" switches to faer above some KKT size (the 1021-block wall): there its
+#: ordering fills 1.3x more and each solve costs more, 2.5 s against 1.35 s with QDLDL, the
+#: superlinear jump from 715 to 1021 blocks. Below that size "auto" is QDLDL already. (QDLDL
+#: panics on an empty KKT system, as when all blocks are supports: "auto" takes those.)
+DIRECT_SOLVE_METHOD = "qdldl"
+# Left at Clarabel's defaults, measured on the vault, walls of 400 and 1021 blocks and the dome:
+# tol_gap 1e-7 saves 1-2 of 12 iterations on walls only, and moves the forces 2-5x further from
+# a tightly solved answer (up to 1e-5 of the weight); equilibration off costs the vault a 10th
+# iteration; fewer equilibration steps, presolve off, faer: within the noise or slower; at
+# most one refinement step: nearly the cost of the default.
+
+
+class _Attempt(NamedTuple):
+    refine: bool                    # iterative refinement of every KKT solve
+    regularization: float | None    # static regularisation (None: Clarabel's default)
+    tension_scale: float            # factor on the tension penalty weight
+
+
+def _attempts(tension: bool) -> list[_Attempt]:
+    """Settings of the successive attempts at one problem, each made only if the one before
+    ended in numerical trouble or short of equilibrium (and the first also after MaxIterations).
+
+    The first skips iterative refinement: that takes 20-30% off the solve of the vault, walls
+    and dome (the vault's KKT solves: 84 -> 38 ms) with the same iterations and verdicts, forces
+    as close to a tightly solved answer, and an equilibrium residual still below 1e-10, since
+    Clarabel judges termination on the residuals of its iterates, not on the accuracy of the
+    KKT solves. The second is Clarabel's default (with refinement). Numerical trouble that remains (InsufficientProgress, NumericalError, or
+    AlmostSolved short of equilibrium) hits about one friction+ problem in 300 among random
+    stacks whose top needs glue: the 1e6 tension penalty makes them ill-conditioned (found by
+    the property tests). Then a stronger static regularisation of the KKT system, then the
+    penalty 10x lower (the tension found differs by < 0.1%), then 100x lower (< 0.01% on glued
+    stacks, blocks and the dome; a random stack of the long property run needed it), within
+    what is left of the time limit."""
+    return ([_Attempt(False, None, 1.0), _Attempt(True, None, 1.0),
+             _Attempt(True, RETRY_REGULARIZATION, 1.0)]
+            + ([_Attempt(True, None, 0.1), _Attempt(True, None, 0.01)] if tension else []))
 
 
 _SOLVER_TIME: ContextVar[list[float] | None] = ContextVar("rbe_solver_time", default=None)
@@ -123,96 +160,31 @@ def solve(model: EquilibriumModel, options: SolveOptions = SolveOptions(), *,
     # weight, which only slows the solver down).
     tension = options.allow_tension and not multiplier and options.friction == "plus"
     v = _Variables(nv, tension, lp, multiplier)
-    rows = _Rows(v.count)
-
-    # equilibrium A_eq f (+ lambda p_live) = -p_dead: the zero cone
-    a_eq = model.a_eq.tocoo()
-    keep = np.isin(a_eq.col // max(nv, 1), (0, 2, 3) if not tension else (0, 1, 2, 3))
-    kind, vertex = a_eq.col[keep] // max(nv, 1), a_eq.col[keep] % max(nv, 1)
-    rows.add_matrix(a_eq.row[keep], v.index(kind, vertex), a_eq.data[keep], -p)
-    if multiplier:
-        rows.add_matrix(np.arange(len(p)), np.full(len(p), v.lam), np.asarray(live_load), None,
-                        same_rows=True)
-    cones = [clarabel.ZeroConeT(rows.count)]
-
-    # nonnegative rows (s = b - A x >= 0): normal parts, the multiplier bound, pyramid facets
-    first = rows.count
-    for k in (0, 1) if tension else (0,):
-        rows.add_rows([(v.index(k, np.arange(nv)), -1.0)], 0.0)
-    if multiplier:
-        rows.add_rows([(np.array([v.lam]), 1.0)], MAX_MULTIPLIER)
-    fn_eff = [(v.index(0, np.arange(nv)), 1.0)]
-    if tension and options.friction == "net":
-        fn_eff.append((v.index(1, np.arange(nv)), -1.0))
-    finite_mu = math.isfinite(options.mu)
-    fu, fv = v.index(2, np.arange(nv)), v.index(3, np.arange(nv))
-    if options.cone != "soc":
-        angles, h = pyramid_facets(options.cone)
-        for theta in angles:
-            tangential = [(fu, math.cos(theta)), (fv, math.sin(theta))]
-            if finite_mu:
-                rows.add_rows(tangential + [(c, -h * options.mu * w) for c, w in fn_eff], 0.0)
-            if lp:
-                rows.add_rows(tangential + [(v.t, -1.0)], 0.0)
-    cones.append(clarabel.NonnegativeConeT(rows.count - first))
-
-    # second-order cones (t_i, fu_i, fv_i), rows interleaved per vertex
-    if options.cone == "soc":
-        for head in ([(c, -options.mu * w) for c, w in fn_eff] if finite_mu else None,
-                     [(v.t, -1.0)] if lp else None):
-            if head is not None:
-                rows.add_cones(head, fu, fv)
-                cones.extend(clarabel.SecondOrderConeT(3) for _ in range(nv))
-
-    a, b = rows.matrix()
+    a, b, cones = _constraints(model, options, v, p, live_load)
     p_diag, q = _objective(options, v, lp, multiplier)
     if lp:
         offsets = (model.points - model.points.mean(axis=0)) @ _TIE_DIRECTION
         tie = 1.0 + LP_TIE_BREAK * (offsets / model.length_scale) ** 2
         for k in (0, 1) if tension else (0,):
-            q[v.index(k, np.arange(nv))] *= tie
-    settings = clarabel.DefaultSettings()
-    settings.verbose = False
-    settings.max_iter = MAX_ITER
-    if math.isfinite(options.time_limit):
-        settings.time_limit = float(options.time_limit)
+            q[v.base[k]:v.base[k] + nv] *= tie
+    data = [_Csc.diagonal(p_diag), _floats(q), a, _floats(b), cones]
     start = time.perf_counter()
-    # Numerical trouble (InsufficientProgress, NumericalError, or AlmostSolved short of
-    # equilibrium) hits about one friction+ problem in 300 among random stacks whose top needs
-    # glue: the 1e6 tension penalty makes them ill-conditioned (found by the property tests).
-    # Retry with a stronger static regularisation of the KKT system, then with the penalty
-    # 10x lower (the tension found differs by < 0.1%), within what is left of the time limit.
-    retries = [_Retry(RETRY_REGULARIZATION, 1.0)] + ([_Retry(None, 0.1)] if tension else [])
-    problem = [sp.diags(p_diag).tocsc(), q, a, b, cones]
-    while True:
-        result = clarabel.DefaultSolver(*problem, settings).solve()
-        status = str(result.status)
-        x = np.asarray(result.x)
-        accepted = None
-        if status in _SOLVED:
-            forces = np.zeros((4, nv))
-            for k in range(4):
-                if k != 1 or tension:
-                    forces[k] = x[v.index(k, np.arange(nv))]
-            lam_value = x[v.lam] if multiplier else 0.0
-            residual = model.a_eq @ forces.ravel() + p
-            if multiplier:
-                residual = residual + lam_value * np.asarray(live_load)
-            residual = float(np.abs(residual).max(initial=0.0))
-            if residual <= RESIDUAL_TOL:   # AlmostSolved can stop short of equilibrium
-                accepted = Solution("solved", status, forces * model.force_scale, 0.0, residual,
-                                    float(lam_value) if multiplier else math.nan)
-        if accepted is not None or not (status in _RETRY or status in _SOLVED) or not retries:
+    status, accepted = "", None
+    for k, attempt in enumerate(_attempts(tension)):
+        if k and not (status in _RETRY or status in _SOLVED
+                      or (k == 1 and status == "MaxIterations")):
             break
-        retry = retries.pop(0)
-        settings.static_regularization_constant = retry.regularization or _DEFAULT_REGULARIZATION
-        if retry.tension_scale != 1.0:
-            fn_neg = v.index(1, np.arange(nv))
+        if attempt.tension_scale != 1.0:
             p_retry, q_retry = p_diag.copy(), q.copy()
-            (q_retry if lp else p_retry)[fn_neg] *= retry.tension_scale
-            problem[:2] = [sp.diags(p_retry).tocsc(), q_retry]
-        if math.isfinite(options.time_limit):
-            settings.time_limit = max(options.time_limit - (time.perf_counter() - start), 1e-9)
+            (q_retry if lp else p_retry)[v.base[1]:v.base[1] + nv] *= attempt.tension_scale
+            data[:2] = [_Csc.diagonal(p_retry), _floats(q_retry)]
+        settings = _settings(options, attempt, time.perf_counter() - start, a.shape[0] + v.count)
+        result = clarabel.DefaultSolver(*data, settings).solve()
+        status = str(result.status)
+        if status in _SOLVED:
+            accepted = _accept(model, v, np.array(result.x), p, live_load, status)
+            if accepted is not None:
+                break
     elapsed = time.perf_counter() - start
     spent = _SOLVER_TIME.get()
     if spent is not None:
@@ -223,9 +195,99 @@ def solve(model: EquilibriumModel, options: SolveOptions = SolveOptions(), *,
     return Solution(kind, status, np.full((4, nv), np.nan), elapsed)
 
 
-class _Retry(NamedTuple):
-    regularization: float | None    # static regularisation (None: Clarabel's default)
-    tension_scale: float            # factor on the tension penalty weight
+def _settings(options: SolveOptions, attempt: _Attempt, spent: float, kkt_size: int):
+    settings = clarabel.DefaultSettings()
+    settings.verbose = False
+    settings.max_iter = MAX_ITER
+    if kkt_size:
+        settings.direct_solve_method = DIRECT_SOLVE_METHOD
+    settings.iterative_refinement_enable = attempt.refine
+    settings.static_regularization_constant = attempt.regularization or _DEFAULT_REGULARIZATION
+    if math.isfinite(options.time_limit):
+        settings.time_limit = max(float(options.time_limit) - spent, 1e-9)
+    return settings
+
+
+def _accept(model: EquilibriumModel, v: _Variables, x: np.ndarray, p, live_load,
+            status: str) -> Solution | None:
+    """The solution read from a solved x, unless it misses equilibrium by more than
+    RESIDUAL_TOL (AlmostSolved can stop short of it)."""
+    nv = v.nv
+    forces = np.zeros((4, nv))
+    for k in range(4):
+        if v.base[k] >= 0:
+            forces[k] = x[v.base[k]:v.base[k] + nv]
+    residual = model.a_eq @ forces.ravel() + p
+    lam = float(x[v.lam]) if live_load is not None else math.nan
+    if live_load is not None:
+        residual = residual + lam * np.asarray(live_load)
+    residual = float(np.abs(residual).max(initial=0.0))
+    if residual > RESIDUAL_TOL:
+        return None
+    return Solution("solved", status, forces * model.force_scale, 0.0, residual, lam)
+
+
+def _constraints(model: EquilibriumModel, options: SolveOptions, v: _Variables, p, live_load):
+    """A, b and the cones of A x + s = b, s in K, in Clarabel's order: zero cone, nonnegative
+    cone, second-order cones. The equilibrium rows are taken as columns of model.a_eq's CSC
+    arrays and stacked on the other rows, not rebuilt through coordinates: with the conversion
+    for Clarabel (_Csc), 11 -> 4.4 ms on the vault."""
+    nv = v.nv
+    neq = model.a_eq.shape[0]
+    rows = _Rows(v.count, neq)
+    # nonnegative rows (s = b - A x >= 0): normal parts, the multiplier bound, pyramid facets
+    for k in (0, 1) if v.base[1] >= 0 else (0,):
+        rows.add_rows([(v.index(k, np.arange(nv)), -1.0)], 0.0)
+    if live_load is not None:
+        rows.add_rows([(np.array([v.lam]), 1.0)], MAX_MULTIPLIER)
+    fn_eff = [(v.index(0, np.arange(nv)), 1.0)]
+    if v.base[1] >= 0 and options.friction == "net":
+        fn_eff.append((v.index(1, np.arange(nv)), -1.0))
+    finite_mu = math.isfinite(options.mu)
+    lp = len(v.t) > 0
+    fu, fv = v.index(2, np.arange(nv)), v.index(3, np.arange(nv))
+    if options.cone != "soc":
+        angles, h = pyramid_facets(options.cone)
+        for theta in angles:
+            tangential = [(fu, math.cos(theta)), (fv, math.sin(theta))]
+            if finite_mu:
+                rows.add_rows(tangential + [(c, -h * options.mu * w) for c, w in fn_eff], 0.0)
+            if lp:
+                rows.add_rows(tangential + [(v.t, -1.0)], 0.0)
+    cones = [clarabel.ZeroConeT(neq), clarabel.NonnegativeConeT(rows.count - neq)]
+    # second-order cones (t_i, fu_i, fv_i), rows interleaved per vertex
+    if options.cone == "soc":
+        for head in ([(c, -options.mu * w) for c, w in fn_eff] if finite_mu else None,
+                     [(v.t, -1.0)] if lp else None):
+            if head is not None:
+                rows.add_cones(head, fu, fv)
+                cones += [clarabel.SecondOrderConeT(3)] * nv
+    a = _Csc.stack(_equilibrium_columns(model, v, live_load), rows.matrix())
+    return a, _floats(np.concatenate([-np.asarray(p, dtype=float)] + rows.b)), cones
+
+
+def _equilibrium_columns(model: EquilibriumModel, v: _Variables, live_load) -> sp.csc_matrix:
+    """The rows A_eq x (+ lambda p_live) of the zero cone in the column layout of ``v``: the
+    columns of model.a_eq (stored by kind) without those of fn- unless v has them, empty
+    columns for t, a dense column for lambda."""
+    a_eq, nv = sp.csc_matrix(model.a_eq), v.nv
+    if not a_eq.has_canonical_format:
+        a_eq = a_eq.copy()
+        a_eq.sum_duplicates()
+    indptr, indices, data = a_eq.indptr, a_eq.indices, a_eq.data
+    if v.base[1] < 0:       # drop the fn- columns nv..2nv-1
+        lo, hi = indptr[nv], indptr[2 * nv]
+        indptr = np.concatenate((indptr[:nv + 1], indptr[2 * nv + 1:] - (hi - lo)))
+        indices = np.concatenate((indices[:lo], indices[hi:]))
+        data = np.concatenate((data[:lo], data[hi:]))
+    extra = [np.full(len(v.t), indptr[-1])]
+    if live_load is not None:
+        live = np.asarray(live_load, dtype=float)
+        extra.append([indptr[-1] + len(live)])
+        indices = np.concatenate((indices, np.arange(len(live))))
+        data = np.concatenate((data, live))
+    indptr = np.concatenate([indptr] + extra)
+    return sp.csc_matrix((data, indices, indptr), shape=(a_eq.shape[0], v.count))
 
 
 class _Variables:
@@ -245,21 +307,12 @@ class _Variables:
 
 
 class _Rows:
-    """Rows of A x + s = b collected as coordinates, in cone order."""
+    """Rows of A x + s = b below the equilibrium rows, collected as coordinates in cone order."""
 
-    def __init__(self, columns: int):
+    def __init__(self, columns: int, first: int):
         self.columns = columns
-        self.count = 0
+        self.first = self.count = first
         self.r, self.c, self.v, self.b = [], [], [], []
-
-    def add_matrix(self, rows, cols, vals, rhs, same_rows: bool = False) -> None:
-        """Entries of a block of rows starting at the current row (``rhs`` its b)."""
-        self.r.append(np.asarray(rows) + (self.count - (len(self.b[-1]) if same_rows else 0)))
-        self.c.append(np.asarray(cols))
-        self.v.append(np.asarray(vals, dtype=float))
-        if not same_rows:
-            self.b.append(np.asarray(rhs, dtype=float))
-            self.count += len(rhs)
 
     def add_rows(self, terms, rhs: float) -> None:
         """One row per vertex: sum of coefficient * variable over ``terms`` (cols, coef)."""
@@ -286,10 +339,57 @@ class _Rows:
         self.b.append(np.zeros(3 * n))
         self.count += 3 * n
 
-    def matrix(self) -> tuple[sp.csc_matrix, np.ndarray]:
-        a = sp.csc_matrix((np.concatenate(self.v), (np.concatenate(self.r), np.concatenate(self.c))),
-                          shape=(self.count, self.columns))
-        return a, np.concatenate(self.b)
+    def matrix(self) -> sp.csc_matrix:
+        """The rows collected (numbered from 0), canonical CSC."""
+        return sp.csc_matrix((np.concatenate(self.v), (np.concatenate(self.r) - self.first,
+                                                       np.concatenate(self.c))),
+                             shape=(self.count - self.first, self.columns))
+
+
+def _floats(x: np.ndarray) -> array:
+    """A vector as Clarabel reads it fastest (see _Csc)."""
+    return array("d", np.ascontiguousarray(x, dtype=float).tobytes())
+
+
+class _Csc:
+    """A CSC matrix as Clarabel's constructor reads it: any object with data, indices, indptr,
+    shape and has_canonical_format. Clarabel copies each array element by element through the
+    Python sequence protocol, and numpy arrays make a scalar object per element: array.array
+    fields halve that copy (the vault's A, 255k entries: 35 ms -> 17 ms)."""
+
+    has_canonical_format = True
+
+    def __init__(self, data, indices, indptr, shape):
+        self.data = _floats(data)
+        self.indices = array("q", np.asarray(indices, dtype=np.int64).tobytes())
+        self.indptr = array("q", np.asarray(indptr, dtype=np.int64).tobytes())
+        self.shape = tuple(int(n) for n in shape)
+
+    @classmethod
+    def diagonal(cls, d: np.ndarray) -> _Csc:
+        """diag(d) without its zero entries."""
+        nz = np.flatnonzero(d)
+        indptr = np.zeros(len(d) + 1, dtype=np.int64)
+        indptr[nz + 1] = 1
+        return cls(d[nz], nz, np.cumsum(indptr), (len(d), len(d)))
+
+    @classmethod
+    def stack(cls, top: sp.csc_matrix, bottom: sp.csc_matrix) -> _Csc:
+        """[top; bottom] of two canonical CSC matrices with the same columns (canonical too:
+        in every column the rows of top come first)."""
+        n_top, n_bottom = np.diff(top.indptr), np.diff(bottom.indptr)
+        indptr = top.indptr.astype(np.int64) + bottom.indptr
+        at_top = np.arange(top.nnz) + np.repeat(bottom.indptr[:-1], n_top)
+        at_bottom = np.arange(bottom.nnz) + np.repeat(top.indptr[1:], n_bottom)
+        data = np.empty(indptr[-1])
+        indices = np.empty(indptr[-1], dtype=np.int64)
+        data[at_top], data[at_bottom] = top.data, bottom.data
+        indices[at_top], indices[at_bottom] = top.indices, bottom.indices + top.shape[0]
+        return cls(data, indices, indptr, (top.shape[0] + bottom.shape[0], top.shape[1]))
+
+    def tocsc(self) -> sp.csc_matrix:
+        return sp.csc_matrix((np.array(self.data), np.array(self.indices), np.array(self.indptr)),
+                             shape=self.shape)
 
 
 def _objective(options: SolveOptions, v: _Variables, lp: bool, multiplier: bool):

@@ -4,7 +4,8 @@ A message dict is a plain nested dict/list shaped exactly like the ROS message, 
 ``rosidl_runtime_py.message_to_ordereddict`` gives it: field names as keys, nested messages as
 dicts (``geometry_msgs/Point`` as ``{"x", "y", "z"}``), arrays as lists, numbers as Python
 ``float``/``int``. The ROS node turns them into rclpy messages with
-``rosidl_runtime_py.set_message_fields``; :mod:`rbe_ros.bag` turns them into rosbags objects.
+:mod:`rbe_ros.ros.convert` (a ``set_message_fields`` like rosidl_runtime_py's);
+:mod:`rbe_ros.bag` turns them into rosbags objects.
 Nothing here imports rclpy or the generated ``rbe_msgs`` package.
 
 Incoming dicts may omit fields: a missing field takes the ROS default (zeros, empty arrays,
@@ -27,17 +28,22 @@ _XYZW = ("x", "y", "z", "w")
 
 # --- small helpers ----------------------------------------------------------------------------
 
+# Numbers go through numpy's ``tolist`` (Python floats, the same values as ``float()`` of each
+# element, several times faster): a report of a 1000-block wall holds ~50k vectors.
+
 def _vec(v, keys=_XYZ) -> dict:
     """A Point/Vector3 (or Quaternion with ``keys=_XYZW``) dict from a sequence of numbers."""
-    return {k: float(x) for k, x in zip(keys, v)}
+    return dict(zip(keys, np.asarray(v, dtype=float).ravel().tolist()))
 
 
 def _vecs(rows) -> list[dict]:
-    return [_vec(r) for r in np.asarray(rows, dtype=float).reshape(-1, 3)]
+    """Point/Vector3 dicts of the rows of an (n, 3) array."""
+    return [{"x": x, "y": y, "z": z}
+            for x, y, z in np.asarray(rows, dtype=float).reshape(-1, 3).tolist()]
 
 
 def _floats(values) -> list[float]:
-    return [float(x) for x in np.asarray(values, dtype=float).ravel()]
+    return np.asarray(values, dtype=float).ravel().tolist()
 
 
 def _field(d, key: str, default, what: str):
@@ -203,24 +209,38 @@ def _hold_from_dict(index: int, raw) -> Hold:
 
 # --- StabilityReport --------------------------------------------------------------------------
 
-def _interface_to_dict(r: InterfaceResult) -> dict:
+def _interface_to_dict(r: InterfaceResult, arrays: bool = False) -> dict:
+    if arrays:      # the numpy form of rbe_ros.ros.convert: no dict per point
+        vecs, floats = _rows, _array
+    else:
+        vecs, floats = _vecs, _floats
+    normal, resultant, shear, centre = _vecs((r.normal, r.resultant, r.shear,
+                                              r.centre_of_pressure))
     return {
         "block_a": r.block_a,
         "block_b": r.block_b,
-        "normal": _vec(r.normal),
-        "polygon": _vecs(r.polygon),
-        "normal_forces": _floats(r.normal_forces),
-        "tangential_forces": _vecs(r.tangential_forces),
-        "resultant_force": _vec(r.resultant),
+        "normal": normal,
+        "polygon": vecs(r.polygon),
+        "normal_forces": floats(r.normal_forces),
+        "tangential_forces": vecs(r.tangential_forces),
+        "resultant_force": resultant,
         "normal_resultant": float(r.normal_resultant),
-        "shear_resultant": _vec(r.shear),
-        "centre_of_pressure": _vec(r.centre_of_pressure),
+        "shear_resultant": shear,
+        "centre_of_pressure": centre,
         "torque": float(r.torque),
-        "kern": _vecs(r.kern),
+        "kern": vecs(r.kern),
         "friction_ratio": float(r.friction_ratio),
         "tension": bool(r.tension),
         "friction_exceeded": bool(r.friction_exceeded),
     }
+
+
+def _array(values) -> np.ndarray:
+    return np.asarray(values, dtype=float).ravel()
+
+
+def _rows(values) -> np.ndarray:
+    return np.asarray(values, dtype=float).reshape(-1, 3)
 
 
 def _interface_from_dict(d: Mapping) -> InterfaceResult:
@@ -242,8 +262,14 @@ def _interface_from_dict(d: Mapping) -> InterfaceResult:
     )
 
 
-def report_to_dict(report: Report, header: dict) -> dict:
-    """An rbe_msgs/StabilityReport dict of ``report`` (``header``: see :func:`header_dict`)."""
+def report_to_dict(report: Report, header: dict, *, arrays: bool = False) -> dict:
+    """An rbe_msgs/StabilityReport dict of ``report`` (``header``: see :func:`header_dict`).
+
+    ``arrays=True``: the same dict, but each sequence of Points/Vector3s as an (n, 3) float
+    array and each float64[] as a 1-D float array: the form that
+    :func:`rbe_ros.ros.convert.dict_to_message` turns into the same message without a dict
+    per point. Not a message dict for bags or comparisons.
+    """
     return {
         "header": header,
         "step_index": int(report.step_index),
@@ -254,7 +280,7 @@ def report_to_dict(report: Report, header: dict) -> dict:
         "worst_friction_ratio": float(report.worst_friction_ratio),
         "solve_time": float(report.solve_time),
         "num_blocks": int(report.num_blocks),
-        "interfaces": [_interface_to_dict(r) for r in report.interfaces],
+        "interfaces": [_interface_to_dict(r, arrays) for r in report.interfaces],
         "unstable_blocks": [str(b) for b in report.unstable_blocks],
         "held_blocks": [str(b) for b in report.held_blocks],
         "suggested_holds": [str(b) for b in report.suggested_holds],

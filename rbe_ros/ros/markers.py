@@ -1,19 +1,27 @@
 """RViz markers of a stability report: contact forces, interfaces, kerns, unstable blocks.
 
 :func:`report_markers` is a pure function of the scene, the report, the frame and the stamp.
-Namespaces:
+A report of a 1000-block wall has ~12k interface vertices, so the many small primitives are
+aggregated, as usual for RViz: one LINE_LIST per kind (a segment per force or edge, colours
+per segment in ``Marker.colors``), built from numpy arrays in bulk. Namespaces:
 
-* ``forces``: one ARROW per interface vertex, from the vertex along the force that block_a
-  exerts on block_b there (normal plus tangential part); length proportional to the force
-  magnitude over the largest vertex force of the report (that one is ``max_length`` long).
-  Compression green, tension (normal force below ``-tension_tol`` times the largest force) red.
-* ``interfaces``: each contact polygon as a closed LINE_STRIP (grey; red when the interface
-  needs tension, orange when its friction is exceeded).
-* ``kerns``: each kern outline as a thinner closed LINE_STRIP (blue).
+* ``forces``: one LINE_LIST, a segment per interface vertex, from the vertex along the force
+  that block_a exerts on block_b there (normal plus tangential part); length proportional to
+  the force magnitude over the largest vertex force of the report (that one is ``max_length``
+  long). Compression green, tension (normal force below ``-tension_tol`` times the largest
+  force) red.
+* ``interfaces``: one LINE_LIST of the edges of every contact polygon (its closed outline;
+  grey, red when the interface needs tension, orange when its friction is exceeded).
+* ``kerns``: one thinner LINE_LIST of the edges of every kern outline (blue).
 * ``unstable``: every block of ``report.unstable_blocks`` as a red translucent TRIANGLE_LIST
   of its mesh.
 
-The first marker is a DELETEALL, so markers of an earlier report vanish.
+The first marker is a DELETEALL, so markers of an earlier report vanish. A LINE_LIST with
+nothing to draw is left out. To halve the number of rclpy objects made, equal points and
+colours are shared objects: a polygon vertex is one ``Point`` in the force segment that
+starts there and in the edges that meet there, and the entries of one colour in
+``Marker.colors`` are one ``ColorRGBA`` (the array is for publishing, not for editing in
+place).
 """
 from __future__ import annotations
 
@@ -40,47 +48,53 @@ def report_markers(scene: Scene | None, report: Report, frame_id: str, stamp, *,
     """The MarkerArray of ``report`` (``stamp``: a builtin_interfaces/Time). ``scene`` gives
     the meshes of the unstable blocks (``None``: no block meshes, e.g. for invalid input).
 
-    ``max_length``: length in m of the arrow of the largest vertex force (default: half the
+    ``max_length``: length in m of the segment of the largest vertex force (default: half the
     largest interface polygon diameter, at least 0.05 m).
     """
     header = Header(frame_id=str(frame_id), stamp=stamp)
     markers = [Marker(header=header, action=Marker.DELETEALL)]
     interfaces = list(report.interfaces)
-    forces = [r.normal_forces[:, None] * r.normal[None, :] + r.tangential_forces
-              for r in interfaces]
-    magnitudes = [np.linalg.norm(f, axis=1) for f in forces]
-    f_ref = max((float(m.max(initial=0.0)) for m in magnitudes), default=0.0)
+    polygons = [_rows(r.polygon) for r in interfaces]
+    vertices = _concat(polygons)
+    normal_forces = np.concatenate([np.asarray(r.normal_forces, dtype=float).reshape(-1)
+                                    for r in interfaces]) if interfaces else np.empty(0)
+    counts = [len(r.normal_forces) for r in interfaces]
+    normals = np.repeat(_rows([r.normal for r in interfaces]), counts, axis=0)
+    forces = (normal_forces[:, None] * normals
+              + _concat([_rows(r.tangential_forces) for r in interfaces]))
+    f_ref = float(np.linalg.norm(forces, axis=1).max(initial=0.0))
     if max_length is None:
-        diameters = [float(np.ptp(r.polygon, axis=0).max(initial=0.0)) if len(r.polygon) else 0.0
-                     for r in interfaces]
-        max_length = max(0.5 * max(diameters, default=0.0), 0.05)
+        max_length = max(0.5 * _largest_diameter(polygons), 0.05)
     width = 0.05 * max_length
 
-    for r, f, mags in zip(interfaces, forces, magnitudes):
-        for vertex, force, fn in zip(r.polygon, f, r.normal_forces):
-            scale = max_length / f_ref if f_ref > 0 else 0.0
-            colour = TENSION if fn < -tension_tol * f_ref else COMPRESSION
-            m = _marker(header, "forces", len(markers), Marker.ARROW, colour)
-            m.scale.x, m.scale.y, m.scale.z = width, 2.0 * width, 3.0 * width
-            m.points = [_point(vertex), _point(vertex + scale * force)]
-            markers.append(m)
+    corners = _points(vertices)        # the polygon vertices, shared by forces and edges
+    if corners:
+        scale = max_length / f_ref if f_ref > 0 else 0.0
+        tension = normal_forces < -tension_tol * f_ref
+        m = _marker(header, "forces", len(markers), Marker.LINE_LIST, COMPRESSION)
+        m.scale.x = width
+        m.points = _interleave(corners, _points(vertices + scale * forces))
+        m.colors = _colours((COMPRESSION, TENSION), np.repeat(tension.astype(int), 2))
+        markers.append(m)
 
     line = 0.01 * max_length
-    for r in interfaces:
-        if len(r.polygon) < 2:
-            continue
-        colour = (INTERFACE_TENSION if r.tension else
-                  INTERFACE_FRICTION if r.friction_exceeded else INTERFACE)
-        m = _marker(header, "interfaces", len(markers), Marker.LINE_STRIP, colour)
+    ends, owner = _edges([len(p) for p in polygons])
+    if len(ends):
+        kind = np.array([2 if r.tension else 1 if r.friction_exceeded else 0
+                         for r in interfaces], dtype=int)
+        m = _marker(header, "interfaces", len(markers), Marker.LINE_LIST, INTERFACE)
         m.scale.x = 2.0 * line
-        m.points = _closed(r.polygon)
+        m.points = [corners[i] for i in ends.tolist()]
+        m.colors = _colours((INTERFACE, INTERFACE_FRICTION, INTERFACE_TENSION),
+                            np.repeat(kind[owner], 2))
         markers.append(m)
-    for r in interfaces:
-        if len(r.kern) < 2:
-            continue
-        m = _marker(header, "kerns", len(markers), Marker.LINE_STRIP, KERN)
+    kerns = [_rows(r.kern) for r in interfaces]
+    ends, _ = _edges([len(k) for k in kerns])
+    if len(ends):
+        m = _marker(header, "kerns", len(markers), Marker.LINE_LIST, KERN)
         m.scale.x = line
-        m.points = _closed(r.kern)
+        kern_points = _points(_concat(kerns))
+        m.points = [kern_points[i] for i in ends.tolist()]
         markers.append(m)
 
     by_id = {b.id: b for b in scene.blocks} if scene is not None else {}
@@ -90,7 +104,7 @@ def report_markers(scene: Scene | None, report: Report, frame_id: str, stamp, *,
             continue
         m = _marker(header, "unstable", len(markers), Marker.TRIANGLE_LIST, UNSTABLE)
         m.scale.x = m.scale.y = m.scale.z = 1.0
-        m.points = [_point(p) for p in _world_triangles(block)]
+        m.points = _points(_world_triangles(block))
         m.text = bid
         markers.append(m)
     return MarkerArray(markers=markers)
@@ -99,17 +113,66 @@ def report_markers(scene: Scene | None, report: Report, frame_id: str, stamp, *,
 def _marker(header: Header, ns: str, marker_id: int, kind: int, colour) -> Marker:
     m = Marker(header=header, ns=ns, id=marker_id, type=kind, action=Marker.ADD)
     m.pose.orientation.w = 1.0
-    m.color = ColorRGBA(r=colour[0], g=colour[1], b=colour[2], a=colour[3])
+    m.color = _colour(colour)
     return m
 
 
-def _point(p) -> Point:
-    return Point(x=float(p[0]), y=float(p[1]), z=float(p[2]))
+def _colour(c) -> ColorRGBA:
+    return ColorRGBA(r=c[0], g=c[1], b=c[2], a=c[3])
 
 
-def _closed(points) -> list[Point]:
-    pts = [_point(p) for p in points]
-    return pts + [pts[0]]
+def _colours(palette, index: np.ndarray) -> list[ColorRGBA]:
+    """``Marker.colors``: ``palette[i]`` for each ``i`` of ``index`` (one object per colour)."""
+    table = [_colour(c) for c in palette]
+    return [table[i] for i in index.tolist()]
+
+
+def _rows(a) -> np.ndarray:
+    return np.asarray(a, dtype=float).reshape(-1, 3)
+
+
+def _concat(arrays: list[np.ndarray]) -> np.ndarray:
+    return np.concatenate(arrays) if arrays else np.empty((0, 3))
+
+
+def _points(rows: np.ndarray) -> list[Point]:
+    return [Point(x=x, y=y, z=z) for x, y, z in rows.tolist()]
+
+
+def _largest_diameter(polygons: list[np.ndarray]) -> float:
+    """The largest extent along an axis of a polygon of ``polygons`` (0 if there is none)."""
+    polygons = [p for p in polygons if len(p)]
+    if not polygons:
+        return 0.0
+    vertices = np.concatenate(polygons)
+    starts = np.cumsum([0] + [len(p) for p in polygons[:-1]])
+    extent = (np.maximum.reduceat(vertices, starts, axis=0)
+              - np.minimum.reduceat(vertices, starts, axis=0))
+    return float(extent.max())
+
+
+def _interleave(a: list, b: list) -> list:
+    """``a[0], b[0], a[1], b[1], ...``"""
+    out = [None] * (len(a) + len(b))
+    out[0::2], out[1::2] = a, b
+    return out
+
+
+def _edges(counts: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """The edges of the closed outlines of polygons of ``counts`` vertices, the polygons'
+    vertices one after another (fewer than 2 vertices: no edge, 2 vertices: one): the
+    indices of the two ends of each edge into those vertices, edge after edge (2e,), and the
+    index of the polygon of each edge (e,)."""
+    counts = np.asarray(counts, dtype=int)
+    last = np.cumsum(counts) - 1
+    first = last - counts + 1
+    owner = np.repeat(np.arange(len(counts)), counts)
+    start = np.arange(int(counts.sum()))
+    end = start + 1
+    end[last[counts > 0]] = first[counts > 0]       # close each outline
+    keep = counts[owner] >= 2
+    keep[last[counts == 2]] = False                 # a 2-gon is one edge, not two
+    return np.stack([start[keep], end[keep]], axis=1).reshape(-1), owner[keep]
 
 
 def _world_triangles(block) -> np.ndarray:

@@ -56,8 +56,9 @@ def xyz(v) -> np.ndarray:
     return np.array([v.x, v.y, v.z])
 
 
-def is_red(marker) -> bool:
-    return marker.color.r > 0.5 and marker.color.g < 0.5
+def is_red(colour) -> bool:
+    """A std_msgs/ColorRGBA is red (tension)."""
+    return colour.r > 0.5 and colour.g < 0.5
 
 
 def check_stack_report(r, shift: float) -> None:
@@ -94,29 +95,37 @@ def test_topic_report_and_markers(rbe, shift):
     markers = rbe.client.markers_for(r).markers
     assert markers[0].action == Marker.DELETEALL
     assert all(m.header.frame_id == "world" for m in markers)
-    arrows = [m for m in markers if m.ns == "forces"]
-    assert all(m.type == Marker.ARROW and len(m.points) == 2 for m in arrows)
-    assert len(arrows) == sum(len(i.polygon) for i in r.interfaces) == 8
-    red = [m for m in arrows if is_red(m)]
-    strips = [m for m in markers if m.ns == "interfaces"]
-    assert len(strips) == len(r.interfaces)
-    assert all(m.type == Marker.LINE_STRIP and m.points[0] == m.points[-1] for m in strips)
-    kerns = [m for m in markers if m.ns == "kerns"]
-    assert kerns and all(k.scale.x < strips[0].scale.x for k in kerns)
-    unstable = [m for m in markers if m.ns == "unstable"]
+    by_ns = {m.ns: m for m in markers[1:]}
+    assert len(by_ns) == len(markers) - 1
+    forces = by_ns["forces"]
+    # a segment per interface vertex: 2 points and 2 colours each
+    assert forces.type == Marker.LINE_LIST
+    assert len(forces.points) == len(forces.colors) == 2 * sum(len(i.polygon)
+                                                              for i in r.interfaces) == 16
+    red = [(forces.points[k], forces.points[k + 1])
+           for k in range(0, len(forces.points), 2) if is_red(forces.colors[k])]
+    strips = by_ns["interfaces"]
+    assert strips.type == Marker.LINE_LIST
+    assert len(strips.points) == 2 * sum(len(i.polygon) for i in r.interfaces)
+    kerns = by_ns["kerns"]
+    assert kerns.type == Marker.LINE_LIST and 0 < kerns.scale.x < strips.scale.x
     if shift < 0.5:
-        assert red == [] and unstable == []
+        assert red == [] and "unstable" not in by_ns
+        assert not any(is_red(c) for c in strips.colors)
     else:
         top = interface(r, "a", "b")
         assert len(red) == sum(f < 0 for f in top.normal_forces) == 2
-        # the red arrows start at the tension vertices and point down, out of block b
-        starts = {tuple(np.round(xyz(m.points[0]), 9)) for m in red}
+        # the red segments start at the tension vertices and point down, out of block b
+        starts = {tuple(np.round(xyz(start), 9)) for start, _ in red}
         assert starts == {tuple(np.round(xyz(p), 9))
                           for p, f in zip(top.polygon, top.normal_forces) if f < 0}
-        assert all(m.points[1].z < m.points[0].z for m in red)
-        assert len(unstable) == 1 and unstable[0].type == Marker.TRIANGLE_LIST
-        assert len(unstable[0].points) == 36 and unstable[0].color.a < 1.0
-        assert max(p.x for p in unstable[0].points) == pytest.approx(shift + 0.5)
+        assert all(end.z < start.z for start, end in red)
+        # the edges of the tension interface a|b are red, the others not
+        assert sum(is_red(c) for c in strips.colors) == 2 * len(top.polygon)
+        unstable = by_ns["unstable"]
+        assert unstable.type == Marker.TRIANGLE_LIST
+        assert len(unstable.points) == 36 and unstable.color.a < 1.0
+        assert max(p.x for p in unstable.points) == pytest.approx(shift + 0.5)
 
 
 def test_topic_sequence_reports_every_step(rbe):

@@ -402,8 +402,8 @@ def rss_kb(pid: int) -> int:
 def test_overload_keeps_the_newest_state_with_bounded_memory(rclpy_context, tmp_path):
     node = start(tmp_path, "overload", rclpy_context)
     node.client.close()
-    # A light driver instead of the Client: no markers (converting a 1700-marker array takes
-    # the test process ~1 s, which would delay the reports' arrival times measured here).
+    # A light driver instead of the Client: no markers (converting each received marker
+    # array in the test process would delay the reports' arrival times measured here).
     driver = Node("rbe_overload_driver", context=rclpy_context)
     reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
                           durability=DurabilityPolicy.VOLATILE)

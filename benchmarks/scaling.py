@@ -5,10 +5,13 @@
 
 Every figure is a ratio measured in this one run, on this machine (stated in the output):
 - one check of running-bond walls of about 100 to 1000 blocks: total time, time inside the
-  conic solver (Clarabel), the share outside it, and the log-log slope of time against n;
+  conic solver (Clarabel), the StabilityReport message the node publishes (built and
+  serialised), the share outside the solver (check + message), the RViz markers apart, and
+  the log-log slope of the check time against n;
 - the 140-block dome built block by block: every step checked with the local model
   (rbe_ros.analysis.incremental) and with the full re-solve, against one check of the whole
-  dome, and the steps where the two verdicts differ (there must be none).
+  dome, the steps where the two verdicts differ (there must be none), and where the time of
+  the local run goes (by the model that answered each step).
 """
 from __future__ import annotations
 
@@ -27,6 +30,7 @@ from rbe_ros.analysis.assembly import Assembly
 from rbe_ros.analysis.check import check_scene
 from rbe_ros.analysis.incremental import StepChecker
 from rbe_ros.analysis.sequence import sequence_steps
+from rbe_ros.messages import header_dict
 from rbe_ros.rbe.solver import solver_timing
 
 DOCS = Path(__file__).resolve().parents[1] / "docs"
@@ -46,12 +50,23 @@ def best_of(repeats: int, fn):
 
 
 def walls(sizes, repeats):
+    """Per wall: (blocks, interfaces, verdict, check s, solver s, message s, markers s)."""
+    from rclpy.serialization import serialize_message
+    from rbe_ros.ros.convert import report_to_msg
+    from rbe_ros.ros.markers import report_markers
+
     rows = []
     for courses, bricks in sizes:
         scene = gen.running_bond_wall(courses=courses, bricks_per_course=bricks)
         report, total, solver = best_of(repeats, lambda: check_scene(scene))
-        rows.append((len(scene.blocks), len(report.interfaces), report.status.name, total, solver))
-        print(f"wall {len(scene.blocks)} blocks: {total:.3f} s, solver {solver:.3f} s", flush=True)
+        header = header_dict("world", 0)
+        _, message, _ = best_of(repeats, lambda: serialize_message(report_to_msg(report, header)))
+        stamp = report_to_msg(report, header).header.stamp
+        _, markers, _ = best_of(repeats, lambda: report_markers(scene, report, "world", stamp))
+        rows.append((len(scene.blocks), len(report.interfaces), report.status.name, total, solver,
+                     message, markers))
+        print(f"wall {len(scene.blocks)} blocks: {total:.3f} s, solver {solver:.3f} s, message"
+              f" {message:.3f} s, markers {markers:.3f} s", flush=True)
     return rows
 
 
@@ -88,11 +103,17 @@ def main() -> int:
     lines = ["# Scaling and per-step cost", "",
              "Made by `benchmarks/scaling.py` (`make scaling`); ratios measured in one run.",
              "Machine: " + machine_summary(), "",
-             "## One check of a running-bond wall (contacts, model, solve, results)", "",
-             "| blocks | interfaces | verdict | total [s] | in the solver [s] | outside the solver |",
-             "|---|---|---|---|---|---|"]
-    lines += [f"| {b} | {i} | {v} | {tt:.3f} | {s:.3f} | {1 - s / tt:.0%} |" for b, i, v, tt, s in rows]
-    lines += ["", f"Log-log slope of total time against blocks: **{slope:.2f}** "
+             "## One check of a running-bond wall", "",
+             "Check: validation, contacts, model, solve, results (`check_scene`). Message: the"
+             " StabilityReport the node publishes, built and serialised to CDR. Outside the solver:"
+             " (check + message - solver) / (check + message). Markers (RViz, published with every"
+             " report) apart.", "",
+             "| blocks | interfaces | verdict | check [s] | in the solver [s] | message [s] |"
+             " outside the solver | markers [s] |",
+             "|---|---|---|---|---|---|---|---|"]
+    lines += [f"| {b} | {i} | {v} | {tt:.3f} | {s:.3f} | {m:.3f} | {1 - s / (tt + m):.0%} | {mk:.3f} |"
+              for b, i, v, tt, s, m, mk in rows]
+    lines += ["", f"Log-log slope of the check time against blocks: **{slope:.2f}** "
               "(target: no faster than about 1.3).", "", "![time per check](bench/check_scaling.png)", "",
               "## The 140-block dome, every step checked", "",
               f"One check of the whole dome (contacts included): {whole:.3f} s.", "",
@@ -105,7 +126,15 @@ def main() -> int:
                      f" {elapsed / whole:.1f} | {solver:.2f} | "
                      f"{', '.join(f'{k} {v}' for k, v in sorted(used.items()))} |")
     lines += ["", f"Steps where the local and the full verdicts differ: {mismatches or 'none'}.",
-              f"Unstable steps: {sum(not r.stable for r in seq[False][0])} of {len(seq[False][0])}.", ""]
+              f"Unstable steps: {sum(not r.stable for r in seq[False][0])} of {len(seq[False][0])}.", "",
+              "Where the local run's time goes, by the model that answered each step (a step's time"
+              " includes its failed local attempts):", "",
+              "| answered by | steps | time [s] | ratio to one whole check |", "|---|---|---|---|"]
+    by_model = collections.defaultdict(list)
+    for r in seq[True][0]:
+        by_model[r.model.split()[0]].append(r.solve_time)
+    lines += [f"| {k} | {len(v)} | {sum(v):.2f} | {sum(v) / whole:.1f} |" for k, v in sorted(by_model.items())]
+    lines.append("")
     (DOCS / "SCALING.md").write_text("\n".join(lines))
     plot(rows, DOCS / "bench" / "check_scaling.png")
     print("\n".join(lines))
@@ -122,6 +151,8 @@ def plot(rows, path: Path) -> None:
     fig, ax = plt.subplots(figsize=(5.5, 4), dpi=120)
     ax.loglog(n, [r[3] for r in rows], "o-", label="whole check")
     ax.loglog(n, [r[4] for r in rows], "s--", label="inside Clarabel")
+    ax.loglog(n, [r[5] for r in rows], "^:", label="report message (built, serialised)")
+    ax.loglog(n, [r[6] for r in rows], "v:", label="RViz markers")
     ax.set(xlabel="blocks (running-bond wall)", ylabel="time per check [s]")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend()

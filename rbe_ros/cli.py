@@ -22,6 +22,7 @@ from .analysis.tilt import DIRECTIONS, tilt_capacity
 from .analysis.virtual import ANALYSES, virtual_assembly
 from .analysis.sequence import check_sequence, first_failing_step
 from .analysis.validate import validated_assembly
+from .geometry.contacts import ContactOptions
 from .rbe.cones import CONES
 from .rbe.solver import SolveOptions
 from .report import format_table, json_number, report_json
@@ -54,6 +55,22 @@ def _solver_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--max-blocks", type=int, default=ValidationLimits().max_blocks,
                    metavar="N", help="refuse scenes of more blocks (default "
                    f"{ValidationLimits().max_blocks}; the other sane ranges: README)")
+    c = parser.add_argument_group("contact detection (lengths relative to the smaller block's "
+                                  "size, the cube root of its volume)")
+    c.add_argument("--distance-tol", type=float, default=ContactOptions().distance_tol,
+                   metavar="R", help="largest gap or overlap between face planes in contact "
+                   f"(default {ContactOptions().distance_tol:g}; noisy meshes need more)")
+    c.add_argument("--angle-tol", type=float, default=ContactOptions().angle_tol_deg,
+                   metavar="DEG", help="largest deviation of the normals from opposite "
+                   f"(default {ContactOptions().angle_tol_deg:g})")
+    c.add_argument("--min-area", type=float, default=ContactOptions().min_area, metavar="R",
+                   help=f"smallest interface area / size^2 (default {ContactOptions().min_area:g})")
+    c.add_argument("--min-width", type=float, default=ContactOptions().min_width, metavar="R",
+                   help="thinner interface polygons are edge contacts and left out "
+                   f"(default {ContactOptions().min_width:g}; 0 keeps all)")
+    c.add_argument("--vertex-tol", type=float, default=ContactOptions().vertex_tol, metavar="R",
+                   help="vertices this close to their neighbours' chord are left out "
+                   f"(default {ContactOptions().vertex_tol:g}; 0 keeps all)")
     h = parser.add_argument_group("suggested holds (unstable checks)")
     h.add_argument("--no-suggest-holds", action="store_true",
                    help="do not search the smallest set of blocks to hold")
@@ -76,9 +93,12 @@ def _options(args) -> CheckOptions:
         raise ValueError("--mu-threshold must be positive")
     holds = HoldSearch(enabled=not args.no_suggest_holds, max_size=args.hold_max_size,
                        max_checks=args.hold_max_checks)
+    contact = ContactOptions(distance_tol=args.distance_tol, angle_tol_deg=args.angle_tol,
+                             min_area=args.min_area, min_width=args.min_width,
+                             vertex_tol=args.vertex_tol)
     return CheckOptions(solve=solve, mu_threshold=args.mu_threshold, tension_tol=args.tension_tol,
                         limits=ValidationLimits(max_blocks=args.max_blocks), holds=holds,
-                        full_solve=args.full_solve)
+                        full_solve=args.full_solve, contact=contact)
 
 
 def _assembly(args) -> Assembly:

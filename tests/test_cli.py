@@ -105,3 +105,20 @@ def test_unreadable_and_invalid_files(tmp_path, capsys):
     (tmp_path / "broken.json").write_text("{not json")
     assert main(["check", str(tmp_path / "broken.json")]) == 2
     assert "invalid JSON at line 1" in capsys.readouterr().err
+
+
+def test_contact_options_from_the_command_line(tmp_path, capsys):
+    """A box 5 mm above the slab (0.5% of its size): floating at the default distance
+    tolerance, resting on the slab with --distance-tol 0.01; a negative tolerance is refused."""
+    from rbe_ros.scene import box_block, make_scene, scene_to_dict
+    scene = make_scene("gap", [box_block("ground", (4, 4, 0.2), (0, 0, -0.1), support=True,
+                                         density=2000),
+                               box_block("box", (1, 1, 1), (0, 0, 0.505), density=2000)])
+    path = tmp_path / "gap.json"
+    path.write_text(json.dumps(scene_to_dict(scene)))
+    assert run_json(capsys, "check", str(path), "--json")["status"] == "INFEASIBLE"
+    out = run_json(capsys, "check", str(path), "--json", "--distance-tol", "0.01")
+    assert out["status"] == "STABLE"
+    assert out["interfaces"][0]["normal_force"] == pytest.approx(2000 * 9.81, rel=1e-6)
+    assert main(["check", str(path), "--vertex-tol", "-1"]) == 2
+    assert "vertex_tol" in capsys.readouterr().err

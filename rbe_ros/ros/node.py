@@ -57,6 +57,7 @@ from visualization_msgs.msg import MarkerArray
 from ..analysis.check import CheckOptions, HoldSearch, check_scene
 from ..analysis.sequence import check_sequence, sequence_steps
 from ..rbe.cones import CONES, FRICTION_MODELS
+from ..geometry.contacts import ContactOptions
 from ..rbe.result import Report, Status
 from ..rbe.solver import OBJECTIVES, SolveOptions
 from ..scene import Scene, SceneError, ValidationLimits
@@ -80,7 +81,11 @@ CHOICES = {"objective": OBJECTIVES, "friction_model": FRICTION_MODELS, "friction
 RANGES = {"friction_coefficient": (0.0, 10.0, True), "friction_threshold": (0.0, 10.0, False),
           "tension_tolerance": (0.0, 1.0, False), "check_time_limit": (0.0, 3600.0, False),
           "max_blocks": (1, 1_000_000, False), "hold_search_max_size": (0, 1000, False),
-          "hold_search_max_checks": (0, 1_000_000, False)}
+          "hold_search_max_checks": (0, 1_000_000, False),
+          "contact_distance_tolerance": (0.0, 1.0, False),
+          "contact_angle_tolerance_deg": (0.0, 90.0, False),
+          "contact_min_area": (0.0, 1.0, False), "contact_min_width": (0.0, 1.0, False),
+          "contact_vertex_tolerance": (0.0, 1.0, False)}
 
 
 def _double(value: float, description: str, low: float, high: float) -> tuple:
@@ -142,6 +147,22 @@ PARAMETERS = {
                                      "to this many blocks, then a greedy heuristic", 0, 1000),
     "hold_search_max_checks": _integer(HoldSearch().max_checks, "suggested holds: sub-assembly "
                                        "checks the exact search may spend", 0, 1_000_000),
+    # contact detection; lengths relative to the smaller block's size (cube root of its volume)
+    "contact_distance_tolerance": _double(
+        ContactOptions().distance_tol, "contact detection: largest gap or overlap between two "
+        "face planes in contact, relative to the smaller block's size", 0.0, 1.0),
+    "contact_angle_tolerance_deg": _double(
+        ContactOptions().angle_tol_deg, "contact detection: largest deviation of two faces' "
+        "normals from opposite, in degrees", 0.0, 90.0),
+    "contact_min_area": _double(
+        ContactOptions().min_area, "contact detection: smallest interface area, relative to "
+        "the size squared", 0.0, 1.0),
+    "contact_min_width": _double(
+        ContactOptions().min_width, "contact detection: thinner interface polygons are edge "
+        "contacts and are left out, relative to the size", 0.0, 1.0),
+    "contact_vertex_tolerance": _double(
+        ContactOptions().vertex_tol, "contact detection: interface vertices closer than this "
+        "to their neighbours' chord are left out, relative to the size", 0.0, 1.0),
 }
 
 
@@ -229,6 +250,12 @@ class RbeNode(Node):
         return CheckOptions(solve=solve, mu_threshold=threshold if threshold > 0 else None,
                             tension_tol=float(value("tension_tolerance")),
                             limits=self.limits(), full_solve=bool(value("full_solve")),
+                            contact=ContactOptions(
+                                distance_tol=float(value("contact_distance_tolerance")),
+                                angle_tol_deg=float(value("contact_angle_tolerance_deg")),
+                                min_area=float(value("contact_min_area")),
+                                min_width=float(value("contact_min_width")),
+                                vertex_tol=float(value("contact_vertex_tolerance"))),
                             holds=HoldSearch(enabled=bool(value("suggest_holds")),
                                              max_size=int(value("hold_search_max_size")),
                                              max_checks=int(value("hold_search_max_checks"))))

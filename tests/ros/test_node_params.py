@@ -137,3 +137,20 @@ def test_unexpected_errors_become_solver_failed_reports(make_node, tmp_path, mon
     assert [m.topic for m in recorded] == ["/rbe_unit_test/rbe_node/assembly",
                                            "/rbe_unit_test/rbe_node/report"] * 2
     assert [m.data["status"] for m in recorded[1::2]] == [StabilityReport.SOLVER_FAILED] * 2
+
+
+def test_contact_parameters_reach_the_detection(make_node):
+    """A box floating 5 mm (0.5% of its size) above the slab: no contact at the default
+    distance tolerance (0.1%), resting on the slab at 1%."""
+    scene = make_scene("gap", [box_block("ground", (4, 4, 0.2), (0, 0, -0.1), support=True,
+                                         density=2000),
+                               box_block("box", (1, 1, 1), (0, 0, 0.505), density=2000)])
+    node = make_node()
+    assert node.check_options().contact.distance_tol == 1e-3
+    assert check_scene(scene, node.check_options()).status == Status.INFEASIBLE
+    node.set_parameters([Parameter("contact_distance_tolerance", value=0.01)])
+    report = check_scene(scene, node.check_options())
+    assert report.status == Status.STABLE
+    assert report.interfaces[0].normal_resultant == pytest.approx(2000 * 9.81, rel=1e-6)
+    bad = node.set_parameters([Parameter("contact_min_width", value=-0.1)])[0]
+    assert not bad.successful and "contact_min_width" in bad.reason

@@ -55,22 +55,23 @@ def _solver_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--max-blocks", type=int, default=ValidationLimits().max_blocks,
                    metavar="N", help="refuse scenes of more blocks (default "
                    f"{ValidationLimits().max_blocks}; the other sane ranges: README)")
+    defaults = ContactOptions()
     c = parser.add_argument_group("contact detection (lengths relative to the smaller block's "
                                   "size, the cube root of its volume)")
-    c.add_argument("--distance-tol", type=float, default=ContactOptions().distance_tol,
+    c.add_argument("--distance-tol", type=float, default=defaults.distance_tol,
                    metavar="R", help="largest gap or overlap between face planes in contact "
-                   f"(default {ContactOptions().distance_tol:g}; noisy meshes need more)")
-    c.add_argument("--angle-tol", type=float, default=ContactOptions().angle_tol_deg,
+                   f"(default {defaults.distance_tol:g}; noisy meshes need more)")
+    c.add_argument("--angle-tol", type=float, default=defaults.angle_tol_deg,
                    metavar="DEG", help="largest deviation of the normals from opposite "
-                   f"(default {ContactOptions().angle_tol_deg:g})")
-    c.add_argument("--min-area", type=float, default=ContactOptions().min_area, metavar="R",
-                   help=f"smallest interface area / size^2 (default {ContactOptions().min_area:g})")
-    c.add_argument("--min-width", type=float, default=ContactOptions().min_width, metavar="R",
+                   f"(default {defaults.angle_tol_deg:g})")
+    c.add_argument("--min-area", type=float, default=defaults.min_area, metavar="R",
+                   help=f"smallest interface area / size^2 (default {defaults.min_area:g})")
+    c.add_argument("--min-width", type=float, default=defaults.min_width, metavar="R",
                    help="thinner interface polygons are edge contacts and left out "
-                   f"(default {ContactOptions().min_width:g}; 0 keeps all)")
-    c.add_argument("--vertex-tol", type=float, default=ContactOptions().vertex_tol, metavar="R",
+                   f"(default {defaults.min_width:g}; 0 keeps all)")
+    c.add_argument("--vertex-tol", type=float, default=defaults.vertex_tol, metavar="R",
                    help="vertices this close to their neighbours' chord are left out "
-                   f"(default {ContactOptions().vertex_tol:g}; 0 keeps all)")
+                   f"(default {defaults.vertex_tol:g}; 0 keeps all)")
     h = parser.add_argument_group("suggested holds (unstable checks)")
     h.add_argument("--no-suggest-holds", action="store_true",
                    help="do not search the smallest set of blocks to hold")

@@ -11,7 +11,7 @@ from rbe_ros.analysis.assembly import Assembly
 from rbe_ros.geometry.block import pose_block, pose_blocks
 from rbe_ros.geometry.contacts import ContactOptions, Interface, detect_interfaces
 from rbe_ros.geometry.kern import kern
-from rbe_ros.geometry.polygon import drop_collinear, drop_collinear_rings, ring_widths
+from rbe_ros.geometry.polygon import drop_collinear_rings, ring_widths
 from rbe_ros.scene import box_block, make_block, make_scene
 
 from helpers import DENSITY
@@ -80,8 +80,8 @@ def test_a_near_collinear_vertex_of_the_contact_polygon_is_dropped():
 
 def test_min_width_and_vertex_tol_zero_keep_everything():
     square_with_midpoint = np.array([[0, 0], [0.5, 0], [1, 0], [1, 1], [0, 1.0]])
-    assert len(drop_collinear(square_with_midpoint, 0.0)) == 5
-    assert len(drop_collinear(square_with_midpoint, 1e-9)) == 4
+    assert drop_collinear_rings(square_with_midpoint, [5], 0.0)[1][0] == 5
+    assert drop_collinear_rings(square_with_midpoint, [5], 1e-9)[1][0] == 4
     sliver = np.array([[0, 0], [1, 0], [1, 1e-9], [0, 1e-9]])
     assert ring_widths(sliver, [4])[0] == pytest.approx(1e-9)
     for scene in (strip_scene(1e-5), gen.dome(slices=8, courses=4)):

@@ -148,7 +148,8 @@ def detect_interfaces(blocks: list[PosedBlock], options: ContactOptions = Contac
     normals, one plane), the overlaps of the survivors are computed in one vectorised shapely
     call, and the overlap polygons are then treated all at once as ragged arrays (vertices
     one polygon after another): width and vertex filters (see :class:`ContactOptions`),
-    frames, lifting to 3D and the kerns, which are cached on the interfaces.
+    frames and lifting to 3D. Kerns are left to :meth:`Interface.compute_kerns` (batched) or
+    to :attr:`Interface.kern` (on first use).
     """
     if len(blocks) < 2:
         return []
@@ -238,23 +239,13 @@ def detect_interfaces(blocks: list[PosedBlock], options: ContactOptions = Contac
     u = edges[longest] / lengths[longest][:, None]
     v = cross(f_n, u)
     centroid = _lift(centroid2d, f_o, f_u, f_v)
-    # the kerns, in the interface frames (centred: best conditioned for the moments)
-    d = pts - centroid[rep]
-    local = np.column_stack((np.einsum("ij,ij->i", d, u[rep]), np.einsum("ij,ij->i", d, v[rep])))
-    kern2d, kern_counts = kerns_ragged(local, counts)
-    kern_rep = np.repeat(np.arange(len(counts)), kern_counts)
-    kern3d = _lift(kern2d, centroid[kern_rep], u[kern_rep], v[kern_rep])
 
     pair = pairs[pair_of[owner]]
-    ends, kern_ends = np.cumsum(counts).tolist(), np.cumsum(kern_counts).tolist()
-    out = []
-    for i, j, o, uu, vv, n, s, e, a, ks, ke in zip(
-            pair[:, 0].tolist(), pair[:, 1].tolist(), centroid, u, v, f_n, [0] + ends[:-1], ends,
-            area.tolist(), [0] + kern_ends[:-1], kern_ends):
-        it = Interface(i, j, PlaneFrame(o, uu, vv, n), pts[s:e], a)
-        it.__dict__["kern"] = kern3d[ks:ke]
-        out.append(it)
-    return out
+    ends = np.cumsum(counts).tolist()
+    return [Interface(i, j, PlaneFrame(o, uu, vv, n), pts[s:e], a)
+            for i, j, o, uu, vv, n, s, e, a in zip(
+                pair[:, 0].tolist(), pair[:, 1].tolist(), centroid, u, v, f_n,
+                [0] + ends[:-1], ends, area.tolist())]
 
 
 def _facing(pairs: np.ndarray, face_count: np.ndarray, face_start: np.ndarray,

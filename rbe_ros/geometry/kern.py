@@ -38,7 +38,7 @@ def kerns_ragged(points: np.ndarray, counts) -> tuple[np.ndarray, np.ndarray]:
     convex = _convex_ccw(pts, counts)
     if not convex.all():
         starts = np.cumsum(counts) - counts
-        rings = [pts[s:s + c] if ok else _hull(pts[s:s + c])
+        rings = [pts[s:s + c] if ok else pts[s:s + c][ConvexHull(pts[s:s + c]).vertices]
                  for s, c, ok in zip(starts, counts, convex)]
         counts = np.array([len(r) for r in rings], dtype=np.intp)
         pts = np.concatenate(rings)
@@ -73,9 +73,3 @@ def _poles(hulls: np.ndarray) -> np.ndarray:
     py = gy - (nx * j[:, 0, 1] + ny * j[:, 1, 1]) / scale
     return np.stack((px.T, py.T), axis=-1)
 
-
-def _hull(pts: np.ndarray) -> np.ndarray:
-    """The polygon itself when it is convex and counter-clockwise, else its convex hull."""
-    if _convex_ccw(pts, np.array([len(pts)]))[0]:
-        return pts
-    return pts[ConvexHull(pts).vertices]

@@ -152,10 +152,3 @@ def drop_collinear_rings(points: np.ndarray, counts, tol) -> tuple[np.ndarray, n
         active[rings] = drop & (cur[rings] > 3)
     return pts[alive], cur
 
-
-def drop_collinear(points: np.ndarray, tol: float) -> np.ndarray:
-    """The polygon without vertices closer than ``tol`` to the line through their neighbours
-    (clipping leaves such vertices on straight edges; shapely's simplify keeps the ring's
-    start point whatever it is). One ring of :func:`drop_collinear_rings`."""
-    pts = np.asarray(points, dtype=float)
-    return drop_collinear_rings(pts, [len(pts)], tol)[0]

@@ -111,6 +111,8 @@ def _string(value: str, description: str, *, read_only: bool = False) -> tuple:
                                       description=description, read_only=read_only)
 
 
+_CONTACT = ContactOptions()    # the defaults of the contact_* parameters
+
 PARAMETERS = {
     "friction_coefficient": _double(
         0.6, "Coulomb friction coefficient mu of every interface, in (0, 10]", 0.0, 10.0),
@@ -149,19 +151,19 @@ PARAMETERS = {
                                        "checks the exact search may spend", 0, 1_000_000),
     # contact detection; lengths relative to the smaller block's size (cube root of its volume)
     "contact_distance_tolerance": _double(
-        ContactOptions().distance_tol, "contact detection: largest gap or overlap between two "
+        _CONTACT.distance_tol, "contact detection: largest gap or overlap between two "
         "face planes in contact, relative to the smaller block's size", 0.0, 1.0),
     "contact_angle_tolerance_deg": _double(
-        ContactOptions().angle_tol_deg, "contact detection: largest deviation of two faces' "
+        _CONTACT.angle_tol_deg, "contact detection: largest deviation of two faces' "
         "normals from opposite, in degrees", 0.0, 90.0),
     "contact_min_area": _double(
-        ContactOptions().min_area, "contact detection: smallest interface area, relative to "
+        _CONTACT.min_area, "contact detection: smallest interface area, relative to "
         "the size squared", 0.0, 1.0),
     "contact_min_width": _double(
-        ContactOptions().min_width, "contact detection: thinner interface polygons are edge "
+        _CONTACT.min_width, "contact detection: thinner interface polygons are edge "
         "contacts and are left out, relative to the size", 0.0, 1.0),
     "contact_vertex_tolerance": _double(
-        ContactOptions().vertex_tol, "contact detection: interface vertices closer than this "
+        _CONTACT.vertex_tol, "contact detection: interface vertices closer than this "
         "to their neighbours' chord are left out, relative to the size", 0.0, 1.0),
 }
 

@@ -65,6 +65,16 @@ def _families(result, kind):
     return fam
 
 
+def _family_results(result, kind, key):
+    """(family, method, cases, median time) for every family of ``kind`` and method with
+    results that have ``key``."""
+    for fam in _families(result, kind):
+        for m in _methods(result):
+            cs = [c for c in result["cases"] if c["family"] == fam and key in c["results"].get(m, {})]
+            if cs:
+                yield fam, m, cs, statistics.median(c["results"][m]["time"] for c in cs)
+
+
 # ----------------------------------------------------------------------------- charts
 
 def chart_speed_accuracy(result, path: Path) -> None:
@@ -72,15 +82,10 @@ def chart_speed_accuracy(result, path: Path) -> None:
     fig, axes = plt.subplots(1, 3, figsize=(17, 5.8))
     floor = 3e-3
     ax = axes[0]
-    for fam in _families(result, "tilt"):
-        for m in methods:
-            cs = [c for c in result["cases"] if c["family"] == fam and "error" in c["results"].get(m, {})]
-            if not cs:
-                continue
-            t = statistics.median(c["results"][m]["time"] for c in cs)
-            err = max(c["results"][m]["error"] for c in cs)
-            ax.scatter(t, max(err if math.isfinite(err) else 90, floor), s=60, marker=MARKERS[fam],
-                       color=COLOURS[m], edgecolor="k", linewidth=0.4, zorder=3)
+    for fam, m, cs, t in _family_results(result, "tilt", "error"):
+        err = max(c["results"][m]["error"] for c in cs)
+        ax.scatter(t, max(err if math.isfinite(err) else 90, floor), s=60, marker=MARKERS[fam],
+                   color=COLOURS[m], edgecolor="k", linewidth=0.4, zorder=3)
     ax.axhline(0.05, ls="--", color="grey", lw=1)
     ax.text(0.01, 0.05, " 0.05 deg target", color="grey", fontsize=8, va="bottom",
             transform=ax.get_yaxis_transform())
@@ -90,16 +95,11 @@ def chart_speed_accuracy(result, path: Path) -> None:
     ax.text(0.01, 0.01, f"errors below {floor} deg drawn at {floor}; falls upright: drawn at 90",
             transform=ax.transAxes, fontsize=7)
     ax = axes[1]
-    for fam in _families(result, "verdict"):
-        for m in methods:
-            cs = [c for c in result["cases"] if c["family"] == fam and "correct" in c["results"].get(m, {})]
-            if not cs:
-                continue
-            t = statistics.median(c["results"][m]["time"] for c in cs)
-            wrong = sum(not c["results"][m]["correct"] for c in cs) / len(cs)
-            jitter = 0.008 * (methods.index(m) - len(methods) / 2)      # keep coincident points apart
-            ax.scatter(t, wrong + jitter, s=60, marker=MARKERS[fam], color=COLOURS[m], edgecolor="k",
-                       linewidth=0.4, zorder=3)
+    for fam, m, cs, t in _family_results(result, "verdict", "correct"):
+        wrong = sum(not c["results"][m]["correct"] for c in cs) / len(cs)
+        jitter = 0.008 * (methods.index(m) - len(methods) / 2)      # keep coincident points apart
+        ax.scatter(t, wrong + jitter, s=60, marker=MARKERS[fam], color=COLOURS[m], edgecolor="k",
+                   linewidth=0.4, zorder=3)
     ax.set(xscale="log", ylim=(-0.05, 1.05), xlabel="time per check [s] (median over the family)",
            ylabel="share misclassified (points offset by method)",
            title="(b) near-limit verdicts")

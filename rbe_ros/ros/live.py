@@ -66,23 +66,35 @@ def _ros_value(value) -> str:
 
 
 class NodeProcess:
-    """An ``rbe_node`` process named ``name`` with ``parameters``, output in a log file."""
+    """``python -m rbe_ros.ros.node --ros-args *ros_args`` as a process, its output in ``log``
+    (a temporary file, removed at :meth:`stop`, if not given)."""
 
-    def __init__(self, name: str, parameters: dict[str, object]):
-        self.name = name
-        self.log = Path(tempfile.mkstemp(prefix=f"{name}_", suffix=".log")[1])
-        args = [sys.executable, "-m", "rbe_ros.ros.node", "--ros-args", "-r", f"__node:={name}"]
-        for key, value in parameters.items():
-            args += ["-p", f"{key}:={_ros_value(value)}"]
+    def __init__(self, ros_args: list[str], log: Path | None = None):
+        self._temporary = log is None
+        self.log = Path(tempfile.mkstemp(prefix="rbe_node_", suffix=".log")[1]) if log is None \
+            else Path(log)
         self._out = self.log.open("wb")
-        self.proc = subprocess.Popen(args, stdout=self._out, stderr=subprocess.STDOUT,
+        self.proc = subprocess.Popen([sys.executable, "-m", "rbe_ros.ros.node", "--ros-args",
+                                      *ros_args], stdout=self._out, stderr=subprocess.STDOUT,
                                      env=dict(os.environ))
 
+    @classmethod
+    def named(cls, name: str, parameters: dict[str, object]) -> "NodeProcess":
+        """The node named ``name`` with ``parameters`` (a temporary log)."""
+        args = ["-r", f"__node:={name}"]
+        for key, value in parameters.items():
+            args += ["-p", f"{key}:={_ros_value(value)}"]
+        return cls(args)
+
     def output(self) -> str:
-        self._out.flush()
+        if not self._out.closed:
+            self._out.flush()
         return self.log.read_text(errors="replace")
 
-    def stop(self, timeout: float = 15.0) -> None:
+    def stop(self, timeout: float = 15.0) -> int:
+        """SIGINT (as Ctrl-C), then the exit status. A node still running after ``timeout``
+        is killed, and RuntimeError says so with its output."""
+        hung = ""
         if self.proc.poll() is None:
             self.proc.send_signal(signal.SIGINT)
             try:
@@ -90,8 +102,13 @@ class NodeProcess:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait()
+                hung = self.output()
         self._out.close()
-        self.log.unlink(missing_ok=True)
+        if self._temporary:
+            self.log.unlink(missing_ok=True)
+        if hung:
+            raise RuntimeError(f"rbe_node did not stop on SIGINT within {timeout:g} s:\n{hung}")
+        return self.proc.returncode
 
 
 class _Client:
@@ -187,7 +204,7 @@ def live_reports(runs, options: CheckOptions, *, node_name: str | None = None, c
     try:
         if node_name is None:
             node_name = f"rbe_replay_{os.getpid()}"
-            process = NodeProcess(node_name, node_parameters(options))
+            process = NodeProcess.named(node_name, node_parameters(options))
 
         def alive() -> None:
             if process is not None and process.proc.poll() is not None:

@@ -1,14 +1,10 @@
-"""Test-side helpers: start ``rbe_node`` as a process, and a client node that talks to it."""
+"""Test-side helpers: a client node that talks to ``rbe_node`` (started as a process by
+:class:`rbe_ros.ros.live.NodeProcess`), and small scenes and states."""
 from __future__ import annotations
 
 import json
-import os
-import signal
-import subprocess
-import sys
 import threading
 import time
-from pathlib import Path
 
 from rbe_msgs.action import CheckSequence
 from rbe_msgs.msg import AssemblyState, StabilityReport
@@ -21,9 +17,9 @@ from visualization_msgs.msg import MarkerArray
 
 from rbe_ros.messages import state_to_dict
 from rbe_ros.ros.convert import dict_to_message, message_to_dict
+from rbe_ros.ros.live import NodeProcess
 from rbe_ros.scene import box_block, make_scene
 
-REPO = Path(__file__).resolve().parents[2]
 NODE = "/rbe_node"
 TIMEOUT = 15.0
 
@@ -83,35 +79,6 @@ def wait_future(future, timeout: float = TIMEOUT, what: str = "future"):
     if not (future.done() or done.wait(timeout)):
         raise AssertionError(f"timed out after {timeout} s waiting for {what}")
     return future.result()
-
-
-class NodeProcess:
-    """``python -m rbe_ros.ros.node --ros-args ...`` with its output in ``log``."""
-
-    def __init__(self, ros_args: list[str], log: Path):
-        self.log = log
-        self._out = log.open("wb")
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "rbe_ros.ros.node", "--ros-args", *ros_args],
-            cwd=REPO, stdout=self._out, stderr=subprocess.STDOUT, env=dict(os.environ))
-
-    def output(self) -> str:
-        if not self._out.closed:
-            self._out.flush()
-        return self.log.read_text(errors="replace")
-
-    def stop(self, timeout: float = TIMEOUT) -> int:
-        """SIGINT (as Ctrl-C), then the exit status."""
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-            try:
-                self.proc.wait(timeout)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-                raise AssertionError(f"rbe_node did not stop on SIGINT:\n{self.output()}")
-        self._out.close()
-        return self.proc.returncode
 
 
 class Client:

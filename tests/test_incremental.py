@@ -6,6 +6,7 @@ from __future__ import annotations
 import collections
 from dataclasses import replace
 
+import numpy as np
 import pytest
 
 from helpers import equilibrium_residual
@@ -41,14 +42,15 @@ def test_local_models_give_the_full_verdict_at_every_step(runs):
     assert 0 < sum(not r.stable for r in full) < len(full)
 
 
-def test_a_local_report_is_an_admissible_state_of_the_whole_partial_assembly(runs):
-    local, _ = runs
+def assert_admissible(scene, reports) -> int:
+    """Every ``local N`` report of ``scene``'s sequence is an admissible state of its partial
+    assembly; returns how many there were."""
     mu = OPTIONS.solve.mu
     checked = 0
-    for step, report in zip(sequence_steps(DOME), local):
+    for step, report in zip(sequence_steps(scene), reports):
         if not report.model.startswith("local"):
             continue
-        partial = partial_scene(DOME, step.present)
+        partial = partial_scene(scene, step.present)
         present_pairs = {(r.block_a, r.block_b) for r in report.interfaces}
         assert len(present_pairs) == len(report.interfaces)   # every interface once
         assert equilibrium_residual(partial, report) < 1e-6
@@ -56,7 +58,38 @@ def test_a_local_report_is_an_admissible_state_of_the_whole_partial_assembly(run
             assert r.normal_forces.min() > -1e-6 * abs(r.normal_forces).max(initial=1.0)
             assert r.friction_ratio <= mu * (1 + 1e-6)
         checked += 1
-    assert checked >= 5
+    return checked
+
+
+def test_a_local_report_is_an_admissible_state_of_the_whole_partial_assembly(runs):
+    local, _ = runs
+    assert assert_admissible(DOME, local) >= 5
+
+
+def test_a_second_dome_beside_the_first_is_checked_as_its_own_component(runs):
+    """Two domes on the ground, 12 m apart, built one after the other: no contact joins them,
+    so the second one's steps re-solve only its own blocks (never the full problem) and have
+    the verdicts of the dome built alone."""
+    alone, _ = runs
+
+    def placed(tag: str, dx: float):
+        return [replace(b, id=f"{tag}_{b.id}", position=np.asarray(b.position) + [dx, 0.0, 0.0])
+                for b in DOME.blocks]
+
+    two = make_scene("two domes", placed("a", 0.0) + placed("b", 12.0),
+                     sequence=[f"{t}_{i}" for t in "ab" for i in DOME.sequence])
+    reports = check_sequence(two, OPTIONS)
+    second = reports[len(DOME.sequence):]
+    assert alone[-1].stable
+    assert [r.stable for r in second] == [r.stable for r in alone]
+    assert all(r.model != "full" for r in second)
+    free = len(DOME.sequence)
+    sizes = [int(r.model.split()[1]) for r in second]
+    assert max(sizes) <= free                       # at most the second dome's free blocks
+    closing = [r for r in second if r.model.startswith("local") and r.stable
+               and int(r.model.split()[1]) > 0.3 * 2 * free]
+    assert closing                                  # regions past the local limit: components
+    assert assert_admissible(two, reports) >= 10
 
 
 def test_a_relaxed_report_names_why_the_step_fails(runs):

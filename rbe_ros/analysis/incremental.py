@@ -11,8 +11,13 @@ without the full problem:
   Infeasible: the whole assembly is infeasible too, so it does not stand (model "relaxed N").
 
 R starts as the new blocks, their free neighbours and a shortest chain of contacts down to a
-support, and grows by layers of neighbours until one of the two answers; past
-MAX_LOCAL_SHARE of the free blocks the full problem is solved (and always below MIN_LOCAL_BLOCKS free blocks). The
+support, and grows by layers of neighbours until one of the two answers, up to
+MAX_LOCAL_SHARE of the free blocks. Then the assembly is decomposed: free blocks joined by
+contacts form components (supports cut them apart), whose problems share no variable and no
+constraint. The components holding new blocks are solved in full, the others keep their
+forces (they stood at the last stable step and nothing about them changed): exact both ways,
+"local N" when they stand, "relaxed N" when not. Only when the new blocks touch every
+component (and always below MIN_LOCAL_BLOCKS free blocks) is the full problem solved. The
 verdict (stable or not) is therefore always the full problem's; a local report's forces are
 one admissible state, not the full QP optimum, and a relaxed report's interfaces are those of
 the region only.
@@ -98,17 +103,17 @@ class StepChecker:
                 report = self._relaxed(assembly, graph, region)
                 if report is not None:
                     return report
+        component = graph.component(set(new) | graph.free_neighbours(new))
         region = set(new) | graph.free_neighbours(new) | graph.path_to_support(new)
         limit = MAX_LOCAL_SHARE * len(graph.free)
-        while len(region) <= limit:
+        while len(region) <= limit and not component <= region:
             report = (self._restricted(assembly, graph, region)
                       or self._relaxed(assembly, graph, region))
             if report is not None:
                 return report
-            grown = region | graph.free_neighbours(region)
-            if grown == region:
-                break
-            region = grown
+            region = region | graph.free_neighbours(region)
+        if len(component) < len(graph.free):
+            return self._component(assembly, graph, component)
         return None
 
     def _restricted(self, assembly: Assembly, graph: "_Graph", region: set[int]) -> Report | None:
@@ -138,15 +143,36 @@ class StepChecker:
                                     tension_tol=self.options.tension_tol, mu=self.options.solve.mu)
         if any(r.tension or r.friction_exceeded for r in results):
             return None
+        return self._kept_elsewhere(assembly, local, results, len(region),
+                                    max(float(solution.forces[1].max(initial=0.0)), 0.0))
+
+    def _component(self, assembly: Assembly, graph: "_Graph", component: set[int]) -> Report | None:
+        """The exact verdict from the components holding the new blocks, solved in full; no
+        contact joins them to the other components, whose kept forces stay admissible."""
+        supports = {k for k in graph.neighbours(component) if assembly.blocks[k].support}
+        local = assembly.subset({assembly.blocks[k].id for k in component | supports})
+        report = check(local, self.options)
+        if report.stable:
+            return self._kept_elsewhere(assembly, local, report.interfaces, len(component),
+                                        report.max_tension)
+        return replace(report, message=f"{report.message} [the {len(component)} blocks joined"
+                                       f" to the new ones by contacts]",
+                       model=f"relaxed {len(component)}")
+
+    def _kept_elsewhere(self, assembly: Assembly, local: Assembly, results, size: int,
+                        max_tension: float) -> Report | None:
+        """Stable report of the forces ``results`` on the interfaces of ``local`` (``size``
+        blocks re-solved) and the kept ones everywhere else (None if one is not kept)."""
         solved = {_key(local, it): r for it, r in zip(local.interfaces, results)}
-        merged = [solved.get(_key(assembly, it)) or self._results[_key(assembly, it)]
-                  for it in assembly.interfaces]
+        merged = [solved.get(key) or self._results.get(key)
+                  for key in (_key(assembly, it) for it in assembly.interfaces)]
+        if None in merged:
+            return None
         worst = max((r.friction_ratio for r in merged), default=0.0)
         return Report(True, Status.STABLE,
-                      f"stable: {len(region)} blocks around the new one re-solved, the forces"
+                      f"stable: {size} blocks around the new one re-solved, the forces"
                       f" elsewhere kept; worst |V|/N {worst:.3f} (mu {self.options.solve.mu:.3g})",
-                      max(float(solution.forces[1].max(initial=0.0)), 0.0), worst,
-                      interfaces=merged, model=f"local {len(region)}")
+                      max_tension, worst, interfaces=merged, model=f"local {size}")
 
     def _relaxed(self, assembly: Assembly, graph: "_Graph", region: set[int]) -> Report | None:
         """Unstable report if R cannot stand even with every neighbour rigid."""
@@ -176,6 +202,18 @@ class _Graph:
 
     def free_neighbours(self, region) -> set[int]:
         return {n for n in self.neighbours(region) if not self.blocks[n].support}
+
+    def component(self, start) -> set[int]:
+        """The free blocks of ``start`` and those joined to them by chains of contacts
+        between free blocks."""
+        found = {k for k in start if not self.blocks[k].support}
+        stack = list(found)
+        while stack:
+            for n in self.adjacent[stack.pop()]:
+                if n not in found and not self.blocks[n].support:
+                    found.add(n)
+                    stack.append(n)
+        return found
 
     def path_to_support(self, start) -> set[int]:
         """Free blocks on a shortest chain of contacts from ``start`` to a support."""

@@ -1,15 +1,18 @@
-"""Contact detection: the fidelity rules (ContactOptions.min_width, vertex_tol) and the
-vectorised polygon helpers against plain per-polygon references."""
+"""Contact detection: the fidelity rules (ContactOptions.min_width, vertex_tol), the
+vectorised polygon helpers against plain per-polygon references, and the batched convex
+clipping against shapely."""
 import math
 
 import numpy as np
 import pytest
+import shapely
 from scipy.spatial.transform import Rotation
 
 from rbe_ros import generators as gen
 from rbe_ros.analysis.assembly import Assembly
 from rbe_ros.geometry.block import pose_block, pose_blocks
-from rbe_ros.geometry.contacts import ContactOptions, Interface, detect_interfaces
+from rbe_ros.geometry.contacts import (ContactOptions, Interface, _clip_convex, _rings,
+                                       detect_interfaces)
 from rbe_ros.geometry.kern import kern
 from rbe_ros.geometry.polygon import drop_collinear_rings, ring_widths
 from rbe_ros.scene import box_block, make_block, make_scene
@@ -177,3 +180,151 @@ def test_cached_kerns_match_kerns_computed_afresh():
     for it, new in zip(detected, fresh):
         assert np.allclose(it.kern, new.kern, rtol=0, atol=1e-12)
         assert np.allclose(new.kern, it.frame.to_3d(kern(it.polygon2d())), rtol=0, atol=1e-12)
+
+
+# ---------------------------------------------------------------- batched convex clipping
+
+def _clip(pairs, eps=1e-12):
+    """_clip_convex on (polygon a, polygon b) vertex lists, read as detect_interfaces reads
+    face outlines (shapely coordinates through _rings: any orientation, any vertex counts,
+    one batch): {pair index: (ring, area, centroid)} for the pairs that overlap."""
+    outlines = [np.array([shapely.Polygon(a) for a, _ in pairs]),
+                np.array([shapely.Polygon(b) for _, b in pairs])]
+    rows, size = np.arange(len(pairs)), np.ones(len(pairs))
+    (ax, ay, na, convex_a), (bx, by, nb, convex_b) = (
+        _rings(*shapely.get_coordinates(o, return_index=True), rows, size) for o in outlines)
+    assert convex_a.all() and convex_b.all()
+    ring, counts, of, area, centroid = _clip_convex(ax, ay, na, bx, by, nb,
+                                                    np.full(len(pairs), eps))
+    rings = np.split(ring, np.cumsum(counts)[:-1])
+    return {int(k): (r, a, c) for k, r, a, c in zip(of, rings, area, centroid)}
+
+
+def _same_vertices(ring, expected, tol=1e-12):
+    """Whether ``ring`` has the vertices of ``expected`` (any start, same count)."""
+    expected = np.asarray(expected, dtype=float)
+    if len(ring) != len(expected):
+        return False
+    d = np.linalg.norm(ring[:, None] - expected[None], axis=2)
+    return bool((d.min(axis=0) <= tol).all() and (d.min(axis=1) <= tol).all())
+
+
+def _signed_area(ring):
+    x, y = ring[:, 0], ring[:, 1]
+    return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+
+
+SQUARE = [(0, 0), (1, 0), (1, 1), (0, 1)]
+
+
+def test_clip_of_two_offset_squares():
+    offset = [(0.5, 0.25), (0.5, 1.25), (1.5, 1.25), (1.5, 0.25)]        # clockwise, as face b
+    ((ring, area, centroid),) = _clip([(SQUARE, offset)]).values()
+    assert _same_vertices(ring, [(0.5, 0.25), (1, 0.25), (1, 1), (0.5, 1)])
+    assert _signed_area(ring) == pytest.approx(area) and area == pytest.approx(0.375)
+    assert centroid == pytest.approx([0.75, 0.625])
+
+
+def test_clip_of_a_triangle_and_a_hexagon_matches_shapely():
+    angle = np.arange(6) * np.pi / 3
+    hexagon = np.column_stack((np.cos(angle), np.sin(angle)))
+    triangle = np.array([(-1.2, -0.3), (1.5, -0.3), (0.2, 1.6)])
+    got = _clip([(triangle, hexagon), (hexagon, triangle[::-1])])
+    reference = shapely.Polygon(triangle).intersection(shapely.Polygon(hexagon))
+    expected = np.array(reference.exterior.coords[:-1])
+    assert len(got) == 2
+    for ring, area, centroid in got.values():
+        assert _same_vertices(ring, expected)
+        assert area == pytest.approx(reference.area, rel=1e-12)
+        assert centroid == pytest.approx(np.array(reference.centroid.coords[0]), abs=1e-12)
+        assert _signed_area(ring) > 0                                       # counter-clockwise
+
+
+def test_squares_sharing_an_edge_or_a_corner_have_no_overlap():
+    beside = [(1, 0), (2, 0), (2, 1), (1, 1)]
+    corner = [(1, 1), (2, 1), (2, 2), (1, 2)]
+    noisy = [(1 - 1e-16, 0), (2, 0), (2, 1), (1 + 1e-16, 1)]              # rounding of a frame
+    sliver = [(1 - 1e-13, 0), (2, 0), (2, 1), (1 - 1e-13, 1)]            # thinner than eps
+    strip = [(1 - 1e-9, 0), (2, 0), (2, 1), (1 - 1e-9, 1)]
+    got = _clip([(SQUARE, beside), (SQUARE, corner), (SQUARE, noisy), (SQUARE, sliver),
+                 (SQUARE, strip)])
+    assert list(got) == [4]
+    ring, area, _ = got[4]
+    assert _same_vertices(ring, [(1 - 1e-9, 0), (1, 0), (1, 1), (1 - 1e-9, 1)])
+    assert area == pytest.approx(1e-9, rel=1e-6)
+
+
+def test_identical_and_nested_polygons():
+    angle = np.linspace(0, 2 * np.pi, 11)[:-1]
+    decagon = np.column_stack((np.cos(angle), np.sin(angle))) * 0.3 + 0.5
+    got = _clip([(SQUARE, SQUARE), (SQUARE, SQUARE[::-1]), (decagon, decagon[::-1]),
+                 (SQUARE, decagon), (decagon, SQUARE)])
+    assert list(got) == [0, 1, 2, 3, 4]
+    for k, polygon in enumerate([SQUARE, SQUARE, decagon, decagon, decagon]):
+        ring, area, _ = got[k]
+        assert _same_vertices(ring, polygon)              # no vertex added on shared edges
+        assert area == pytest.approx(shapely.Polygon(polygon).area, rel=1e-12)
+
+
+def _random_convex(rng, k):
+    """A random convex polygon of up to k vertices (hull of k random points), often a
+    rectangle or another polygon with edges on the lines of a square's edges."""
+    if rng.random() < 0.3:
+        x0, y0 = rng.choice([0.0, 0.25, 0.5, 1.0], 2)
+        return [(x0, y0), (x0 + 1, y0), (x0 + 1, y0 + rng.choice([0.5, 1.0])), (x0, y0 + 1)][
+            :4 if rng.random() < 0.5 else 3]
+    pts = rng.normal(size=(k, 2)) * rng.uniform(0.2, 2, 2) + rng.normal(size=2) * 0.5
+    return np.array(shapely.MultiPoint(pts).convex_hull.exterior.coords[:-1])
+
+
+def test_clip_of_random_convex_polygons_matches_shapely():
+    rng = np.random.default_rng(11)
+    pairs = []
+    for _ in range(600):
+        a = _random_convex(rng, int(rng.integers(3, 14)))
+        b = _random_convex(rng, int(rng.integers(3, 14)))
+        pairs.append((a, b[::-1] if rng.random() < 0.5 else b))
+    got = _clip(pairs)
+    overlapping = 0
+    for k, (a, b) in enumerate(pairs):
+        reference = shapely.Polygon(a).intersection(shapely.Polygon(b))
+        if k not in got:
+            assert reference.area <= 1e-12
+            continue
+        overlapping += 1
+        ring, area, centroid = got[k]
+        assert area == pytest.approx(reference.area, rel=1e-9, abs=1e-13)
+        assert _signed_area(ring) == pytest.approx(area, rel=1e-12)
+        assert shapely.hausdorff_distance(shapely.Polygon(ring), reference) <= 1e-9
+        assert centroid == pytest.approx(np.array(reference.centroid.coords[0]), abs=1e-9)
+    assert overlapping > 300
+
+
+def l_prism(block_id, z0, height=1.0):
+    """An L-shaped prism (area 3: a 2 x 2 square without its corner quadrant) standing on
+    z = z0: non-convex bottom and top faces."""
+    ring = [(0, 0), (2, 0), (2, 1), (1, 1), (1, 2), (0, 2)]
+    vertices = [(x, y, z0) for x, y in ring] + [(x, y, z0 + height) for x, y in ring]
+    n = len(ring)
+    faces = [tuple(reversed(range(n))), tuple(range(n, 2 * n))]
+    faces += [(k, (k + 1) % n, n + (k + 1) % n, n + k) for k in range(n)]
+    return make_block(block_id, vertices, faces, density=DENSITY)
+
+
+def test_faces_of_non_convex_blocks_are_still_clipped_exactly():
+    scene = make_scene("L", [
+        box_block("ground", (8, 8, 1.0), (0, 0, -0.5), support=True, density=DENSITY),
+        l_prism("L", 0.0),
+        box_block("cube", (1, 1, 1), (-2.5, 0.5, 0.5), density=DENSITY),
+        box_block("top", (1.5, 1.5, 1), (1.25, 1.25, 1.5), density=DENSITY),   # over the notch
+    ])
+    found = {(scene.blocks[it.a].id, scene.blocks[it.b].id): it
+             for it in Assembly.from_scene(scene).interfaces}
+    assert found["ground", "L"].area == pytest.approx(3.0) and len(found["ground", "L"].points) == 6
+    assert found["ground", "cube"].area == pytest.approx(1.0)
+    assert found["L", "top"].area == pytest.approx(1.5 ** 2 - 1.0)    # an L again
+    assert len(found["L", "top"].points) == 6
+    assert [(it.a, it.b) for it in Assembly.from_scene(scene).interfaces] == sorted(
+        (it.a, it.b) for it in found.values())
+    (alone,) = Assembly.from_scene(make_scene("L", scene.blocks[:2])).interfaces  # shapely only
+    assert alone.area == pytest.approx(3.0)

@@ -4,11 +4,11 @@ A bag is what ``ros2 bag record -s mcap`` makes: a directory ``<name>/`` holding
 ``<name>_0.mcap`` (profile ``ros2``; one schema per type, encoding ``ros2msg`` with the complete
 concatenated .msg text; channels with message encoding ``cdr`` and metadata
 ``offered_qos_profiles``/``topic_type_hash``; a ``rosbag2`` metadata record) and a version-9
-``metadata.yaml``. CDR comes from the rosbags serializer; the container is written with the
-``mcap`` library (rosbags' own writer keeps up to 1 MiB of messages in memory and writes
-nothing recoverable before close). Messages go in and come out as *message dicts*
-(:mod:`rbe_ros.messages`); raw CDR bytes (``rclpy.serialization.serialize_message``) are
-accepted as well. Never imports rclpy.
+``metadata.yaml``. CDR is written by :mod:`rbe_ros.cdr` (the bytes rclpy gives) and read by
+rosbags' deserializer; the container is written with the ``mcap`` library (rosbags' own
+writer keeps up to 1 MiB of messages in memory and writes nothing recoverable before close).
+Messages go in and come out as *message dicts* (:mod:`rbe_ros.messages`); raw CDR bytes
+(``rclpy.serialization.serialize_message``) are accepted as well. Never imports rclpy.
 """
 from __future__ import annotations
 
@@ -21,7 +21,6 @@ from importlib.metadata import version
 from pathlib import Path
 from typing import NamedTuple
 
-import numpy as np
 from mcap.exceptions import McapError
 from mcap.records import Channel, Message, Schema
 from mcap.stream_reader import StreamReader
@@ -31,6 +30,8 @@ from rosbags.interfaces import Nodetype
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 from ruamel.yaml import YAML
+
+from . import cdr
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 _DELIM = "=" * 80
@@ -118,13 +119,7 @@ def message_definition(msgtype: str, store: Typestore | None = None) -> str:
     return "\n".join(parts) + "\n"
 
 
-# --- message dicts <-> rosbags objects ---------------------------------------------------------
-
-_DTYPES = {"bool": np.bool_, "byte": np.uint8, "char": np.uint8, "int8": np.int8,
-           "uint8": np.uint8, "int16": np.int16, "uint16": np.uint16, "int32": np.int32,
-           "uint32": np.uint32, "int64": np.int64, "uint64": np.uint64, "float32": np.float32,
-           "float64": np.float64}
-
+# --- rosbags objects -> message dicts ----------------------------------------------------------
 
 def _scalar(typ: str, value):
     if typ == "string" or typ == "wstring":
@@ -136,35 +131,8 @@ def _scalar(typ: str, value):
     return float(value) if typ.startswith("float") else int(value)
 
 
-def to_rosbags(store: Typestore, msgtype: str, data) -> object:
-    """A rosbags message object from a message dict (missing fields take ROS defaults)."""
-    data = data or {}
-    if not isinstance(data, Mapping):
-        raise TypeError(f"{msgtype}: expected a message dict, got {type(data).__name__}")
-    fields = {name: _value_to_rosbags(store, desc, data.get(name), f"{msgtype}.{name}")
-              for name, desc in store.fielddefs[msgtype][1]}
-    return store.types[msgtype](**fields)
-
-
-def _value_to_rosbags(store: Typestore, desc, value, where: str):
-    kind, detail = desc
-    if kind == Nodetype.BASE:
-        return _scalar(detail[0], value)
-    if kind == Nodetype.NAME:
-        return to_rosbags(store, detail, value)
-    sub, length = detail
-    items = [] if value is None else list(value)
-    if kind == Nodetype.ARRAY and len(items) != length:
-        if items:
-            raise ValueError(f"{where}: fixed array needs {length} items, got {len(items)}")
-        items = [None] * length
-    if sub[0] == Nodetype.BASE and sub[1][0] in _DTYPES:
-        return np.array([_scalar(sub[1][0], v) for v in items], dtype=_DTYPES[sub[1][0]])
-    return [_value_to_rosbags(store, sub, v, where) for v in items]
-
-
 def to_dict(store: Typestore, msgtype: str, obj) -> dict:
-    """The message dict of a rosbags message object (the inverse of :func:`to_rosbags`)."""
+    """The message dict of a rosbags message object (what :func:`rbe_ros.cdr.encode` takes)."""
     return {name: _value_to_dict(store, desc, getattr(obj, name))
             for name, desc in store.fielddefs[msgtype][1]}
 
@@ -252,7 +220,7 @@ class BagWriter:
         cid = self._writer.register_channel(topic, "cdr", self._schemas[msgtype], {
             "offered_qos_profiles": _dump_yaml(qos).strip(), "topic_type_hash": digest})
         self._topics[topic] = {"id": cid, "msgtype": msgtype, "qos": qos, "hash": digest,
-                               "count": 0}
+                               "encode": cdr.encoder(self.store, msgtype), "count": 0}
         self._write_metadata()
 
     def write(self, topic: str, message, stamp_ns: int) -> None:
@@ -265,8 +233,7 @@ class BagWriter:
         if isinstance(message, (bytes, bytearray, memoryview)):
             data = bytes(message)
         else:
-            data = bytes(self.store.serialize_cdr(
-                to_rosbags(self.store, info["msgtype"], message), info["msgtype"]))
+            data = info["encode"](message)
         stamp_ns = int(stamp_ns)
         self._writer.add_message(info["id"], log_time=stamp_ns, data=data,
                                  publish_time=stamp_ns, sequence=info["count"])
@@ -390,5 +357,4 @@ def _scan_mcap(path: Path) -> Iterator[BagMessage]:
 
 
 __all__ = ["BagMessage", "BagWriter", "message_definition", "msg_dir", "read_bag",
-           "read_custom_data", "to_dict",
-           "to_rosbags", "typestore"]
+           "read_custom_data", "to_dict", "typestore"]

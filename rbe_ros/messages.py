@@ -3,9 +3,9 @@
 A message dict is a plain nested dict/list shaped exactly like the ROS message, as
 ``rosidl_runtime_py.message_to_ordereddict`` gives it: field names as keys, nested messages as
 dicts (``geometry_msgs/Point`` as ``{"x", "y", "z"}``), arrays as lists, numbers as Python
-``float``/``int``. The ROS node turns them into rclpy messages with
-:mod:`rbe_ros.ros.convert` (a ``set_message_fields`` like rosidl_runtime_py's);
-:mod:`rbe_ros.bag` turns them into rosbags objects.
+``float``/``int``. :mod:`rbe_ros.cdr` encodes them to CDR bytes (the node's reports, bags);
+:mod:`rbe_ros.ros.convert` turns them into rclpy messages and back (a ``set_message_fields``
+like rosidl_runtime_py's).
 Nothing here imports rclpy or the generated ``rbe_msgs`` package.
 
 Incoming dicts may omit fields: a missing field takes the ROS default (zeros, empty arrays,
@@ -266,9 +266,9 @@ def report_to_dict(report: Report, header: dict, *, arrays: bool = False) -> dic
     """An rbe_msgs/StabilityReport dict of ``report`` (``header``: see :func:`header_dict`).
 
     ``arrays=True``: the same dict, but each sequence of Points/Vector3s as an (n, 3) float
-    array and each float64[] as a 1-D float array: the form that
-    :func:`rbe_ros.ros.convert.dict_to_message` turns into the same message without a dict
-    per point. Not a message dict for bags or comparisons.
+    array and each float64[] as a 1-D float array: the form that :mod:`rbe_ros.cdr` (the
+    node's reports) and :func:`rbe_ros.ros.convert.dict_to_message` take without a dict per
+    point. Not for comparisons.
     """
     return {
         "header": header,

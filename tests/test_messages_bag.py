@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 import os
+import random
 import signal
 import subprocess
 import sys
@@ -14,9 +15,10 @@ import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
+from rosbags.interfaces import Nodetype
 from ruamel.yaml import YAML
 
-from rbe_ros import bag, messages
+from rbe_ros import bag, cdr, messages
 from rbe_ros.rbe.result import InterfaceResult, Report, Status
 from rbe_ros.scene import SceneError, box_block, box_vertices, make_block, make_scene
 
@@ -159,11 +161,9 @@ def written(tmp_path):
         w.add_topic("/rbe/report", "rbe_msgs/msg/StabilityReport")
         w.write("/rbe/assembly", state, 2_000)
         w.write("/rbe/report", rep, 3_000)
-        # raw CDR bytes, as the node passes rclpy.serialization.serialize_message output
-        store = bag.typestore()
-        raw = store.serialize_cdr(bag.to_rosbags(store, "rbe_msgs/msg/StabilityReport", rep),
-                                  "rbe_msgs/msg/StabilityReport")
-        w.write("/rbe/report", bytes(raw), 4_000)
+        # raw CDR bytes, as the node passes them
+        w.write("/rbe/report", cdr.encode(bag.typestore(), "rbe_msgs/msg/StabilityReport", rep),
+                4_000)
     return path, state, rep
 
 
@@ -299,7 +299,174 @@ def test_holds_and_hold_report_fields_round_trip():
     assert (back.held_blocks, back.suggested_holds) == (["t"], ["a"])
     # through a bag (CDR) and back
     store = bag.typestore()
-    raw = store.serialize_cdr(bag.to_rosbags(store, "rbe_msgs/msg/AssemblyState", d),
-                              "rbe_msgs/msg/AssemblyState")
+    raw = cdr.encode(store, "rbe_msgs/msg/AssemblyState", d)
     obj = store.deserialize_cdr(raw, "rbe_msgs/msg/AssemblyState")
     assert bag.to_dict(store, "rbe_msgs/msg/AssemblyState", obj)["holds"] == d["holds"]
+
+
+# --- CDR (rbe_ros.cdr) ------------------------------------------------------------------------
+
+REPORT = "rbe_msgs/msg/StabilityReport"
+_NUMPY = {"bool": np.bool_, "byte": np.uint8, "char": np.uint8, "int8": np.int8,
+          "uint8": np.uint8, "int16": np.int16, "uint16": np.uint16, "int32": np.int32,
+          "uint32": np.uint32, "int64": np.int64, "uint64": np.uint64, "float32": np.float32,
+          "float64": np.float64}
+
+
+def _random_message(store, msgtype: str, rng: random.Random, zero: bool):
+    """A rosbags message object with random values (``zero``: zeros, "" and empty)."""
+    def scalar(typ: str):
+        if typ == "string":
+            return "" if zero else "".join(rng.choice("ab€😀") for _ in range(rng.randrange(6)))
+        if zero or typ == "bool":
+            return False if zero else rng.random() < 0.5
+        if typ.startswith("float"):
+            return float(np.array(rng.uniform(-1e3, 1e3), dtype=_NUMPY[typ]))
+        if typ == "byte":
+            return rng.randrange(128)   # rosbags packs byte as int8; ROS 2 (and cdr): uint8
+        info = np.iinfo(_NUMPY[typ])
+        return rng.randint(int(info.min), int(info.max))
+
+    def value(desc):
+        kind, detail = desc
+        if kind == Nodetype.BASE:
+            return scalar(detail[0])
+        if kind == Nodetype.NAME:
+            return message(detail)
+        sub, length = detail
+        if kind == Nodetype.SEQUENCE:
+            length = 0 if zero else rng.randrange(4)
+        items = [value(sub) for _ in range(length)]
+        if sub[0] == Nodetype.BASE and sub[1][0] != "string":
+            return np.array(items, dtype=_NUMPY[sub[1][0]])
+        return items
+
+    def message(t: str):
+        return store.types[t](**{name: value(desc) for name, desc in store.fielddefs[t][1]})
+    return message(msgtype)
+
+
+def test_cdr_of_every_type_is_rosbags_cdr():
+    """Every type of the typestore (ROS 2 Jazzy's and rbe_msgs), with random values (strings
+    of 0-5 characters of 1-4 UTF-8 bytes, sequences of 0-3 items: every alignment case) and
+    all zero: the CDR of the message dict is rosbags' CDR of the message, byte for byte
+    (padding zeros in both), and an empty dict is the all-zero message."""
+    store = bag.typestore()
+    rng = random.Random(7)
+    assert len(store.fielddefs) > 150
+    for msgtype in sorted(store.fielddefs):
+        for zero in (True, False, False, False):
+            obj = _random_message(store, msgtype, rng, zero)
+            expected = bytes(store.serialize_cdr(obj, msgtype))
+            assert cdr.encode(store, msgtype, bag.to_dict(store, msgtype, obj)) == expected, msgtype
+            if zero:
+                assert cdr.encode(store, msgtype, {}) == expected, msgtype
+
+
+def test_cdr_of_a_report_in_both_forms():
+    """A report as plain message dict and in the numpy form of report_to_dict(arrays=True):
+    the same bytes, which rosbags reads back as the plain dict and writes again identically."""
+    store = bag.typestore()
+    r = report()
+    r.held_blocks, r.suggested_holds, r.model, r.dropped_states = ["t"], ["a", "g"], "local 3", 4
+    header = messages.header_dict("wörld", 1_500_000_000_123)
+    plain = messages.report_to_dict(r, header)
+    data = cdr.encode(store, REPORT, plain)
+    assert data[:4] == b"\x00\x01\x00\x00" and data[4:8] == (1500).to_bytes(4, "little")
+    assert cdr.encode(store, REPORT, messages.report_to_dict(r, header, arrays=True)) == data
+    obj = store.deserialize_cdr(data, REPORT)
+    assert bag.to_dict(store, REPORT, obj) == plain
+    assert bytes(store.serialize_cdr(obj, REPORT)) == data
+    empty = messages.report_to_dict(Report(False, Status.INVALID_INPUT, "invalid: ∅"), header)
+    obj = store.deserialize_cdr(cdr.encode(store, REPORT, empty), REPORT)
+    assert bag.to_dict(store, REPORT, obj) == empty and obj.interfaces == []
+
+
+def test_cdr_fills_in_missing_fields_and_casts():
+    store = bag.typestore()
+    partial = {"step_index": "3", "stable": 1, "num_blocks": 2.0, "header": {"frame_id": 5},
+               "interfaces": [{"block_a": "a",
+                               "polygon": [{"x": 1}, {"y": "2.5", "z": np.float32(0.5)}],
+                               "normal_forces": (v for v in (1, "2")),
+                               "kern": np.array([[1, 2, 3]], dtype=np.int64)}],
+               "unstable_blocks": ("a",), "model": None}
+    data = cdr.encode(store, REPORT, partial)
+    got = bag.to_dict(store, REPORT, store.deserialize_cdr(data, REPORT))
+    assert (got["step_index"], got["stable"], got["num_blocks"], got["model"]) == (3, True, 2, "")
+    assert got["header"] == {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": "5"}
+    assert got["unstable_blocks"] == ["a"] and got["held_blocks"] == []
+    (iface,) = got["interfaces"]
+    assert iface["polygon"] == [{"x": 1.0, "y": 0.0, "z": 0.0}, {"x": 0.0, "y": 2.5, "z": 0.5}]
+    assert iface["normal_forces"] == [1.0, 2.0]
+    assert iface["kern"] == [{"x": 1.0, "y": 2.0, "z": 3.0}]
+    assert (iface["block_b"], iface["tangential_forces"], iface["tension"]) == ("", [], False)
+    assert iface["normal"] == {"x": 0.0, "y": 0.0, "z": 0.0}
+    assert cdr.encode(store, REPORT, got) == data           # the complete dict: same bytes
+
+    # arrays of any dtype numpy casts safely, non-contiguous ones too: the bytes of the lists
+    forces = "rbe_msgs/msg/InterfaceForces"
+    rows = np.arange(12.0).reshape(3, 4)[:, :3]
+    lists = {"polygon": [dict(zip("xyz", row)) for row in rows.tolist()],
+             "normal_forces": [1.0, -2.0], "kern": []}
+    assert cdr.encode(store, forces, {"polygon": rows, "normal_forces": np.array([1, -2], np.int8),
+                                      "kern": np.zeros((0, 3), np.float32)}) \
+        == cdr.encode(store, forces, lists)
+    image = "sensor_msgs/msg/CompressedImage"       # uint8[]: bytes, numbers, a float array
+    assert cdr.encode(store, image, {"data": b"\x01\xff"}) \
+        == cdr.encode(store, image, {"data": [1, 255]}) \
+        == cdr.encode(store, image, {"data": np.array([1.0, 255.0])})
+
+    # the typestore has no .msg default values: a missing Quaternion.w is 0 (rclpy's is 1)
+    q = "geometry_msgs/msg/Quaternion"
+    assert store.deserialize_cdr(cdr.encode(store, q, {"x": 0.5}), q).w == 0.0
+    # a string ends at its first NUL, as rclpy's C strings do
+    text = "std_msgs/msg/String"
+    assert cdr.encode(store, text, {"data": "ab\x00c"}) == cdr.encode(store, text, {"data": "ab"})
+
+
+@pytest.mark.parametrize("msgtype, data, error, match", [
+    (REPORT, {"colour": 1}, ValueError,
+     r"^rbe_msgs/msg/StabilityReport: rbe_msgs/msg/StabilityReport has no field 'colour'$"),
+    (REPORT, {"interfaces": [{}, {"polygon": [{"x": 1.0, "w": 0.0}]}]}, ValueError,
+     r"^rbe_msgs/msg/StabilityReport\.interfaces\[1\]\.polygon\[0\]: geometry_msgs/msg/Point "
+     r"has no field 'w'$"),
+    (REPORT, {"interfaces": [{"polygon": np.zeros((4, 2))}]}, ValueError,
+     r"StabilityReport\.interfaces\[0\]\.polygon: expected an \(n, 3\) array of "
+     r"geometry_msgs/msg/Point field values, got shape \(4, 2\)"),
+    (REPORT, {"interfaces": [{"kern": np.zeros(3)}]}, ValueError,
+     r"interfaces\[0\]\.kern: expected an \(n, 3\) array .*got shape \(3,\)"),
+    (REPORT, {"interfaces": [{"normal_forces": np.zeros((2, 2))}]}, ValueError,
+     r"interfaces\[0\]\.normal_forces: expected a 1-D array, got shape \(2, 2\)"),
+    (REPORT, {"interfaces": [{"normal_forces": [1.0, "x"]}]}, ValueError,
+     r"interfaces\[0\]\.normal_forces\[1\]: 'x' is not a valid float64"),
+    (REPORT, {"status": 300}, ValueError, r"StabilityReport\.status: 300 is not a valid uint8"),
+    (REPORT, {"solve_time": [1.0]}, TypeError, r"StabilityReport\.solve_time: \[1\.0\] is not a "
+                                               r"float64"),
+    (REPORT, {"header": [1, 2]}, TypeError,
+     r"StabilityReport\.header: expected a message dict \(std_msgs/msg/Header\), got list"),
+    (REPORT, {"unstable_blocks": "ab"}, TypeError,
+     r"StabilityReport\.unstable_blocks: expected a sequence, got str"),
+    (REPORT, {"interfaces": np.zeros((1, 15))}, TypeError,
+     r"StabilityReport\.interfaces: rbe_msgs/msg/InterfaceForces items cannot be given as an "
+     r"array"),
+    (REPORT, "report", TypeError, r"^rbe_msgs/msg/StabilityReport: expected a message dict "
+                                  r"\(rbe_msgs/msg/StabilityReport\), got str$"),
+    ("shape_msgs/msg/MeshTriangle", {"vertex_indices": [0, 1]}, ValueError,
+     r"MeshTriangle\.vertex_indices: fixed array needs 3 items, got 2"),
+    ("shape_msgs/msg/MeshTriangle", {"vertex_indices": [0, 1, -1]}, ValueError,
+     r"MeshTriangle\.vertex_indices\[2\]: -1 is not a valid uint32"),
+])
+def test_cdr_errors_name_the_field(msgtype, data, error, match):
+    with pytest.raises(error, match=match):
+        cdr.encode(bag.typestore(), msgtype, data)
+
+
+def test_cdr_refuses_unknown_types_and_bag_writes_nothing_bad(tmp_path):
+    with pytest.raises(KeyError, match="unknown message type 'rbe_msgs/msg/Nope'"):
+        cdr.encoder(bag.typestore(), "rbe_msgs/msg/Nope")
+    with bag.BagWriter(tmp_path / "b") as w:
+        w.add_topic("/r", REPORT)
+        with pytest.raises(ValueError, match="has no field 'colour'"):
+            w.write("/r", {"colour": 1}, 1)
+        w.write("/r", {"step_index": 2}, 2)
+    assert [(m.stamp_ns, m.data["step_index"]) for m in bag.read_bag(tmp_path / "b")] == [(2, 2)]

@@ -1,4 +1,4 @@
-"""rclpy messages <-> message dicts, and the two conversions the node needs.
+"""rclpy messages <-> message dicts, and the node's conversion of states to scenes.
 
 A *message dict* (see :mod:`rbe_ros.messages`, the one place that knows the rbe_msgs layout)
 is a nested dict/list shaped like the message. The generic converters below work for any
@@ -30,8 +30,7 @@ import numpy as np
 from rosidl_parser.definition import (AbstractGenericString, AbstractNestedType,
                                       AbstractSequence, BasicType, NamespacedType)
 
-from ..messages import report_to_dict, scene_from_state_dict
-from ..rbe.result import Report
+from ..messages import scene_from_state_dict
 from ..scene import Scene, SceneError, ValidationLimits, check_block_count
 
 _FLOATS = {"float", "double", "long double"}
@@ -276,7 +275,7 @@ def dict_to_message(values: Mapping, msg_type):
     return _plan(msg_type).build(values)
 
 
-# --- the node's conversions -------------------------------------------------------------------
+# --- the node's conversion --------------------------------------------------------------------
 
 def scene_from_msg(msg, *, sequence: bool = True, limits: ValidationLimits | None = None) -> Scene:
     """The validated scene of an rbe_msgs/AssemblyState (raises :class:`SceneError`).
@@ -300,15 +299,4 @@ def scene_from_msg(msg, *, sequence: bool = True, limits: ValidationLimits | Non
     return scene_from_state_dict(values)
 
 
-def report_to_msg(report: Report, header):
-    """An rbe_msgs/StabilityReport of ``report`` with ``header`` (a std_msgs/Header or a
-    header dict)."""
-    from rbe_msgs.msg import StabilityReport
-
-    if not isinstance(header, Mapping):
-        header = message_to_dict(header)
-    return dict_to_message(report_to_dict(report, header, arrays=True), StabilityReport)
-
-
-__all__ = ["message_to_dict", "set_message_fields", "dict_to_message", "scene_from_msg",
-           "report_to_msg"]
+__all__ = ["message_to_dict", "set_message_fields", "dict_to_message", "scene_from_msg"]

@@ -11,6 +11,7 @@ Sources: Kao et al. 2021 (RBE), Sec. 3.1-3.3; Paterson & Zwick 2009 (harmonic st
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -281,6 +282,18 @@ def running_bond_wall(courses: int = 6, bricks_per_course: int = 5, brick=(0.4, 
                                density=density))
             order.append(bid)
     return make_scene(f"running-bond-wall({courses}x{bricks_per_course})", blocks, sequence=order)
+
+
+def side_by_side(scene: Scene, copies: int, spacing: float) -> Scene:
+    """``copies`` of ``scene`` along x, ``spacing`` m apart, ids prefixed "c{i}_"; built one
+    after the other, each in ``scene``'s order. Nothing joins them but the supports: a scene
+    of independent parts (e.g. to see a per-step check re-solve only the part it touches)."""
+    def copy(i: int):
+        return [replace(b, id=f"c{i}_{b.id}", position=np.asarray(b.position) + [i * spacing, 0, 0])
+                for b in scene.blocks]
+    return make_scene(f"{copies} x {scene.name}", [b for i in range(copies) for b in copy(i)],
+                      scene.gravity, sequence=[f"c{i}_{bid}" for i in range(copies)
+                                               for bid in scene.sequence])
 
 
 def dome_joint_ring(block_a: str, block_b: str) -> tuple[str, str]:

@@ -6,7 +6,6 @@ from __future__ import annotations
 import collections
 from dataclasses import replace
 
-import numpy as np
 import pytest
 
 from helpers import equilibrium_residual
@@ -71,13 +70,7 @@ def test_a_second_dome_beside_the_first_is_checked_as_its_own_component(runs):
     so the second one's steps re-solve only its own blocks (never the full problem) and have
     the verdicts of the dome built alone."""
     alone, _ = runs
-
-    def placed(tag: str, dx: float):
-        return [replace(b, id=f"{tag}_{b.id}", position=np.asarray(b.position) + [dx, 0.0, 0.0])
-                for b in DOME.blocks]
-
-    two = make_scene("two domes", placed("a", 0.0) + placed("b", 12.0),
-                     sequence=[f"{t}_{i}" for t in "ab" for i in DOME.sequence])
+    two = gen.side_by_side(DOME, 2, 12.0)
     reports = check_sequence(two, OPTIONS)
     second = reports[len(DOME.sequence):]
     assert alone[-1].stable

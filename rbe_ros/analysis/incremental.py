@@ -10,15 +10,14 @@ without the full problem:
 * relaxation (necessary): solve R with every neighbour outside it made rigid (a support).
   Infeasible: the whole assembly is infeasible too, so it does not stand (model "relaxed N").
 
-R starts as the new blocks, their free neighbours and a shortest chain of contacts down to a
-support, and grows by layers of neighbours until one of the two answers, up to
-MAX_LOCAL_SHARE of the free blocks. Then the assembly is decomposed: free blocks joined by
-contacts form components (supports cut them apart), whose problems share no variable and no
-constraint. The components holding new blocks are solved in full, the others keep their
-forces (they stood at the last stable step and nothing about them changed): exact both ways,
-"local N" when they stand, "relaxed N" when not. Only when the new blocks touch every
-component (and always below MIN_LOCAL_BLOCKS free blocks) is the full problem solved. The
-verdict (stable or not) is therefore always the full problem's; a local report's forces are
+Free blocks joined by contacts form components (supports cut them apart), whose problems
+share no variable and no constraint. R starts as the new blocks, their free neighbours and a
+shortest chain of contacts down to a support, and grows by layers of neighbours until one of
+the two answers, up to MAX_LOCAL_SHARE of the components holding the new blocks (no regions
+when those have fewer than MIN_LOCAL_BLOCKS free blocks). Then those components are solved in
+full and the others keep their forces (they stood at the last stable step and nothing about
+them changed): exact both ways, "local N" when they stand, "relaxed N" when not. Only when
+the new blocks' components hold every free block is the full problem solved. The verdict (stable or not) is therefore always the full problem's; a local report's forces are
 one admissible state, not the full QP optimum, and a relaxed report's interfaces are those of
 the region only.
 """
@@ -38,12 +37,12 @@ from ..rbe.solver import solve
 from .assembly import Assembly
 from .check import CheckOptions, check, infeasible_report
 
-#: Local regions larger than this share of the free blocks go to the full problem: every
-#: failed local attempt costs two solves, and on the dome sequence 0.3 took about 15% less
-#: time than 0.5 (same verdicts).
+#: Local regions larger than this share of the free blocks joined to the new ones (their
+#: component) go to the component's full problem: every failed local attempt costs two
+#: solves, and on the dome sequence 0.3 took about 15% less time than 0.5 (same verdicts).
 MAX_LOCAL_SHARE = 0.3
-#: Below this many free blocks the full problem is as cheap as the local ones, and its
-#: report (all interfaces, the QP optimum) is the more useful: no local models.
+#: Below this many free blocks in the component its full problem is as cheap as the local
+#: ones, and its report (all its interfaces, the QP optimum) is the more useful: no regions.
 MIN_LOCAL_BLOCKS = 20
 
 
@@ -92,8 +91,19 @@ class StepChecker:
     def _local(self, assembly: Assembly) -> Report | None:
         graph = _Graph(assembly)
         new = [k for k, b in enumerate(assembly.blocks) if b.id not in self._present]
-        if not new or len(graph.free) < MIN_LOCAL_BLOCKS:
+        if not new:
             return None
+        component = graph.component(set(new) | graph.free_neighbours(new))
+        report = self._region(assembly, graph, new, component) \
+            if len(component) >= MIN_LOCAL_BLOCKS else None
+        if report is None and len(component) < len(graph.free):
+            report = self._component(assembly, graph, component)
+        return report
+
+    def _region(self, assembly: Assembly, graph: "_Graph", new: list[int],
+                component: set[int]) -> Report | None:
+        """The report of the first region around ``new`` that settles the step, up to
+        MAX_LOCAL_SHARE of ``component`` (the free blocks joined to the new ones)."""
         # after a failure the next step tends to fail too: then try the cheap proofs of that
         # first, the block placed now on rigid neighbours (one block: a tiny problem), then
         # every block placed since the last stable step; after a success, the proof of stability
@@ -103,17 +113,14 @@ class StepChecker:
                 report = self._relaxed(assembly, graph, region)
                 if report is not None:
                     return report
-        component = graph.component(set(new) | graph.free_neighbours(new))
         region = set(new) | graph.free_neighbours(new) | graph.path_to_support(new)
-        limit = MAX_LOCAL_SHARE * len(graph.free)
+        limit = MAX_LOCAL_SHARE * len(component)
         while len(region) <= limit and not component <= region:
             report = (self._restricted(assembly, graph, region)
                       or self._relaxed(assembly, graph, region))
             if report is not None:
                 return report
             region = region | graph.free_neighbours(region)
-        if len(component) < len(graph.free):
-            return self._component(assembly, graph, component)
         return None
 
     def _restricted(self, assembly: Assembly, graph: "_Graph", region: set[int]) -> Report | None:

@@ -59,23 +59,34 @@ def validate_scene(scene: "Scene", limits: ValidationLimits = ValidationLimits()
     if not limits.min_gravity <= g <= limits.max_gravity:
         raise SceneError(f"|gravity| {g:.6g} m/s^2 is outside the sane range "
                          f"[{limits.min_gravity:g}, {limits.max_gravity:g}] m/s^2")
-    for b in scene.blocks:
-        where = f"block {b.id!r}"
-        if len(b.vertices) > limits.max_vertices:
-            raise SceneError(f"{where}: {len(b.vertices)} vertices, more than the limit of "
-                             f"{limits.max_vertices}")
-        extent = np.ptp(b.vertices, axis=0)
-        if extent.min() < limits.min_size or extent.max() > limits.max_size:
-            raise SceneError(f"{where}: size {' x '.join(f'{e:.6g}' for e in extent)} m is "
-                             f"outside the sane range [{limits.min_size:g}, {limits.max_size:g}]"
-                             " m per edge")
-        distance = float(np.linalg.norm(b.position))
-        if distance > limits.max_distance:
-            raise SceneError(f"{where}: position {distance:.6g} m from the origin, farther "
-                             f"than the limit of {limits.max_distance:g} m")
-        if b.density > 0 and not limits.min_density <= b.density <= limits.max_density:
-            raise SceneError(f"{where}: density {b.density:.6g} kg/m^3 is outside the sane "
-                             f"range [{limits.min_density:g}, {limits.max_density:g}] kg/m^3")
+    # all blocks at once; then the first block at fault is named
+    counts = np.array([len(b.vertices) for b in scene.blocks])
+    starts = np.cumsum(counts) - counts
+    vertices = np.concatenate([b.vertices for b in scene.blocks])
+    extents = np.maximum.reduceat(vertices, starts) - np.minimum.reduceat(vertices, starts)
+    distances = np.linalg.norm([b.position for b in scene.blocks], axis=1)
+    densities = np.array([b.density for b in scene.blocks])
+    bad = ((counts > limits.max_vertices) | (extents.min(axis=1) < limits.min_size)
+           | (extents.max(axis=1) > limits.max_size) | (distances > limits.max_distance)
+           | ((densities > 0) & ((densities < limits.min_density)
+                                 | (densities > limits.max_density))))
+    if not bad.any():
+        return
+    k = int(np.flatnonzero(bad)[0])
+    b, extent, distance = scene.blocks[k], extents[k], float(distances[k])
+    where = f"block {b.id!r}"
+    if len(b.vertices) > limits.max_vertices:
+        raise SceneError(f"{where}: {len(b.vertices)} vertices, more than the limit of "
+                         f"{limits.max_vertices}")
+    if extent.min() < limits.min_size or extent.max() > limits.max_size:
+        raise SceneError(f"{where}: size {' x '.join(f'{e:.6g}' for e in extent)} m is "
+                         f"outside the sane range [{limits.min_size:g}, {limits.max_size:g}]"
+                         " m per edge")
+    if distance > limits.max_distance:
+        raise SceneError(f"{where}: position {distance:.6g} m from the origin, farther "
+                         f"than the limit of {limits.max_distance:g} m")
+    raise SceneError(f"{where}: density {b.density:.6g} kg/m^3 is outside the sane "
+                     f"range [{limits.min_density:g}, {limits.max_density:g}] kg/m^3")
 
 
 @dataclass(frozen=True)

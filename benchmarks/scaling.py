@@ -115,7 +115,7 @@ def main() -> int:
     args = parser.parse_args()
     sizes = ([(10, 10), (20, 15)] if args.quick else
              [(10, 10), (14, 14), (20, 20), (28, 25), (40, 25)])
-    rows = walls(sizes, 1 if args.quick else 3)
+    rows = walls(sizes, 1 if args.quick else 5)
     n = np.array([r[0] for r in rows], dtype=float)
     t = np.array([r[3] for r in rows])
     slope = float(np.polyfit(np.log(n), np.log(t), 1)[0]) if len(rows) > 1 else float("nan")

@@ -151,7 +151,8 @@ class StepChecker:
         if any(r.tension or r.friction_exceeded for r in results):
             return None
         return self._kept_elsewhere(assembly, local, results, len(region),
-                                    max(float(solution.forces[1].max(initial=0.0)), 0.0))
+                                    max(float(solution.forces[1].max(initial=0.0)), 0.0),
+                                    f"{_blocks(len(region))} around the new one re-solved")
 
     def _component(self, assembly: Assembly, graph: "_Graph", component: set[int]) -> Report | None:
         """The exact verdict from the components holding the new blocks, solved in full; no
@@ -159,17 +160,18 @@ class StepChecker:
         supports = {k for k in graph.neighbours(component) if assembly.blocks[k].support}
         local = assembly.subset({assembly.blocks[k].id for k in component | supports})
         report = check(local, self.options)
+        joined = f"{_blocks(len(component))} joined to the new one by contacts"
         if report.stable:
             return self._kept_elsewhere(assembly, local, report.interfaces, len(component),
-                                        report.max_tension)
-        return replace(report, message=f"{report.message} [the {len(component)} blocks joined"
-                                       f" to the new ones by contacts]",
+                                        report.max_tension, f"the {joined} solved in full")
+        return replace(report, message=f"{report.message} [{joined}]",
                        model=f"relaxed {len(component)}")
 
     def _kept_elsewhere(self, assembly: Assembly, local: Assembly, results, size: int,
-                        max_tension: float) -> Report | None:
+                        max_tension: float, how: str) -> Report | None:
         """Stable report of the forces ``results`` on the interfaces of ``local`` (``size``
-        blocks re-solved) and the kept ones everywhere else (None if one is not kept)."""
+        blocks re-solved, ``how`` says which) and the kept ones everywhere else (None if one
+        is not kept)."""
         solved = {_key(local, it): r for it, r in zip(local.interfaces, results)}
         merged = [solved.get(key) or self._results.get(key)
                   for key in (_key(assembly, it) for it in assembly.interfaces)]
@@ -177,8 +179,7 @@ class StepChecker:
             return None
         worst = max((r.friction_ratio for r in merged), default=0.0)
         return Report(True, Status.STABLE,
-                      f"stable: {size} blocks around the new one re-solved, the forces"
-                      f" elsewhere kept; worst |V|/N {worst:.3f} (mu {self.options.solve.mu:.3g})",
+                      f"stable: {how}, the forces elsewhere kept; worst |V|/N {worst:.3f} (mu {self.options.solve.mu:.3g})",
                       max_tension, worst, interfaces=merged, model=f"local {size}")
 
     def _relaxed(self, assembly: Assembly, graph: "_Graph", region: set[int]) -> Report | None:
@@ -191,6 +192,10 @@ class StepChecker:
             return None
         return replace(report, message=f"{report.message} [even with the blocks around it rigid]",
                        model=f"relaxed {len(region)}")
+
+
+def _blocks(n: int) -> str:
+    return f"{n} block" if n == 1 else f"{n} blocks"
 
 
 class _Graph:

@@ -11,8 +11,8 @@ from scipy.spatial.transform import Rotation
 from rbe_ros import generators as gen
 from rbe_ros.analysis.assembly import Assembly
 from rbe_ros.geometry.block import pose_block, pose_blocks
-from rbe_ros.geometry.contacts import (ContactOptions, Interface, _clip_convex, _rings,
-                                       detect_interfaces)
+from rbe_ros.geometry.clip import clip_convex, padded_rings
+from rbe_ros.geometry.contacts import ContactOptions, Interface, detect_interfaces
 from rbe_ros.geometry.kern import kern
 from rbe_ros.geometry.polygon import drop_collinear_rings, ring_widths
 from rbe_ros.scene import box_block, make_block, make_scene
@@ -185,16 +185,16 @@ def test_cached_kerns_match_kerns_computed_afresh():
 # ---------------------------------------------------------------- batched convex clipping
 
 def _clip(pairs, eps=1e-12):
-    """_clip_convex on (polygon a, polygon b) vertex lists, read as detect_interfaces reads
-    face outlines (shapely coordinates through _rings: any orientation, any vertex counts,
-    one batch): {pair index: (ring, area, centroid)} for the pairs that overlap."""
+    """clip_convex on (polygon a, polygon b) vertex lists, read as detect_interfaces reads
+    face outlines (shapely coordinates through padded_rings: any orientation, any vertex
+    counts, one batch): {pair index: (ring, area, centroid)} for the pairs that overlap."""
     outlines = [np.array([shapely.Polygon(a) for a, _ in pairs]),
                 np.array([shapely.Polygon(b) for _, b in pairs])]
     rows, size = np.arange(len(pairs)), np.ones(len(pairs))
     (ax, ay, na, convex_a), (bx, by, nb, convex_b) = (
-        _rings(*shapely.get_coordinates(o, return_index=True), rows, size) for o in outlines)
+        padded_rings(*shapely.get_coordinates(o, return_index=True), rows, size) for o in outlines)
     assert convex_a.all() and convex_b.all()
-    ring, counts, of, area, centroid = _clip_convex(ax, ay, na, bx, by, nb,
+    ring, counts, of, area, centroid = clip_convex(ax, ay, na, bx, by, nb,
                                                     np.full(len(pairs), eps))
     rings = np.split(ring, np.cumsum(counts)[:-1])
     return {int(k): (r, a, c) for k, r, a, c in zip(of, rings, area, centroid)}

@@ -17,9 +17,10 @@ the two answers, up to MAX_LOCAL_SHARE of the components holding the new blocks 
 when those have fewer than MIN_LOCAL_BLOCKS free blocks). Then those components are solved in
 full and the others keep their forces (they stood at the last stable step and nothing about
 them changed): exact both ways, "local N" when they stand, "relaxed N" when not. Only when
-the new blocks' components hold every free block is the full problem solved. The verdict (stable or not) is therefore always the full problem's; a local report's forces are
-one admissible state, not the full QP optimum, and a relaxed report's interfaces are those of
-the region only.
+the new blocks' components hold every free block is the full problem solved. The verdict
+(stable or not) is therefore always the full problem's; a local report's forces are one
+admissible state, not the full QP optimum, and a relaxed report's interfaces are those of the
+region only.
 """
 from __future__ import annotations
 
@@ -179,7 +180,8 @@ class StepChecker:
             return None
         worst = max((r.friction_ratio for r in merged), default=0.0)
         return Report(True, Status.STABLE,
-                      f"stable: {how}, the forces elsewhere kept; worst |V|/N {worst:.3f} (mu {self.options.solve.mu:.3g})",
+                      f"stable: {how}, the forces elsewhere kept; worst |V|/N {worst:.3f}"
+                      f" (mu {self.options.solve.mu:.3g})",
                       max_tension, worst, interfaces=merged, model=f"local {size}")
 
     def _relaxed(self, assembly: Assembly, graph: "_Graph", region: set[int]) -> Report | None:

@@ -161,11 +161,12 @@ class StepChecker:
         supports = {k for k in graph.neighbours(component) if assembly.blocks[k].support}
         local = assembly.subset({assembly.blocks[k].id for k in component | supports})
         report = check(local, self.options)
-        joined = f"{_blocks(len(component))} joined to the new one by contacts"
+        which = (f"the {len(component)} blocks joined to the new one by contacts"
+                 if len(component) > 1 else "the new block alone (it touches no other free block)")
         if report.stable:
             return self._kept_elsewhere(assembly, local, report.interfaces, len(component),
-                                        report.max_tension, f"the {joined} solved in full")
-        return replace(report, message=f"{report.message} [{joined}]",
+                                        report.max_tension, f"{which} solved in full")
+        return replace(report, message=f"{report.message} [{which}, solved in full]",
                        model=f"relaxed {len(component)}")
 
     def _kept_elsewhere(self, assembly: Assembly, local: Assembly, results, size: int,

@@ -126,8 +126,7 @@ class StepChecker:
 
     def _restricted(self, assembly: Assembly, graph: "_Graph", region: set[int]) -> Report | None:
         """Stable report if R alone, loaded by the kept forces on its boundary, stands."""
-        supports = {k for k in graph.neighbours(region) if assembly.blocks[k].support}
-        ids = {assembly.blocks[k].id for k in region | supports}
+        ids = {assembly.blocks[k].id for k in region | graph.support_neighbours(region)}
         local = assembly.subset(ids)
         index = {b.id: k for k, b in enumerate(local.blocks)}
         wrenches: dict[int, np.ndarray] = {}
@@ -157,10 +156,13 @@ class StepChecker:
 
     def _component(self, assembly: Assembly, graph: "_Graph", component: set[int]) -> Report | None:
         """The exact verdict from the components holding the new blocks, solved in full; no
-        contact joins them to the other components, whose kept forces stay admissible."""
-        supports = {k for k in graph.neighbours(component) if assembly.blocks[k].support}
-        local = assembly.subset({assembly.blocks[k].id for k in component | supports})
+        contact joins them to the other components, whose kept forces stay admissible. None
+        if the solver failed (the full problem is tried then)."""
+        local = assembly.subset({assembly.blocks[k].id
+                                 for k in component | graph.support_neighbours(component)})
         report = check(local, self.options)
+        if report.status == Status.SOLVER_FAILED:
+            return None
         which = (f"the {len(component)} blocks joined to the new one by contacts"
                  if len(component) > 1 else "the new block alone (it touches no other free block)")
         if report.stable:
@@ -217,6 +219,9 @@ class _Graph:
 
     def free_neighbours(self, region) -> set[int]:
         return {n for n in self.neighbours(region) if not self.blocks[n].support}
+
+    def support_neighbours(self, region) -> set[int]:
+        return {n for n in self.neighbours(region) if self.blocks[n].support}
 
     def component(self, start) -> set[int]:
         """The free blocks of ``start`` and those joined to them by chains of contacts

@@ -7,18 +7,14 @@ every generated class carries), like ``rosidl_runtime_py.message_to_ordereddict`
 ``set_message_fields`` do; ``rosidl_runtime_py`` itself is not published as a PyPI wheel, so
 this module does not depend on it.
 
-Speed: a report of a 1000-block wall holds ~50k points, so the walk is planned once per
-message class (per field a getter, a converter and a setter, cached) rather than decided per
-value, and the bulk takes fast paths:
-
-* a message whose fields are all floats (``geometry_msgs/Point``, ``Vector3``, ``Quaternion``,
-  ``std_msgs/ColorRGBA``) is made with one constructor call from a dict with exactly its
-  keys (anything else takes the general path, with its errors and casts); a sequence of
-  them may also be given as an ``(n, k)`` numpy array of their field values in field order
-  (no dict per point; ``rbe_ros.messages.report_to_dict(..., arrays=True)`` gives that
-  form);
-* a ``float64[]``/``float32[]`` sequence is handed to the setter as an ``array.array``, what
-  rclpy stores anyway (from a numpy array: its bytes).
+The walk is planned once per message class (per field a getter, a converter and a setter,
+cached) rather than decided per value. Bulk data may be given as numpy arrays: a sequence of
+messages whose fields are all floats (``geometry_msgs/Point``, ``Vector3``, ``Quaternion``,
+``std_msgs/ColorRGBA``) as an ``(n, k)`` array of their field values in field order
+(``rbe_ros.messages.report_to_dict(..., arrays=True)`` gives that form), and a
+``float64[]``/``float32[]`` sequence as a 1-D array, handed to the setter as the
+``array.array`` rclpy stores anyway. (The node's reports do not come this way: they are
+encoded to CDR directly, :mod:`rbe_ros.cdr`.)
 """
 from __future__ import annotations
 
@@ -87,27 +83,27 @@ def _float_fields(cls) -> tuple[str, ...] | None:
 class _Plan:
     """How to read and write the fields of one message class, worked out once: per field a
     getter (message -> dict value), a converter (dict value -> field value) and a setter
-    (message, dict value -> None; nested messages are set in place), and ``build`` (message
-    dict -> new message, one constructor call)."""
+    (message, dict value -> None; nested messages are set in place); ``build`` makes a new
+    message from a message dict in one constructor call, ``from_rows`` (all-float types only)
+    the messages of rows of field values."""
 
-    __slots__ = ("cls", "getters", "converters", "setters", "build", "from_rows")
+    __slots__ = ("cls", "getters", "converters", "setters", "from_rows")
 
     def __init__(self, cls):
         self.cls = cls
         self.getters: dict = {}
         self.converters: dict = {}
         self.setters: dict = {}
-        self.build = self._build
-        self.from_rows = None       # (n, k) float array -> n messages; all-float types only
+        self.from_rows = None
         for name, typ in _fields(cls):      # nested types: their plans are made on first use
             self.getters[name] = _getter(name, typ)
             convert = self.converters[name] = _converter(typ)
             self.setters[name] = _setter(name, typ, convert)
         floats = _float_fields(cls)
         if floats is not None:
-            self.build, self.from_rows = _float_builders(cls, floats, self._build)
+            self.from_rows = lambda rows: [cls(**dict(zip(floats, row))) for row in rows]
 
-    def _build(self, values):
+    def build(self, values):
         if not isinstance(values, Mapping):
             raise TypeError(f"{self.cls.__name__}: expected a message dict, "
                             f"got {type(values).__name__}")
@@ -142,29 +138,6 @@ def _lazy_plan(t: NamespacedType):
             found = _plan(_message_class(t))
         return found
     return plan_of
-
-
-def _float_builders(cls, names: tuple[str, ...], general):
-    """``build`` and ``from_rows`` of a message of float fields only. ``build``: one
-    constructor call with every field from a dict that has exactly those keys, else the
-    general path (its errors and casts). ``from_rows``: the messages of rows of field values
-    (lists of Python floats)."""
-    args = ", ".join(f"{n}=float(values[{n!r}])" for n in names)
-    row = ", ".join(f"v{i}" for i in range(len(names)))
-    kwargs = ", ".join(f"{n}=v{i}" for i, n in enumerate(names))
-    source = (f"def build(values):\n"
-              f"    try:\n"
-              f"        if len(values) == {len(names)}:\n"
-              f"            return cls({args})\n"
-              f"    except Exception:\n"
-              f"        pass\n"
-              f"    return general(values)\n"
-              f"\n"
-              f"def from_rows(rows):\n"
-              f"    return [cls({kwargs}) for {row}, in rows]\n")
-    scope = {"cls": cls, "general": general}
-    exec(source, scope)             # noqa: S102 - field names are rosidl identifiers
-    return scope["build"], scope["from_rows"]
 
 
 def _float_rows(values: np.ndarray, cls) -> list:

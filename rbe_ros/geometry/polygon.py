@@ -15,16 +15,6 @@ def cross(a, b) -> np.ndarray:
                      a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]), axis=-1)
 
 
-def newell_normal(points: np.ndarray) -> np.ndarray:
-    """Unit normal of a (possibly non-convex) planar polygon, oriented by its winding."""
-    p, q = points, np.roll(points, -1, axis=0)
-    n = np.array([np.sum((p[:, 1] - q[:, 1]) * (p[:, 2] + q[:, 2])),
-                  np.sum((p[:, 2] - q[:, 2]) * (p[:, 0] + q[:, 0])),
-                  np.sum((p[:, 0] - q[:, 0]) * (p[:, 1] + q[:, 1]))])
-    length = np.linalg.norm(n)
-    return n / length if length > 0 else n
-
-
 def tangent_basis(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two unit vectors u, v with (u, v, normal) right-handed; deterministic for a given normal."""
     helper = np.array([1.0, 0.0, 0.0]) if abs(normal[0]) < 0.9 else np.array([0.0, 1.0, 0.0])

@@ -37,7 +37,8 @@ MUTMUT = Path(sys.executable).with_name("mutmut")
 #: seconds in all, so that a surviving mutant costs little.
 FAST_TESTS = ("test_mass_properties.py", "test_oracles.py", "test_rbe_method.py",
               "test_check.py", "test_solver_results.py", "test_contacts.py",
-              "test_paper.py", "test_generators.py", "test_properties.py")
+              "test_validation.py", "test_holds.py", "test_paper.py", "test_generators.py",
+              "test_properties.py", "test_core_units.py")
 
 
 def targets() -> list[str]:
@@ -170,7 +171,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--module", action="append", help="only this module (repeatable)")
     parser.add_argument("--report", action="store_true", help="only write docs/MUTATION.md")
-    parser.add_argument("--children", type=int, default=1, help="parallel mutant runs")
+    parser.add_argument("--children", type=int, default=2, help="parallel mutant runs")
     args = parser.parse_args()
     modules = args.module or targets()
     if not args.report:

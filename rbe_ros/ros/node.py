@@ -39,7 +39,6 @@ import time
 from pathlib import Path
 
 import rclpy
-from builtin_interfaces.msg import Time
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType, SetParametersResult)
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
@@ -60,13 +59,13 @@ from ..analysis.check import CheckOptions, HoldSearch, check_scene
 from ..analysis.sequence import check_sequence, sequence_steps
 from ..bag import BagWriter, typestore
 from ..geometry.contacts import ContactOptions
+from ..markers import MARKER_TYPE, state_report_markers
 from ..messages import report_to_dict
 from ..rbe.cones import CONES, FRICTION_MODELS
 from ..rbe.result import Report, Status
 from ..rbe.solver import OBJECTIVES, SolveOptions
 from ..scene import Scene, SceneError, ValidationLimits
 from .convert import message_to_dict, scene_from_msg
-from .markers import report_markers
 
 NODE_NAME = "rbe_node"
 
@@ -138,6 +137,9 @@ PARAMETERS = {
                          "a timestamp suffix", read_only=True),
     "frame_id": _string("world", "frame of reports and markers when a received state has an "
                         "empty header frame_id"),
+    "record_markers": (True, ParameterDescriptor(
+        type=ParameterType.PARAMETER_BOOL, description="with mcap_path: record the markers of "
+        "every report too (false: a lean log of states and reports)")),
     "max_blocks": _integer(ValidationLimits().max_blocks, "largest number of blocks of a state; "
                            "a larger one gets an INVALID_INPUT report", 1, 1_000_000),
     "check_time_limit": _double(0.0, "time limit in s of each solver call of a check (a check "
@@ -203,6 +205,7 @@ class RbeNode(Node):
         # reports go out as CDR bytes made from their message dicts (rbe_ros.cdr): ~6x faster
         # than building the rclpy message (an object per Point) and serialising it
         self._encode_report = cdr.encoder(typestore(), "rbe_msgs/msg/StabilityReport")
+        self._encode_markers = cdr.encoder(typestore(), MARKER_TYPE)
         self._report_pub = self.create_publisher(StabilityReport, "~/report", LATCHED_QOS)
         self._marker_pub = self.create_publisher(MarkerArray, "~/markers", LATCHED_QOS)
         # raw: the callback gets the CDR bytes; a state is converted to a message only when
@@ -221,6 +224,7 @@ class RbeNode(Node):
 
         self.state_topic = self._state_sub.topic_name
         self.report_topic = self._report_pub.topic_name
+        self.marker_topic = self._marker_pub.topic_name
         self._open_bag()
         self._worker = threading.Thread(target=self._work, name="rbe_state_worker", daemon=True)
         self._worker.start()
@@ -293,6 +297,7 @@ class RbeNode(Node):
         self._bag.add_topic(self.state_topic, "rbe_msgs/msg/AssemblyState")
         self._bag.add_topic(self.report_topic, "rbe_msgs/msg/StabilityReport",
                             transient_local=True)
+        self._bag.add_topic(self.marker_topic, MARKER_TYPE, transient_local=True)
         self.bag_path = path
         self.get_logger().info(f"recording states and reports to {path}")
 
@@ -356,16 +361,23 @@ class RbeNode(Node):
             header["frame_id"] = self.get_parameter("frame_id").value
         return header
 
-    def _publish(self, scene: Scene | None, report: Report, header: dict) -> bytes:
+    def _publish(self, scene: Scene | None, report: Report, header: dict,
+                 state: AssemblyState | None = None, error: Exception | None = None) -> bytes:
         """Record, then publish ``report`` and its markers; returns the report's CDR bytes
         (``deserialize_message(data, StabilityReport)`` where a message is needed). Recorded
-        first, so that a report anyone received is in the bag even if the node is killed."""
+        first, so that a report anyone received is in the bag even if the node is killed.
+        ``state`` and ``error``: the state that could not be checked and why (its markers
+        show the blocks at fault)."""
         report.dropped_states = self._dropped
         data = self._encode_report(report_to_dict(report, header, arrays=True))
         self._record(self.report_topic, data)
         self._report_pub.publish(data)
-        self._marker_pub.publish(report_markers(scene, report, header["frame_id"],
-                                                Time(**header["stamp"])))
+        markers = self._encode_markers(state_report_markers(
+            self._drawable(state) if scene is None else {}, report, header, scene,
+            getattr(error, "blocks", ())))
+        if self.get_parameter("record_markers").value:
+            self._record(self.marker_topic, markers)
+        self._marker_pub.publish(markers)
         where = f" step {report.step_index} ({report.block_placed})" \
             if report.step_index >= 0 else ""
         text = f"{header['frame_id']}{where}: {report.status.name}: {report.message}"
@@ -376,6 +388,12 @@ class RbeNode(Node):
         else:
             self.get_logger().info(text)
         return data
+
+    def _drawable(self, state: AssemblyState | None) -> dict:
+        """The message dict of an unchecked ``state`` to draw, if within the block limit."""
+        if state is None or len(state.blocks) > self.limits().max_blocks:
+            return {}
+        return message_to_dict(state)
 
     def _error_report(self, exc: Exception) -> Report:
         if isinstance(exc, SceneError):
@@ -393,7 +411,7 @@ class RbeNode(Node):
             scene = scene_from_msg(state, sequence=False, limits=options.limits)
             report = check_scene(scene, options)
         except Exception as exc:
-            report = self._error_report(exc)
+            return self._publish(scene, self._error_report(exc), header, state, exc)
         return self._publish(scene, report, header)
 
     def _on_state(self, data: bytes) -> None:
@@ -446,7 +464,7 @@ class RbeNode(Node):
                                on_step=lambda report, _total: self._publish(scene, report, header),
                                cancelled=lambda: self._closing)
             except Exception as exc:
-                self._publish(scene, self._error_report(exc), header)
+                self._publish(scene, self._error_report(exc), header, state, exc)
         except Exception as exc:  # publishing itself failed (e.g. during shutdown)
             self.get_logger().error(f"state not handled: {type(exc).__name__}: {exc}")
 
@@ -487,7 +505,8 @@ class RbeNode(Node):
             finished = len(steps) == total
         except Exception as exc:
             try:
-                data = self._publish(scene, self._error_report(exc), header)
+                data = self._publish(scene, self._error_report(exc), header,
+                                     goal_handle.request.assembly, exc)
                 reports.append(deserialize_message(data, StabilityReport))
             except Exception as exc2:
                 self.get_logger().error(f"goal not handled: {type(exc2).__name__}: {exc2}")

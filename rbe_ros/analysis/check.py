@@ -63,8 +63,10 @@ class CheckOptions:
         return self.solve.mu if self.mu_threshold is None else self.mu_threshold
 
 
-def check_scene(scene: Scene, options: CheckOptions = CheckOptions()) -> Report:
-    """Check ``scene`` as a whole (contact detection included in the reported time).
+def check_scene(scene: Scene, options: CheckOptions = CheckOptions(),
+                assembly: Assembly | None = None) -> Report:
+    """Check ``scene`` as a whole (contact detection included in the reported time);
+    ``assembly``: its blocks on interfaces given instead of detected (a COMPAS file's).
 
     With holds, the assembly is the state after the last step: supports whose hold ends are
     taken away, free blocks held to the end are supports (``held_blocks``). An unstable
@@ -74,7 +76,7 @@ def check_scene(scene: Scene, options: CheckOptions = CheckOptions()) -> Report:
     from .sequence import final_state
 
     start = time.perf_counter()
-    assembly = validated_assembly(scene, options.limits, options.contact)
+    assembly = validated_assembly(scene, options.limits, options.contact, assembly)
     held: tuple[str, ...] = ()
     if scene.holds:
         present, held = final_state(scene)

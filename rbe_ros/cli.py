@@ -33,13 +33,34 @@ from .io.messages import header_dict, report_to_dict, state_to_dict
 from .io.replay import (REPORT_TOPIC, STATE_TOPIC, Run, default_output, offline_reports,
                         replay_bag, write_runs)
 from .io.report import format_table, json_number, report_json
-from .io.scene_json import load_scene, scene_to_dict
+from .io.scene_json import scene_to_dict
 from .rbe.cones import CONES
 from .rbe.solver import SolveOptions
+from .io.inputs import load_design
+from .io.poses import load_poses, scene_at_poses
+from .io.stored_interfaces import compare_interfaces
 from .scene import Scene, SceneError, ValidationLimits
 
 
+def _input_arguments(parser: argparse.ArgumentParser) -> None:
+    i = parser.add_argument_group("input (the scene: a scene JSON or a COMPAS Assembly JSON, "
+                                  "either gzipped as *.gz)")
+    i.add_argument("--poses", metavar="POSES.json",
+                   help='measured poses {"poses": {ID: {"position": [x, y, z], "orientation": '
+                   '[x, y, z, w]}}}: the design\'s supports and the measured blocks at their '
+                   'measured poses are checked; blocks not measured are not placed')
+    i.add_argument("--density", type=float, default=None, metavar="KG_M3",
+                   help="density of the blocks of a COMPAS file that gives them none "
+                   "(default 2500)")
+    i.add_argument("--interfaces", choices=("detected", "stored", "compare"),
+                   default="detected", help="detected (default); stored: check on the "
+                   "interfaces a COMPAS file stores, as given; compare: list how the detected "
+                   "ones differ from the stored ones (missing, extra, area), then check on the "
+                   "detected ones")
+
+
 def _solver_arguments(parser: argparse.ArgumentParser) -> None:
+    _input_arguments(parser)
     g = parser.add_argument_group("RBE model")
     g.add_argument("--mu", type=float, default=0.6, help="friction coefficient (default 0.6)")
     g.add_argument("--mu-threshold", type=float, default=None,
@@ -107,10 +128,31 @@ def _options(args) -> CheckOptions:
                         full_solve=args.full_solve, contact=contact)
 
 
+def _scene(args) -> tuple[Scene, Assembly | None]:
+    """The scene of ``args.scene`` (``--poses`` applied) and, with ``--interfaces stored``,
+    its assembly on the stored interfaces (else None: detected in the check). With
+    ``--interfaces compare`` the differences are printed first (to stderr after --json)."""
+    if args.poses and args.interfaces != "detected":
+        raise ValueError("--interfaces stored and compare are of the blocks as the file has "
+                         "them, not at measured poses (--poses)")
+    scene, stored = load_design(args.scene, args.density, stored=args.interfaces != "detected")
+    if args.poses:
+        scene = scene_at_poses(scene, load_poses(args.poses))
+    if args.interfaces == "compare":
+        diff = compare_interfaces(Assembly.from_scene(scene, _options(args).contact), stored)
+        args.interfaces_compare = diff
+        as_json = getattr(args, "json", False)
+        if not (as_json and args.command == "check"):
+            print("\n".join(diff.lines()), file=sys.stderr if as_json else sys.stdout)
+        stored = None
+    return scene, stored
+
+
 def _assembly(args) -> Assembly:
     """The validated assembly of ``args.scene`` (the limits of the options; SceneError)."""
     options = _options(args)
-    return validated_assembly(load_scene(args.scene), options.limits, options.contact)
+    scene, stored = _scene(args)
+    return validated_assembly(scene, options.limits, options.contact, stored)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -207,9 +249,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _run_check(args) -> int:
     options = _options(args)
-    scene = load_scene(args.scene)
+    scene, stored = _scene(args)
     if args.bag:
         _prepare_bag_dir(Path(args.bag), args.force)
+    if stored is not None and (args.sequence or args.bag):
+        raise ValueError("--interfaces stored checks the assembly as a whole, and is not "
+                         "recorded (a replay detects the interfaces): no --sequence or --bag")
     if args.sequence:
         def progress(report, total: int) -> None:
             if report.step_index == 0:      # after validation: bad input gives one line only
@@ -221,8 +266,10 @@ def _run_check(args) -> int:
         out = {"scene": scene.name, "first_failing_step": first_failing_step(reports),
                "steps": [report_json(r) for r in reports]}
     else:
-        reports = [check_scene(scene, options)]
+        reports = [check_scene(scene, options, stored)]
         out = {"scene": scene.name, **report_json(reports[0])}
+    if args.interfaces == "compare":
+        out["interfaces_compare"] = args.interfaces_compare.to_json()
     if args.bag:
         _record(Path(args.bag), scene, reports, options, args.sequence)
     if args.json:
@@ -340,7 +387,10 @@ def _record(path: Path, scene: Scene, reports, options: CheckOptions, sequence: 
 
 def _run_plan(args) -> int:
     options = _options(args)
-    scene = load_scene(args.scene)
+    scene, stored = _scene(args)
+    if stored is not None:
+        raise ValueError("plan detects the interfaces of every partial assembly (not "
+                         "--interfaces stored)")
     if not args.json:
         print(f"planning {scene.name}: {sum(not b.support for b in scene.blocks)} blocks to "
               f"place, at most {args.max_held} held", file=sys.stderr)

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 from ..rbe.result import Report, Status
 from ..scene import Scene, SceneError
+from .assembly import Assembly
 from .holds import annotate_holds
 from .incremental import StepChecker
 from .options import CheckOptions
@@ -17,15 +18,17 @@ from .validate import validated_assembly
 from .verdict import check
 
 
-def check_scene(scene: Scene, options: CheckOptions = CheckOptions()) -> Report:
-    """Check ``scene`` as a whole (contact detection included in the reported time).
+def check_scene(scene: Scene, options: CheckOptions = CheckOptions(),
+                assembly: Assembly | None = None) -> Report:
+    """Check ``scene`` as a whole (contact detection included in the reported time);
+    ``assembly``: its blocks on interfaces given instead of detected (a COMPAS file's).
 
     With holds, the assembly is the state after the last step: supports whose hold ends are
     taken away, free blocks held to the end are supports (``held_blocks``). An unstable
     report names the smallest set of blocks to hold (``suggested_holds``, see
     :class:`~rbe_ros.analysis.options.HoldSearch`)."""
     start = time.perf_counter()
-    assembly = validated_assembly(scene, options.limits, options.contact)
+    assembly = validated_assembly(scene, options.limits, options.contact, assembly)
     held: tuple[str, ...] = ()
     if scene.holds:
         present, held = final_state(scene)

@@ -1,6 +1,7 @@
 """The JSON scene format (documented in the README): read and write scenes."""
 from __future__ import annotations
 
+import gzip
 import json
 from pathlib import Path
 
@@ -74,18 +75,28 @@ def _load_mesh_file(bid: str, rel: str, base_dir: Path | None):
     return np.asarray(mesh.vertices), [list(f) for f in mesh.faces]
 
 
-def load_scene(path) -> Scene:
-    """Read a scene JSON file (raises :class:`SceneError` for any problem)."""
+def read_json(path, what: str = "scene") -> tuple[object, str]:
+    """The JSON document of a file (gzip-compressed when its name ends in ``.gz``) and the
+    file's name for messages; SceneError names the file and the problem."""
     path = Path(path)
     try:
-        text = path.read_text()
+        raw = path.read_bytes()
+        text = (gzip.decompress(raw) if path.suffix == ".gz" else raw).decode("utf-8")
     except OSError as exc:
-        raise SceneError(f"cannot read scene {str(path)!r}: {exc.strerror}") from None
+        raise SceneError(f"cannot read {what} {str(path)!r}: "
+                         f"{exc.strerror or exc}") from None
+    except (UnicodeDecodeError, EOFError) as exc:
+        raise SceneError(f"cannot read {what} {str(path)!r}: {exc}") from None
     try:
-        data = json.loads(text)
+        return json.loads(text), path.name
     except json.JSONDecodeError as exc:
         raise SceneError(f"{path.name}: invalid JSON at line {exc.lineno}: {exc.msg}") from None
-    return scene_from_dict(data, path.parent)
+
+
+def load_scene(path) -> Scene:
+    """Read a scene JSON file (raises :class:`SceneError` for any problem)."""
+    data, _ = read_json(path)
+    return scene_from_dict(data, Path(path).parent)
 
 
 def scene_to_dict(scene: Scene) -> dict:

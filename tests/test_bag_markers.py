@@ -7,9 +7,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from mcap_ros2.reader import read_ros2_messages
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
 
-from rbe_ros.replay import STEP_NS, read_runs
+from rbe_ros.io.replay import STEP_NS, read_runs
 
 BAGS = sorted(p for p in (Path(__file__).resolve().parents[1] / "bags").iterdir() if p.is_dir())
 
@@ -17,8 +18,10 @@ BAGS = sorted(p for p in (Path(__file__).resolve().parents[1] / "bags").iterdir(
 @pytest.mark.parametrize("bag", BAGS, ids=[b.name for b in BAGS])
 def test_markers_of_every_step(bag):
     [mcap] = bag.glob("*.mcap")
-    markers = {m.log_time_ns: m.ros_msg
-               for m in read_ros2_messages(str(mcap), topics=["/rbe_node/markers"])}
+    with mcap.open("rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        markers = {message.log_time: decoded for _, _, message, decoded
+                   in reader.iter_decoded_messages(topics=["/rbe_node/markers"])}
     runs = read_runs(bag)
     assert sum(len(r.reports) for r in runs) == len(markers) > 0
     for run in runs:

@@ -1,4 +1,4 @@
-"""The markers of reports (rbe_ros.markers): message dicts, checked against the report's own
+"""The markers of reports (rbe_ros.io.markers): message dicts, checked against the report's own
 numbers and the blocks' posed meshes; their CDR size for a 1000-block wall."""
 from __future__ import annotations
 
@@ -8,18 +8,18 @@ import numpy as np
 import pytest
 
 from helpers import stacked_boxes
-from rbe_ros import cdr
-from rbe_ros.analysis.check import check_scene
-from rbe_ros.analysis.sequence import check_sequence
-from rbe_ros.bag import typestore
+from rbe_ros.io import cdr
+from rbe_ros.analysis.pipeline import check_scene, check_sequence
+from rbe_ros.io.bag import typestore
 from rbe_ros.generators import running_bond_wall
 from rbe_ros.geometry.block import pose_block
-from rbe_ros.markers import (ADD, COMPRESSION, DELETEALL, INTERFACE_COLOURS, KERN, LINE_LIST,
+from rbe_ros.io.markers import (ADD, COMPRESSION, DELETEALL, INTERFACE_COLOURS, KERN, LINE_LIST,
                              MARKER_TYPE, ROLE_COLOURS, TENSION, TEXT_VIEW_FACING,
                              TRIANGLE_LIST, run_markers, step_markers)
-from rbe_ros.messages import header_dict, report_to_dict, state_to_dict
-from rbe_ros.replay import Run, replay_run
-from rbe_ros.scene import Hold, box_block, load_scene, make_scene
+from rbe_ros.io.messages import header_dict, report_to_dict, state_to_dict
+from rbe_ros.io.replay import Run, replay_run
+from rbe_ros.io.scene_json import load_scene
+from rbe_ros.scene import Hold, box_block, make_scene
 
 HEADER = header_dict("map", 7_000_000_008)
 

@@ -34,12 +34,12 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .analysis.check import CheckOptions
-from .analysis.sequence import final_state, sequence_steps
-from .analysis.validate import validated_assembly
+from ..analysis.options import CheckOptions
+from ..analysis.steps import final_state, sequence_steps
+from ..analysis.validate import validated_assembly
+from ..rbe.result import Report, Status
+from ..scene import BOX_FACES, Scene, SceneError, box_vertices
 from .messages import SOLID_PRIMITIVE_BOX, report_from_dict, scene_from_state_dict
-from .rbe.result import Report, Status
-from .scene import BOX_FACES, Scene, SceneError, box_vertices
 
 #: Marker types and actions (visualization_msgs/Marker constants).
 LINE_LIST, TRIANGLE_LIST, TEXT_VIEW_FACING = 5, 11, 9

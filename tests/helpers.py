@@ -6,7 +6,8 @@ import math
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from rbe_ros.analysis.check import CheckOptions, check_scene
+from rbe_ros.analysis.options import CheckOptions
+from rbe_ros.analysis.pipeline import check_scene
 from rbe_ros.scene import box_block, make_scene
 
 from oracles.mass import mass_centroid

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from rbe_ros.analysis.check import CheckOptions
+from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.rbe.result import Status
 from rbe_ros.rbe.solver import SolveOptions
 from rbe_ros.scene import Scene, box_block, make_scene

@@ -13,7 +13,7 @@ from rbe_ros.geometry.polygon import ring_widths
 from rbe_ros.rbe.cones import cone_capacity, pyramid_facets
 from rbe_ros.rbe.result import Status
 from rbe_ros.rbe.solver import SolveOptions
-from rbe_ros.analysis.check import CheckOptions
+from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.scene import box_block, make_block, make_scene
 
 from helpers import DENSITY, checked, inclined_block

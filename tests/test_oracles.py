@@ -14,7 +14,9 @@ import pytest
 
 from rbe_ros import generators as gen
 from rbe_ros.analysis.assembly import Assembly
-from rbe_ros.analysis.check import CheckOptions, check, check_scene
+from rbe_ros.analysis.options import CheckOptions
+from rbe_ros.analysis.pipeline import check_scene
+from rbe_ros.analysis.verdict import check
 from rbe_ros.analysis.friction import minimum_friction
 from rbe_ros.analysis.virtual import virtual_assembly
 from rbe_ros.rbe.result import Status

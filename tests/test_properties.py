@@ -32,7 +32,8 @@ from hypothesis import assume, event, given
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from rbe_ros.analysis.check import CheckOptions, check_scene
+from rbe_ros.analysis.options import CheckOptions
+from rbe_ros.analysis.pipeline import check_scene
 from rbe_ros.rbe.cones import CONES, FRICTION_MODELS
 from rbe_ros.rbe.result import Status
 from rbe_ros.rbe.solver import SolveOptions

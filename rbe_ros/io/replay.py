@@ -44,13 +44,18 @@ from pathlib import Path
 
 import numpy as np
 
-from .analysis.check import CheckOptions, HoldSearch, check_scene
-from .analysis.sequence import check_sequence, final_state, sequence_steps
-from .geometry.contacts import ContactOptions
-from .messages import header_stamp_ns, report_to_dict, scene_from_state_dict, state_to_dict
-from .rbe.result import Report, Status
-from .rbe.solver import SolveOptions, Weights
-from .scene import Scene, SceneError
+from ..analysis.options import CheckOptions, HoldSearch
+from ..analysis.pipeline import check_state
+from ..analysis.steps import final_state, sequence_steps
+from ..geometry.block import pose_block
+from ..geometry.contacts import ContactOptions
+from ..rbe.result import Report
+from ..rbe.solver import SolveOptions, Weights
+from ..scene import Scene, SceneError
+from .bag import BagWriter, read_bag, read_custom_data
+from .messages import (header_stamp_ns, report_header, report_to_dict, scene_from_state_dict,
+                       state_to_dict)
+from .markers import MARKER_TOPIC, MARKER_TYPE, run_markers
 
 OPTIONS_KEY = "rbe_ros.check_options"
 STATE_TYPE = "rbe_msgs/msg/AssemblyState"
@@ -58,6 +63,9 @@ REPORT_TYPE = "rbe_msgs/msg/StabilityReport"
 #: Topics of bags written here: the names rbe_node uses (node name rbe_node).
 STATE_TOPIC = "/rbe_node/assembly"
 REPORT_TOPIC = "/rbe_node/report"
+#: Log-time spacing of the reports (and markers) of a recorded sequence: one step a second,
+#: so that a player's timeline (Foxglove) steps through the sequence one step at a time.
+STEP_NS = 1_000_000_000
 #: Report fields that are not compared.
 IGNORED = frozenset({"solve_time", "dropped_states"})
 
@@ -91,8 +99,6 @@ def options_from_json(text: str) -> CheckOptions:
 
 def bag_options(path) -> CheckOptions:
     """The check options recorded in the bag at ``path``, else the defaults."""
-    from .bag import read_custom_data
-
     text = read_custom_data(path).get(OPTIONS_KEY)
     return options_from_json(text) if text else CheckOptions()
 
@@ -124,14 +130,18 @@ class Run:
                 f"{what})")
 
 
+def step_stamps(stamp_ns: int, count: int) -> list[int]:
+    """Log times of the ``count`` reports of a state logged at ``stamp_ns``."""
+    return [stamp_ns + (k + 1) * STEP_NS for k in range(count)]
+
+
 def read_runs(path) -> list[Run]:
     """The runs of a bag: every AssemblyState in log-time order, each with the reports whose
-    header stamp is its stamp (a report goes to the latest such state before it)."""
-    from .bag import read_bag
-
+    header stamp is its stamp (a report goes to the latest such state before it). Other
+    topics (markers) are not read."""
     runs: list[Run] = []
     by_key: dict[tuple[int, int], list[Run]] = {}
-    for m in read_bag(path):
+    for m in read_bag(path, msgtypes={STATE_TYPE, REPORT_TYPE}):
         if m.msgtype == STATE_TYPE:
             run = Run(m.data, m.stamp_ns, m.topic)
             runs.append(run)
@@ -150,37 +160,24 @@ def read_runs(path) -> list[Run]:
     return runs
 
 
-def check_state(state: dict, options: CheckOptions = CheckOptions()) -> list[Report]:
-    """The reports ``rbe_node`` makes for ``state`` (a message dict), in order."""
-    try:
-        if state.get("sequence"):
-            return check_sequence(scene_from_state_dict(state), options)
-        return [check_scene(scene_from_state_dict({**state, "sequence": []}), options)]
-    except SceneError as exc:
-        return [Report(False, Status.INVALID_INPUT, f"invalid input: {exc}")]
-    except Exception as exc:        # as the node: a failed check is a report, not a crash
-        return [Report(False, Status.SOLVER_FAILED, f"check failed: {type(exc).__name__}: {exc}")]
+def state_reports(state: dict, options: CheckOptions = CheckOptions()) -> list[Report]:
+    """The reports ``rbe_node`` makes for ``state`` (a message dict), in order: the node's
+    own dispatch, :func:`rbe_ros.analysis.pipeline.check_state`."""
+    def read(sequence: bool) -> Scene:
+        return scene_from_state_dict(state if sequence else {**state, "sequence": []})
 
-
-def report_header(state: dict, frame_id: str = "world") -> dict:
-    header = json.loads(json.dumps(state.get("header") or {}))
-    header.setdefault("stamp", {"sec": 0, "nanosec": 0})
-    if not header.get("frame_id"):
-        header["frame_id"] = frame_id
-    return header
+    return check_state(read, bool(state.get("sequence")), options).reports
 
 
 def replay_run(run: Run, options: CheckOptions = CheckOptions()) -> list[dict]:
     """The report dicts of re-checking ``run.state``."""
-    header = report_header(run.state)
-    return [report_to_dict(r, header) for r in check_state(run.state, options)]
+    header = report_header(run.state.get("header"))
+    return [report_to_dict(r, header) for r in state_reports(run.state, options)]
 
 
 def free_weights(state: dict) -> dict[int, float]:
     """Free weight W (N) by step index (-1: the whole assembly) of a state: the weight of the
     free blocks present and not held. Empty if the state cannot be read."""
-    from .geometry.block import pose_block
-
     try:
         scene = scene_from_state_dict(state)
         whole = scene_from_state_dict({**state, "sequence": []})
@@ -423,11 +420,12 @@ def format_differences(runs: list[Run], differences: list[Difference], limit: in
 
 # --- writing ---------------------------------------------------------------------------------
 
-def write_runs(path, runs: list[Run], replayed: list[list[dict]], options: CheckOptions) -> None:
+def write_runs(path, runs: list[Run], replayed: list[list[dict]], options: CheckOptions, *,
+               markers: bool = True) -> None:
     """A bag with every run's state and its ``replayed`` reports (at the recorded report
-    times where there are as many, else just after the state); the options in custom_data."""
-    from .bag import BagWriter
-
+    times where there are as many, else a step a second after the state: :data:`STEP_NS`);
+    with ``markers`` each report's MarkerArray on :data:`rbe_ros.io.markers.MARKER_TOPIC` at
+    its time; the options in custom_data."""
     with BagWriter(path, custom_data={OPTIONS_KEY: options_to_json(options)}) as bag:
         topics: set[str] = set()
         for run, reports in zip(runs, replayed):
@@ -436,18 +434,25 @@ def write_runs(path, runs: list[Run], replayed: list[list[dict]], options: Check
                 if topic not in topics:
                     bag.add_topic(topic, kind, transient_local=latched)
                     topics.add(topic)
+            if markers and MARKER_TOPIC not in topics:
+                bag.add_topic(MARKER_TOPIC, MARKER_TYPE, transient_local=True)
+                topics.add(MARKER_TOPIC)
             bag.write(run.topic, run.state, run.stamp_ns)
             stamps = run.report_stamps if len(run.report_stamps) == len(reports) else \
-                [run.stamp_ns + k + 1 for k in range(len(reports))]
+                step_stamps(run.stamp_ns, len(reports))
             for report, stamp in zip(reports, stamps):
                 bag.write(run.report_topic, report, stamp)
+            if markers:
+                for array, stamp in zip(run_markers(run.state, reports, options), stamps):
+                    bag.write(MARKER_TOPIC, array, stamp)
 
 
 def record_bag(path, scenes: list[tuple[Scene, str, int]], options: CheckOptions = CheckOptions(),
-               *, zero_times: bool = False) -> list[Run]:
-    """Check ``(scene, frame_id, stamp_ns)`` states as the node would and record states and
-    reports in a new bag at ``path`` (reports 1 ns apart after their state). ``zero_times``:
-    solve_time 0 in every report, so that reruns write identical files."""
+               *, zero_times: bool = False, markers: bool = True) -> list[Run]:
+    """Check ``(scene, frame_id, stamp_ns)`` states as the node would and record states,
+    reports and (``markers``) their markers in a new bag at ``path`` (a step a second after
+    their state). ``zero_times``: solve_time 0 in every report, so that reruns write
+    identical files."""
     runs = []
     for scene, frame, stamp in scenes:
         run = Run(state_to_dict(scene, frame, stamp), stamp)
@@ -455,9 +460,9 @@ def record_bag(path, scenes: list[tuple[Scene, str, int]], options: CheckOptions
         if zero_times:
             for r in run.reports:
                 r["solve_time"] = 0.0
-        run.report_stamps = [stamp + k + 1 for k in range(len(run.reports))]
+        run.report_stamps = step_stamps(stamp, len(run.reports))
         runs.append(run)
-    write_runs(path, runs, [r.reports for r in runs], options)
+    write_runs(path, runs, [r.reports for r in runs], options, markers=markers)
     return runs
 
 
@@ -484,15 +489,31 @@ def default_output(path) -> Path:
     return path.with_name(path.name + "_replay")
 
 
+#: Re-checks runs: ``recheck(runs, options, on_run)`` -> the report dicts of each run.
+Recheck = Callable[[list[Run], CheckOptions, Callable[[int, Run], None] | None], list[list[dict]]]
+
+
+def offline_reports(runs: list[Run], options: CheckOptions,
+                    on_run: Callable[[int, Run], None] | None = None) -> list[list[dict]]:
+    """The report dicts of re-checking every run here, as the node would."""
+    replayed = []
+    for i, run in enumerate(runs):
+        replayed.append(replay_run(run, options))
+        if on_run is not None:
+            on_run(i, run)
+    return replayed
+
+
 def replay_bag(path, output=None, *, options: CheckOptions | None = None, compare: bool = True,
-               live: bool = False, node_name: str | None = None,
-               tolerances: Tolerances = Tolerances(), write: bool = True,
-               context=None, timeout: float = 120.0,
+               recheck: Recheck = offline_reports, tolerances: Tolerances = Tolerances(),
+               write: bool = True, markers: bool = True,
                on_run: Callable[[int, Run], None] | None = None) -> ReplayResult:
-    """Re-check every state of the bag at ``path`` (offline, or ``live`` through an rbe_node:
-    started here, or the running one named ``node_name``), write the states and the new
+    """Re-check every state of the bag at ``path`` with ``recheck`` (offline; or through a
+    live rbe_node: :func:`rbe_ros.ros.live.live_recheck`), write the states and the new
     reports to ``output`` (default: path + "_replay"; never overwritten; ``write=False``:
-    no bag), and with ``compare`` list the differences from the recorded reports."""
+    no bag; ``markers``: with the reports' markers), and with ``compare`` list the
+    differences from the recorded reports (markers are drawings of the reports: not
+    compared)."""
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"no bag at {str(path)!r}")
@@ -501,24 +522,14 @@ def replay_bag(path, output=None, *, options: CheckOptions | None = None, compar
         raise FileExistsError(f"{str(out)!r} exists already, not overwriting it")
     options = options or bag_options(path)
     runs = read_runs(path)
-    if live:
-        from .ros.live import live_reports
-
-        replayed = live_reports(runs, options, node_name=node_name, context=context,
-                                timeout=timeout, on_run=on_run)
-    else:
-        replayed = []
-        for i, run in enumerate(runs):
-            replayed.append(replay_run(run, options))
-            if on_run is not None:
-                on_run(i, run)
+    replayed = recheck(runs, options, on_run)
     if write:
-        write_runs(out, runs, replayed, options)
+        write_runs(out, runs, replayed, options, markers=markers)
     differences = compare_runs(runs, replayed, tolerances=tolerances) if compare else []
     return ReplayResult(runs, replayed, differences, out if write else None, options)
 
 
 __all__ = ["Difference", "OPTIONS_KEY", "ReplayResult", "Run", "Tolerances", "bag_options",
-           "check_state", "compare_report", "compare_runs", "default_output", "free_weights",
-           "options_from_json", "options_to_json", "read_runs", "record_bag", "replay_bag",
-           "replay_run", "write_runs"]
+           "compare_report", "compare_runs", "default_output", "free_weights",
+           "offline_reports", "options_from_json", "options_to_json", "read_runs", "record_bag", "replay_bag",
+           "replay_run", "state_reports", "step_stamps", "write_runs"]

@@ -130,13 +130,15 @@ class Hold:
 @dataclass(frozen=True)
 class Scene:
     """An assembly of blocks under gravity, with an optional insertion sequence of block ids
-    and temporary supports (holds) by step."""
+    and temporary supports (holds) by step. ``pose_uncertainty`` (m, deg): how well the
+    poses are known (measured, as built; about 3 sigma), None for design geometry."""
 
     name: str
     blocks: tuple[Block, ...]
     gravity: np.ndarray = field(default_factory=lambda: np.array(DEFAULT_GRAVITY))
     sequence: tuple[str, ...] = ()
     holds: tuple[Hold, ...] = ()
+    pose_uncertainty: tuple[float, float] | None = None
 
     def block(self, block_id: str) -> Block:
         for b in self.blocks:
@@ -215,9 +217,10 @@ def _finite_array(value, shape, what: str) -> np.ndarray:
     return arr
 
 
-def make_scene(name: str, blocks, gravity=DEFAULT_GRAVITY, sequence=(), holds=()) -> Scene:
+def make_scene(name: str, blocks, gravity=DEFAULT_GRAVITY, sequence=(), holds=(),
+               pose_uncertainty=None) -> Scene:
     """A validated scene: unique ids, a support, a sequence of existing free blocks, holds of
-    existing blocks within the steps."""
+    existing blocks within the steps, a pose uncertainty of two numbers >= 0 (or None)."""
     blocks = tuple(blocks)
     if not blocks:
         raise SceneError("the scene has no blocks")
@@ -244,7 +247,21 @@ def make_scene(name: str, blocks, gravity=DEFAULT_GRAVITY, sequence=(), holds=()
             raise SceneError(f"sequence names block {s!r} twice")
         seq_seen.add(s)
     steps = len(seq) or sum(not b.support for b in blocks)
-    return Scene(str(name), blocks, g, seq, _check_holds(holds, seen, steps))
+    return Scene(str(name), blocks, g, seq, _check_holds(holds, seen, steps),
+                 _check_uncertainty(pose_uncertainty))
+
+
+def _check_uncertainty(value) -> tuple[float, float] | None:
+    """A declared pose uncertainty: [position m] or [position m, angle deg], finite, >= 0."""
+    if value is None:
+        return None
+    what = '"pose_uncertainty" must be [position m, angle deg]'
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or not 1 <= len(value) <= 2:
+        raise SceneError(f"{what}, got {value!r}")
+    arr = _finite_array(list(value) + [0.0] * (2 - len(value)), (2,), what.split(" must")[0])
+    if np.any(arr < 0):
+        raise SceneError(f"{what}, both >= 0, got {list(value)}")
+    return float(arr[0]), float(arr[1])
 
 
 def _check_holds(holds, ids: set[str], steps: int) -> tuple[Hold, ...]:
@@ -290,7 +307,8 @@ def scene_from_dict(data: dict, base_dir: Path | None = None) -> Scene:
     if not isinstance(holds, (list, tuple)):
         raise SceneError('"holds" must be a list of {"block", "from_step", "until_step"}')
     return make_scene(data.get("name", "scene"), blocks, data.get("gravity", DEFAULT_GRAVITY), seq,
-                      [_hold_from_dict(i, h) for i, h in enumerate(holds)])
+                      [_hold_from_dict(i, h) for i, h in enumerate(holds)],
+                      data.get("pose_uncertainty"))
 
 
 def _hold_from_dict(index: int, raw) -> Hold:
@@ -369,4 +387,6 @@ def scene_to_dict(scene: Scene) -> dict:
         out["holds"] = [{"block": h.block, "from_step": h.from_step,
                          **({} if h.until_step is None else {"until_step": h.until_step})}
                         for h in scene.holds]
+    if scene.pose_uncertainty is not None:
+        out["pose_uncertainty"] = list(scene.pose_uncertainty)
     return out

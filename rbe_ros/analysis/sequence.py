@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 from ..rbe.result import Report
 from ..scene import Scene
+from .asbuilt import annotate_sensitivity, declared
 from .check import CheckOptions
 from .validate import validated_assembly
 from .holds import annotate_holds
@@ -66,6 +67,7 @@ def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
     the reports so far are returned.
     """
     start = time.perf_counter()
+    options = declared(options, scene)
     full = validated_assembly(scene, options.limits, options.contact)
     contact_time = time.perf_counter() - start
     steps = sequence_steps(scene)
@@ -77,6 +79,7 @@ def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
         assembly = full.subset(step.present, step.held)
         report = checker.check(assembly)
         report.step_index, report.block_placed = step.index, step.block
+        annotate_sensitivity(report, assembly, options)
         annotate_holds(report, assembly, step.held, options)
         report.solve_time += contact_time / len(steps)
         reports.append(report)

@@ -11,14 +11,15 @@ import numpy as np
 import pytest
 
 from rbe_ros import generators as gen
-from rbe_ros.analysis.check import CheckOptions, HoldSearch, check_scene
+from rbe_ros.analysis.options import CheckOptions, HoldSearch
 from rbe_ros.analysis.perturb import PoseNoise, perturb_scene, resultant_error
-from rbe_ros.analysis.sequence import check_sequence
+from rbe_ros.analysis.pipeline import check_scene, check_sequence
 from rbe_ros.cli import main
 from rbe_ros.geometry.block import pose_blocks
 from rbe_ros.geometry.contacts import ContactOptions, detect_contacts
+from rbe_ros.io.scene_json import load_scene, scene_to_dict
 from rbe_ros.rbe.result import Status
-from rbe_ros.scene import SceneError, box_block, load_scene, make_scene, scene_to_dict
+from rbe_ros.scene import SceneError, box_block, make_scene
 
 NO_HOLDS = HoldSearch(enabled=False)
 

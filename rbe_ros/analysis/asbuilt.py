@@ -5,20 +5,20 @@ by a tolerance (:mod:`rbe_ros.geometry.uncertainty`). Every report lists the *ne
 (face pairs beyond the tolerance but within NEAR_FACTOR times it) and says whether the
 verdict is *sensitive* to the tolerance: whether the assembly would stand otherwise if the
 near contacts were contacts, or if the contacts closest to the threshold (a gap beyond
-MARGINAL_SHARE of their tolerance) were not. Each question costs one solve (the deciding
-problem, :func:`rbe_ros.analysis.check.stands`), asked only when such face pairs exist: design
-geometry, whose gaps are rounding, asks neither.
+MARGINAL_SHARE of their tolerance) were not. Each question costs one solve (the verdict
+without its explanation, :func:`rbe_ros.analysis.verdict.is_stable`), asked only when such
+face pairs exist: design geometry, whose gaps are rounding, asks neither.
 """
 from __future__ import annotations
 
 from dataclasses import replace
 
 from ..geometry.contacts import Interface
-from ..rbe.model import build_model
 from ..rbe.result import NearContact, Report, Status
 from ..scene import Scene
 from .assembly import Assembly
-from .check import CheckOptions, stands
+from .options import CheckOptions
+from .verdict import is_stable
 
 #: Contacts whose gap (or overlap) is beyond this share of their tolerance are the ones
 #: closest to the threshold (dropped to test the verdict's sensitivity).
@@ -49,27 +49,20 @@ def annotate_sensitivity(report: Report, assembly: Assembly, options: CheckOptio
     stood = report.stable
     why = []
     if assembly.near:
-        if _stands(replace(assembly, interfaces=assembly.interfaces + assembly.near, near=()),
-                   options) != stood:
+        if is_stable(replace(assembly, interfaces=assembly.interfaces + assembly.near, near=()),
+                     options) != stood:
             why.append(f"with the near contact{'s' * (len(assembly.near) > 1)} "
                        f"{_pairs(assembly.near, ids)} it would {_verb(not stood)}")
     marginal = [it for it in assembly.interfaces if abs(it.gap) > MARGINAL_SHARE * it.tol]
     if marginal:
         kept = tuple(it for it in assembly.interfaces if abs(it.gap) <= MARGINAL_SHARE * it.tol)
-        if _stands(replace(assembly, interfaces=kept), options) != stood:
+        if is_stable(replace(assembly, interfaces=kept), options) != stood:
             why.append(f"without the contact{'s' * (len(marginal) > 1)} "
                        f"{_pairs(marginal, ids)}, near the tolerance, it would "
                        f"{_verb(not stood)}")
     if why:
         report.verdict_sensitive = True
         report.message += " | sensitive: " + "; ".join(why)
-
-
-def _stands(assembly: Assembly, options: CheckOptions) -> bool:
-    """Whether the deciding problem of ``assembly`` has a solution without tension."""
-    if assembly.floating_blocks():
-        return False
-    return stands(build_model(assembly.blocks, assembly.interfaces, assembly.gravity), options)
 
 
 def _verb(stand: bool) -> str:

@@ -47,17 +47,24 @@ import numpy as np
 from .analysis.check import CheckOptions, HoldSearch, check_scene
 from .analysis.sequence import check_sequence, final_state, sequence_steps
 from .geometry.contacts import ContactOptions
-from .messages import header_stamp_ns, report_to_dict, scene_from_state_dict, state_to_dict
+from .messages import (header_stamp_ns, poses_from_dict, report_to_dict, scene_from_state_dict,
+                       state_to_dict)
+from .poses import AsBuilt
 from .rbe.result import Report, Status
 from .rbe.solver import SolveOptions, Weights
 from .scene import Scene, SceneError
 
 OPTIONS_KEY = "rbe_ros.check_options"
 STATE_TYPE = "rbe_msgs/msg/AssemblyState"
+POSES_TYPE = "rbe_msgs/msg/BlockPoses"
 REPORT_TYPE = "rbe_msgs/msg/StabilityReport"
 #: Topics of bags written here: the names rbe_node uses (node name rbe_node).
 STATE_TOPIC = "/rbe_node/assembly"
 REPORT_TOPIC = "/rbe_node/report"
+DESIGN_TOPIC = "/rbe_node/design"
+POSES_TOPIC = "/rbe_node/poses"
+#: Kinds of run: a state checked as it is, a design (~/design), measured poses (~/poses).
+STATE, DESIGN, POSES = "state", "design", "poses"
 #: Report fields that are not compared.
 IGNORED = frozenset({"solve_time", "dropped_states"})
 
@@ -109,6 +116,7 @@ class Run:
     reports: list[dict] = field(default_factory=list)
     report_stamps: list[int] = field(default_factory=list)
     report_topic: str = REPORT_TOPIC
+    kind: str = STATE                               # STATE, DESIGN or POSES
 
     @property
     def key(self) -> tuple[int, int]:
@@ -119,9 +127,12 @@ class Run:
         header = self.state.get("header", {})
         seq = self.state.get("sequence") or []
         what = f"{len(seq)}-block sequence" if seq else "whole assembly"
-        return (f"state stamp {header_stamp_ns(header) / 1e9:.9f} s frame "
-                f"{header.get('frame_id', '')!r} ({len(self.state.get('blocks', []))} blocks, "
-                f"{what})")
+        contents = {STATE: f"{len(self.state.get('blocks', []))} blocks, {what}",
+                    DESIGN: f"design of {len(self.state.get('blocks', []))} blocks",
+                    POSES: f"{len(self.state.get('ids', []))} measured poses"}[self.kind]
+        return (f"{'state' if self.kind == STATE else self.kind} stamp "
+                f"{header_stamp_ns(header) / 1e9:.9f} s frame "
+                f"{header.get('frame_id', '')!r} ({contents})")
 
 
 def read_runs(path) -> list[Run]:
@@ -132,8 +143,10 @@ def read_runs(path) -> list[Run]:
     runs: list[Run] = []
     by_key: dict[tuple[int, int], list[Run]] = {}
     for m in read_bag(path):
-        if m.msgtype == STATE_TYPE:
-            run = Run(m.data, m.stamp_ns, m.topic)
+        if m.msgtype in (STATE_TYPE, POSES_TYPE):
+            kind = POSES if m.msgtype == POSES_TYPE else \
+                DESIGN if m.topic.endswith("/design") else STATE
+            run = Run(m.data, m.stamp_ns, m.topic, kind=kind)
             runs.append(run)
             by_key.setdefault(run.key, []).append(run)
         elif m.msgtype == REPORT_TYPE:
@@ -152,10 +165,56 @@ def read_runs(path) -> list[Run]:
 
 def check_state(state: dict, options: CheckOptions = CheckOptions()) -> list[Report]:
     """The reports ``rbe_node`` makes for ``state`` (a message dict), in order."""
+    if state.get("sequence"):
+        return _checked(lambda: check_sequence(scene_from_state_dict(state), options))
+    return _checked(lambda: [check_scene(scene_from_state_dict({**state, "sequence": []}),
+                                         options)])
+
+
+def merge_message(asbuilt: AsBuilt, kind: str, message: dict) -> Scene:
+    """The as-built scene after a design (``kind`` DESIGN, an AssemblyState dict) or
+    measured poses (POSES, a BlockPoses dict): the node's and the replay's one step
+    (SceneError: the message's report is INVALID_INPUT)."""
+    if kind == DESIGN:
+        try:
+            design, error = scene_from_state_dict(message), ""
+        except SceneError as exc:
+            design, error = None, str(exc)
+        return asbuilt.set_design(design, error)
+    return asbuilt.update(poses_from_dict(message))
+
+
+def asbuilt_scenes(runs: list[Run]) -> list[Scene | SceneError | None]:
+    """For each run, the as-built scene after it (or why there is none); None for states.
+    Every design and poses message counts, checked when recorded or not."""
+    asbuilt = AsBuilt()
+    out: list[Scene | SceneError | None] = []
+    for run in runs:
+        if run.kind == STATE:
+            out.append(None)
+            continue
+        try:
+            out.append(merge_message(asbuilt, run.kind, run.state))
+        except SceneError as exc:
+            out.append(exc)
+    return out
+
+
+def check_asbuilt(scene: Scene | SceneError, options: CheckOptions = CheckOptions()
+                  ) -> list[Report]:
+    """The report ``rbe_node`` makes for an as-built scene (as a whole), or for why there
+    is none."""
+    def reports():
+        if isinstance(scene, SceneError):
+            raise scene
+        return [check_scene(scene, options)]
+    return _checked(reports)
+
+
+def _checked(reports: Callable[[], list[Report]]) -> list[Report]:
+    """``reports()``, or the one report of why they cannot be made, as the node makes it."""
     try:
-        if state.get("sequence"):
-            return check_sequence(scene_from_state_dict(state), options)
-        return [check_scene(scene_from_state_dict({**state, "sequence": []}), options)]
+        return reports()
     except SceneError as exc:
         return [Report(False, Status.INVALID_INPUT, f"invalid input: {exc}")]
     except Exception as exc:        # as the node: a failed check is a report, not a crash
@@ -176,12 +235,17 @@ def replay_run(run: Run, options: CheckOptions = CheckOptions()) -> list[dict]:
     return [report_to_dict(r, header) for r in check_state(run.state, options)]
 
 
-def free_weights(state: dict) -> dict[int, float]:
-    """Free weight W (N) by step index (-1: the whole assembly) of a state: the weight of the
-    free blocks present and not held. Empty if the state cannot be read."""
+def free_weights(state: dict | Scene) -> dict[int, float]:
+    """Free weight W (N) by step index (-1: the whole assembly) of a state (or an as-built
+    scene): the weight of the free blocks present and not held. Empty if the state cannot
+    be read."""
     from .geometry.block import pose_block
 
+    if isinstance(state, SceneError):
+        return {}
     try:
+        if isinstance(state, Scene):
+            state = state_to_dict(state)
         scene = scene_from_state_dict(state)
         whole = scene_from_state_dict({**state, "sequence": []})
     except SceneError:
@@ -395,8 +459,9 @@ def compare_runs(runs: list[Run], replayed: list[list[dict]], *,
     """Differences between each run's recorded reports and ``replayed[i]`` (the same
     comparison offline and live)."""
     out: list[Difference] = []
+    asbuilt = asbuilt_scenes(runs)
     for i, (run, new) in enumerate(zip(runs, replayed)):
-        weights = free_weights(run.state)
+        weights = free_weights(run.state if run.kind == STATE else asbuilt[i])
         for rec, rep in zip(run.reports, new):
             w = weights.get(int(rec.get("step_index", -1)), 1.0)
             out += compare_report(rec, rep, run=i, free_weight=w, tolerances=tolerances)
@@ -431,7 +496,8 @@ def write_runs(path, runs: list[Run], replayed: list[list[dict]], options: Check
     with BagWriter(path, custom_data={OPTIONS_KEY: options_to_json(options)}) as bag:
         topics: set[str] = set()
         for run, reports in zip(runs, replayed):
-            for topic, kind, latched in ((run.topic, STATE_TYPE, False),
+            for topic, kind, latched in ((run.topic, POSES_TYPE if run.kind == POSES else
+                                          STATE_TYPE, run.kind == DESIGN),
                                          (run.report_topic, REPORT_TYPE, True)):
                 if topic not in topics:
                     bag.add_topic(topic, kind, transient_local=latched)
@@ -508,8 +574,14 @@ def replay_bag(path, output=None, *, options: CheckOptions | None = None, compar
                                 timeout=timeout, on_run=on_run)
     else:
         replayed = []
+        asbuilt = asbuilt_scenes(runs)
         for i, run in enumerate(runs):
-            replayed.append(replay_run(run, options))
+            if run.kind == STATE:
+                replayed.append(replay_run(run, options))
+            else:   # a design or poses message the node dropped unchecked is not checked
+                header = report_header(run.state)
+                replayed.append([report_to_dict(r, header) for r in check_asbuilt(
+                    asbuilt[i], options)] if run.reports else [])
             if on_run is not None:
                 on_run(i, run)
     if write:
@@ -518,7 +590,8 @@ def replay_bag(path, output=None, *, options: CheckOptions | None = None, compar
     return ReplayResult(runs, replayed, differences, out if write else None, options)
 
 
-__all__ = ["Difference", "OPTIONS_KEY", "ReplayResult", "Run", "Tolerances", "bag_options",
-           "check_state", "compare_report", "compare_runs", "default_output", "free_weights",
+__all__ = ["DESIGN", "Difference", "OPTIONS_KEY", "POSES", "ReplayResult", "Run", "STATE",
+           "Tolerances", "asbuilt_scenes", "bag_options", "check_asbuilt", "check_state",
+           "compare_report", "merge_message", "compare_runs", "default_output", "free_weights",
            "options_from_json", "options_to_json", "read_runs", "record_bag", "replay_bag",
            "replay_run", "write_runs"]

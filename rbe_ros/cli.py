@@ -15,26 +15,31 @@ import sys
 import time
 from pathlib import Path
 
+from dataclasses import replace
+
 from .analysis.assembly import Assembly
-from .analysis.check import CheckOptions, HoldSearch, check, check_scene
 from .analysis.friction import minimum_friction
+from .analysis.options import CheckOptions, HoldSearch
+from .analysis.pipeline import check_scene, check_sequence, first_failing_step
+from .analysis.planning import plan_sequence
 from .analysis.tilt import DIRECTIONS, tilt_capacity
-from .analysis.virtual import ANALYSES, virtual_assembly
-from .analysis.sequence import check_sequence, first_failing_step
 from .analysis.validate import validated_assembly
+from .analysis.verdict import check
+from .analysis.virtual import ANALYSES, virtual_assembly
+from .generators import GENERATORS
 from .geometry.contacts import ContactOptions
+from .io.figures import draw_report
+from .io.messages import header_dict, report_to_dict, state_to_dict
+from .io.replay import (REPORT_TOPIC, STATE_TOPIC, Run, default_output, offline_reports,
+                        replay_bag, write_runs)
+from .io.report import format_table, json_number, report_json
+from .io.scene_json import scene_to_dict
 from .rbe.cones import CONES
 from .rbe.solver import SolveOptions
-from .report import format_table, json_number, report_json
-from .generators import GENERATORS
-from .inputs import load_design
-from .poses import load_poses, scene_at_poses
-from .scene import Scene, SceneError, ValidationLimits, scene_to_dict
-from .stored_interfaces import compare_interfaces
-
-#: Topics under which the CLI records, the names the node uses (node name rbe_node).
-STATE_TOPIC = "/rbe_node/assembly"
-REPORT_TOPIC = "/rbe_node/report"
+from .io.inputs import load_design
+from .io.poses import load_poses, scene_at_poses
+from .io.stored_interfaces import compare_interfaces
+from .scene import Scene, SceneError, ValidationLimits
 
 
 def _input_arguments(parser: argparse.ArgumentParser) -> None:
@@ -323,8 +328,6 @@ def _run_analyse(args) -> int:
 
 
 def _run_figure(args) -> int:
-    from .figures import draw_report
-
     assembly, report = _analysed(args)
     title = f"{args.analysis + ': ' if args.analysis else ''}{report.message}"
     print(f"figure written to {draw_report(assembly, report, args.output, title=title, view=tuple(args.view))}")
@@ -372,11 +375,6 @@ def _record(path: Path, scene: Scene, reports, options: CheckOptions, sequence: 
     """Write the scene's state and every report, as the node would have published them, and
     the options (so that ``rbe-ros replay`` re-checks the same way). The state holds the
     order checked (``sequence``) or no sequence (a check as a whole)."""
-    from dataclasses import replace
-
-    from .messages import header_dict, report_to_dict, state_to_dict
-    from .replay import Run, write_runs
-
     order = (scene.sequence or tuple(b.id for b in scene.blocks if not b.support)) \
         if sequence else ()
     stamp = time.time_ns()
@@ -388,8 +386,6 @@ def _record(path: Path, scene: Scene, reports, options: CheckOptions, sequence: 
 
 
 def _run_plan(args) -> int:
-    from .analysis.planning import plan_sequence
-
     options = _options(args)
     scene, stored = _scene(args)
     if stored is not None:
@@ -423,8 +419,6 @@ def _run_plan(args) -> int:
 
 
 def _run_replay(args) -> int:
-    from .replay import default_output, replay_bag
-
     if args.node_name and not args.live:
         raise ValueError("--node-name needs --live")
     out = Path(args.output) if args.output else default_output(args.bag)
@@ -436,9 +430,14 @@ def _run_replay(args) -> int:
         print(f"  run {i}: {run.describe()}: {len(run.reports)} recorded reports",
               file=sys.stderr)
 
+    recheck = offline_reports
+    if args.live:
+        # rclpy is loaded only for --live: every other command runs without ROS
+        from .ros.live import live_recheck
+        recheck = live_recheck(args.node_name, timeout=args.timeout)
     try:
-        result = replay_bag(args.bag, out, compare=args.compare, live=args.live,
-                            node_name=args.node_name, timeout=args.timeout, on_run=progress)
+        result = replay_bag(args.bag, out, compare=args.compare, recheck=recheck,
+                            on_run=progress)
     except RuntimeError as exc:     # the live node failed or exited
         raise ValueError(str(exc)) from None
     reports = sum(len(r) for r in result.replayed)

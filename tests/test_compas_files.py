@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 
 from rbe_ros.cli import main
-from rbe_ros.compas_io import compas_document, compas_scene, interfaces_of
+from rbe_ros.io.compas import compas_document, compas_scene, interfaces_of
 from rbe_ros.rbe.model import build_model
 from rbe_ros.rbe.solver import SolveOptions, Weights, solve
-from rbe_ros.scene import read_json
-from rbe_ros.stored_interfaces import compare_interfaces, stored_assembly
+from rbe_ros.io.scene_json import read_json
+from rbe_ros.io.stored_interfaces import compare_interfaces, stored_assembly
 from rbe_ros.analysis.assembly import Assembly
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))

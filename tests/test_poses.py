@@ -8,11 +8,12 @@ import numpy as np
 import pytest
 
 from rbe_ros import generators as gen
-from rbe_ros.analysis.check import check_scene
+from rbe_ros.analysis.pipeline import check_scene
 from rbe_ros.cli import main
-from rbe_ros.poses import AsBuilt, poses_from_json, scene_at_poses
+from rbe_ros.io.poses import AsBuilt, poses_from_json, scene_at_poses
 from rbe_ros.rbe.result import Status
-from rbe_ros.scene import SceneError, scene_to_dict
+from rbe_ros.scene import SceneError
+from rbe_ros.io.scene_json import scene_to_dict
 
 IDENTITY = [0.0, 0.0, 0.0, 1.0]
 

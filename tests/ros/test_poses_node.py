@@ -16,15 +16,15 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from rbe_client import NodeProcess, wait_until
 from rbe_ros import generators as gen
-from rbe_ros.analysis.check import check_scene
-from rbe_ros.bag import read_bag
+from rbe_ros.analysis.pipeline import check_scene
 from rbe_ros.cli import main
-from rbe_ros.messages import poses_to_dict, state_to_dict
-from rbe_ros.poses import scene_at_poses
+from rbe_ros.io.bag import read_bag
+from rbe_ros.io.messages import poses_to_dict, state_to_dict
+from rbe_ros.io.poses import scene_at_poses
+from rbe_ros.io.scene_json import scene_to_dict
+from rbe_ros.io.testing import assert_bag_replays
 from rbe_ros.rbe.result import Status
 from rbe_ros.ros.convert import dict_to_message
-from rbe_ros.scene import scene_to_dict
-from rbe_ros.testing import assert_bag_replays
 
 RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.VOLATILE)

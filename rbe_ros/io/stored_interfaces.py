@@ -15,19 +15,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .analysis.assembly import Assembly
-from .compas_io import CompasInterface, interfaces_of, node_keys
-from .geometry.block import PosedBlock, pose_blocks
-from .geometry.contacts import Interface
-from .geometry.polygon import PlaneFrame, area_moments
-from .scene import Scene, SceneError
+from ..analysis.assembly import Assembly
+from ..geometry.block import PosedBlock, pose_blocks
+from ..geometry.contacts import Interface
+from ..geometry.polygon import PlaneFrame, area_moments
+from ..scene import Scene, SceneError
+from .compas import CompasInterface, interfaces_of, node_keys
 
 #: Matched pairs whose areas differ by more than this share are listed by the comparison.
 AREA_TOLERANCE = 0.01
 
 
 def stored_assembly(scene: Scene, doc: dict, stem: str) -> Assembly:
-    """The assembly of ``scene`` (the document's own, :func:`rbe_ros.compas_io.compas_scene`)
+    """The assembly of ``scene`` (the document's own, :func:`rbe_ros.io.compas.compas_scene`)
     on the interfaces stored in the document, those between two supports left out."""
     blocks = tuple(pose_blocks(scene.blocks))
     index = {key: i for i, key in enumerate(node_keys(doc, stem))}

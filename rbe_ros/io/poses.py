@@ -16,7 +16,8 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from .scene import Scene, SceneError, make_block, make_scene, read_json
+from ..scene import Scene, SceneError, make_block, make_scene
+from .scene_json import read_json
 
 #: (position [x, y, z] in m, orientation [x, y, z, w]); validated by the merge
 Pose = tuple

@@ -19,7 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .scene import Block, Scene, SceneError, make_block, make_scene, read_json
+from ..analysis.assembly import Assembly
+from ..scene import Block, Scene, SceneError, make_block, make_scene
+from .scene_json import read_json
 
 DEFAULT_DENSITY = 2500.0
 SAMPLES_ENV = "RBE_COMPAS_SAMPLES"
@@ -239,8 +241,6 @@ def save_compas_assembly(scene: Scene, path, *, interfaces: bool = True) -> None
     ``is_support``; a node ``density`` or ``mass`` keeps the block's. With ``interfaces``,
     the detected interfaces go on the edges (``forces`` null).
     """
-    from .analysis.assembly import Assembly      # deferred: the geometry stage is heavier
-
     assembly = Assembly.from_scene(scene)
     nodes, edges = {}, {str(i): {} for i in range(len(scene.blocks))}
     for i, (block, posed) in enumerate(zip(scene.blocks, assembly.blocks)):

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .analysis.assembly import Assembly
-from .compas_io import DEFAULT_DENSITY, compas_document, compas_scene, is_compas_assembly
-from .scene import Scene, SceneError, read_json, scene_from_dict
+from ..analysis.assembly import Assembly
+from ..scene import Scene, SceneError
+from .compas import DEFAULT_DENSITY, compas_document, compas_scene, is_compas_assembly
+from .scene_json import read_json, scene_from_dict
 from .stored_interfaces import stored_assembly
 
 

@@ -31,7 +31,7 @@ from .geometry.contacts import ContactOptions
 from .io.figures import draw_report
 from .io.messages import header_dict, report_to_dict, state_to_dict
 from .io.replay import (REPORT_TOPIC, STATE_TOPIC, Run, default_output, offline_reports,
-                        replay_bag, write_runs)
+                        replay_bag, step_stamps, write_runs)
 from .io.report import format_table, json_number, report_json
 from .io.scene_json import scene_to_dict
 from .rbe.cones import CONES
@@ -166,6 +166,8 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("--bag", metavar="DIR",
                        help="record states and reports as a rosbag2 MCAP bag in DIR")
     check.add_argument("--force", action="store_true", help="replace an existing --bag DIR")
+    check.add_argument("--no-markers", action="store_true",
+                       help="--bag without the markers of the reports (a lean log)")
     check.add_argument("--strict", action="store_true",
                        help="exit 1 when an assembly or step is not stable")
     _solver_arguments(check)
@@ -241,6 +243,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help="with --live: use the running node NAME (e.g. rbe_node)")
     replay.add_argument("-o", "--output", metavar="DIR",
                         help="bag to write (default: BAG_replay; never overwritten)")
+    replay.add_argument("--no-markers", action="store_true",
+                        help="write the new bag without the markers of the reports")
     replay.add_argument("--timeout", type=float, default=120.0, metavar="S",
                         help="--live: seconds to wait for each answer (default 120)")
     replay.set_defaults(run=_run_replay)
@@ -271,7 +275,7 @@ def _run_check(args) -> int:
     if args.interfaces == "compare":
         out["interfaces_compare"] = args.interfaces_compare.to_json()
     if args.bag:
-        _record(Path(args.bag), scene, reports, options, args.sequence)
+        _record(Path(args.bag), scene, reports, options, args.sequence, not args.no_markers)
     if args.json:
         print(json.dumps(out, indent=1))
     else:
@@ -371,18 +375,20 @@ def _prepare_bag_dir(path: Path, force: bool) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
 
 
-def _record(path: Path, scene: Scene, reports, options: CheckOptions, sequence: bool) -> None:
-    """Write the scene's state and every report, as the node would have published them, and
-    the options (so that ``rbe-ros replay`` re-checks the same way). The state holds the
-    order checked (``sequence``) or no sequence (a check as a whole)."""
+def _record(path: Path, scene: Scene, reports, options: CheckOptions, sequence: bool,
+            markers: bool) -> None:
+    """Write the scene's state and every report (and with ``markers`` its markers), as the
+    node would have published them, a step a second, and the options (so that ``rbe-ros
+    replay`` re-checks the same way). The state holds the order checked (``sequence``) or no
+    sequence (a check as a whole)."""
     order = (scene.sequence or tuple(b.id for b in scene.blocks if not b.support)) \
         if sequence else ()
     stamp = time.time_ns()
     header = header_dict("world", stamp)
     run = Run(state_to_dict(replace(scene, sequence=order), "world", stamp), stamp,
               STATE_TOPIC, [report_to_dict(r, header) for r in reports],
-              [stamp + k + 1 for k in range(len(reports))], REPORT_TOPIC)
-    write_runs(path, [run], [run.reports], options)
+              step_stamps(stamp, len(reports)), REPORT_TOPIC)
+    write_runs(path, [run], [run.reports], options, markers=markers)
 
 
 def _run_plan(args) -> int:
@@ -437,7 +443,7 @@ def _run_replay(args) -> int:
         recheck = live_recheck(args.node_name, timeout=args.timeout)
     try:
         result = replay_bag(args.bag, out, compare=args.compare, recheck=recheck,
-                            on_run=progress)
+                            markers=not args.no_markers, on_run=progress)
     except RuntimeError as exc:     # the live node failed or exited
         raise ValueError(str(exc)) from None
     reports = sum(len(r) for r in result.replayed)

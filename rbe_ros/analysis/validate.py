@@ -23,12 +23,12 @@ def validate_assembly(assembly: Assembly, limits: ValidationLimits = ValidationL
             raise SceneError(
                 f"block {b.id!r}: mass {b.mass:.6g} kg in {b.volume:.6g} m^3 is a density of "
                 f"{density:.6g} kg/m^3, outside the sane range [{limits.min_density:g}, "
-                f"{limits.max_density:g}] kg/m^3")
+                f"{limits.max_density:g}] kg/m^3", [b.id])
     hit = find_penetration(list(assembly.blocks), max(limits.penetration_tol, contact.distance_tol))
     if hit is not None:
         a, b = assembly.blocks[hit.a], assembly.blocks[hit.b]
         raise SceneError(f"blocks {a.id!r} and {b.id!r} interpenetrate: they overlap by "
-                         f"{hit.depth:.4g} m, more than the tolerance {hit.tol:.4g} m")
+                         f"{hit.depth:.4g} m, more than the tolerance {hit.tol:.4g} m", [a.id, b.id])
 
 
 def validated_assembly(scene: Scene, limits: ValidationLimits | None = ValidationLimits(),

@@ -98,7 +98,7 @@ def pose_blocks(blocks) -> list[PosedBlock]:
         try:
             shapes.append(_shape(rounded[s:s + n].tobytes(), n, block.faces))
         except ValueError as exc:
-            raise SceneError(f"block {block.id!r}: {exc}") from None
+            raise SceneError(f"block {block.id!r}: {exc}", [block.id]) from None
     rot = Rotation.from_quat(np.array([b.orientation for b in blocks])).as_matrix()  # x, y, z, w
     pos = np.array([b.position for b in blocks], dtype=float)
     n_face = np.array([len(s.offsets) for s in shapes])

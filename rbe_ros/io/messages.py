@@ -18,7 +18,8 @@ from collections.abc import Mapping
 import numpy as np
 
 from ..rbe.result import InterfaceResult, Report, Status
-from ..scene import BOX_FACES, Hold, Scene, SceneError, box_vertices, make_block, make_scene
+from ..scene import (BOX_FACES, Hold, Scene, SceneError, blame, box_vertices, make_block,
+                     make_scene)
 
 SOLID_PRIMITIVE_BOX = 1  # shape_msgs/SolidPrimitive.BOX
 _XYZ = ("x", "y", "z")
@@ -186,7 +187,10 @@ def scene_from_state_dict(d) -> Scene:
     if not isinstance(d, Mapping):
         raise SceneError("an AssemblyState must be a mapping (message dict), "
                          f"got {type(d).__name__}")
-    blocks = [_block_from_dict(i, b) for i, b in enumerate(_list(d, "blocks", "AssemblyState"))]
+    blocks = []
+    for i, b in enumerate(_list(d, "blocks", "AssemblyState")):
+        with blame(b.get("id") if isinstance(b, Mapping) else ""):
+            blocks.append(_block_from_dict(i, b))
     sequence = _list(d, "sequence", "AssemblyState")
     if not all(isinstance(s, str) for s in sequence):
         raise SceneError("AssemblyState.sequence must be a list of block ids (strings)")

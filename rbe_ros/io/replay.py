@@ -45,7 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from ..analysis.options import CheckOptions, HoldSearch
-from ..analysis.pipeline import check_state
+from ..analysis.pipeline import StateCheck, check_state
 from ..analysis.steps import final_state, sequence_steps
 from ..geometry.block import pose_block
 from ..geometry.contacts import ContactOptions
@@ -53,6 +53,7 @@ from ..rbe.result import Report
 from ..rbe.solver import SolveOptions, Weights
 from ..scene import Scene, SceneError
 from .bag import BagWriter, read_bag, read_custom_data
+from .markers import MARKER_TOPIC, MARKER_TYPE, run_markers
 from .messages import (header_stamp_ns, poses_from_dict, report_header, report_to_dict,
                        scene_from_state_dict, state_to_dict)
 from .poses import AsBuilt
@@ -68,6 +69,9 @@ DESIGN_TOPIC = "/rbe_node/design"
 POSES_TOPIC = "/rbe_node/poses"
 #: Kinds of run: a state checked as it is, a design (~/design), measured poses (~/poses).
 STATE, DESIGN, POSES = "state", "design", "poses"
+#: Log-time spacing of the reports (and markers) of a recorded sequence: one step a second,
+#: so that a player's timeline (Foxglove) steps through the sequence one step at a time.
+STEP_NS = 1_000_000_000
 #: Report fields that are not compared.
 IGNORED = frozenset({"solve_time", "dropped_states"})
 
@@ -136,12 +140,18 @@ class Run:
                 f"{header.get('frame_id', '')!r} ({contents})")
 
 
+def step_stamps(stamp_ns: int, count: int) -> list[int]:
+    """Log times of the ``count`` reports of a state logged at ``stamp_ns``."""
+    return [stamp_ns + (k + 1) * STEP_NS for k in range(count)]
+
+
 def read_runs(path) -> list[Run]:
     """The runs of a bag: every AssemblyState in log-time order, each with the reports whose
-    header stamp is its stamp (a report goes to the latest such state before it)."""
+    header stamp is its stamp (a report goes to the latest such state before it). Other
+    topics (markers) are not read."""
     runs: list[Run] = []
     by_key: dict[tuple[int, int], list[Run]] = {}
-    for m in read_bag(path):
+    for m in read_bag(path, msgtypes={STATE_TYPE, POSES_TYPE, REPORT_TYPE}):
         if m.msgtype in (STATE_TYPE, POSES_TYPE):
             kind = POSES if m.msgtype == POSES_TYPE else \
                 DESIGN if m.topic.endswith("/design") else STATE
@@ -191,16 +201,16 @@ def asbuilt_scenes(runs: list[Run]) -> list[Scene | SceneError | None]:
     return out
 
 
-def asbuilt_reports(scene: Scene | SceneError, options: CheckOptions = CheckOptions()
-                    ) -> list[Report]:
-    """The report ``rbe_node`` makes for an as-built scene (checked as a whole), or for
-    why there is none: the node's own dispatch, as for a state."""
+def asbuilt_check(scene: Scene | SceneError, options: CheckOptions = CheckOptions()
+                  ) -> StateCheck:
+    """The check ``rbe_node`` makes of an as-built scene (as a whole), or the report of why
+    there is none: the node's own dispatch, as for a state."""
     def read(_sequence: bool) -> Scene:
         if isinstance(scene, SceneError):
             raise scene
         return scene
 
-    return check_state(read, False, options).reports
+    return check_state(read, False, options)
 
 
 def state_reports(state: dict, options: CheckOptions = CheckOptions()) -> list[Report]:
@@ -469,30 +479,44 @@ def format_differences(runs: list[Run], differences: list[Difference], limit: in
 
 # --- writing ---------------------------------------------------------------------------------
 
-def write_runs(path, runs: list[Run], replayed: list[list[dict]], options: CheckOptions) -> None:
+def write_runs(path, runs: list[Run], replayed: list[list[dict]], options: CheckOptions, *,
+               markers: bool = True) -> None:
     """A bag with every run's state and its ``replayed`` reports (at the recorded report
-    times where there are as many, else just after the state); the options in custom_data."""
+    times where there are as many, else a step a second after the state: :data:`STEP_NS`);
+    with ``markers`` each report's MarkerArray on :data:`rbe_ros.io.markers.MARKER_TOPIC` at
+    its time; the options in custom_data."""
+    asbuilt = asbuilt_scenes(runs) if markers else []
     with BagWriter(path, custom_data={OPTIONS_KEY: options_to_json(options)}) as bag:
         topics: set[str] = set()
-        for run, reports in zip(runs, replayed):
+        for i, (run, reports) in enumerate(zip(runs, replayed)):
             for topic, kind, latched in ((run.topic, POSES_TYPE if run.kind == POSES else
                                           STATE_TYPE, run.kind == DESIGN),
                                          (run.report_topic, REPORT_TYPE, True)):
                 if topic not in topics:
                     bag.add_topic(topic, kind, transient_local=latched)
                     topics.add(topic)
+            if markers and MARKER_TOPIC not in topics:
+                bag.add_topic(MARKER_TOPIC, MARKER_TYPE, transient_local=True)
+                topics.add(MARKER_TOPIC)
             bag.write(run.topic, run.state, run.stamp_ns)
             stamps = run.report_stamps if len(run.report_stamps) == len(reports) else \
-                [run.stamp_ns + k + 1 for k in range(len(reports))]
+                step_stamps(run.stamp_ns, len(reports))
             for report, stamp in zip(reports, stamps):
                 bag.write(run.report_topic, report, stamp)
+            if markers:
+                # an as-built run is drawn as the state checked: its scene, as a whole
+                drawn = run.state if run.kind == STATE else {} if isinstance(
+                    asbuilt[i], SceneError) else {**state_to_dict(asbuilt[i]), "sequence": []}
+                for array, stamp in zip(run_markers(drawn, reports, options), stamps):
+                    bag.write(MARKER_TOPIC, array, stamp)
 
 
 def record_bag(path, scenes: list[tuple[Scene, str, int]], options: CheckOptions = CheckOptions(),
-               *, zero_times: bool = False) -> list[Run]:
-    """Check ``(scene, frame_id, stamp_ns)`` states as the node would and record states and
-    reports in a new bag at ``path`` (reports 1 ns apart after their state). ``zero_times``:
-    solve_time 0 in every report, so that reruns write identical files."""
+               *, zero_times: bool = False, markers: bool = True) -> list[Run]:
+    """Check ``(scene, frame_id, stamp_ns)`` states as the node would and record states,
+    reports and (``markers``) their markers in a new bag at ``path`` (a step a second after
+    their state). ``zero_times``: solve_time 0 in every report, so that reruns write
+    identical files."""
     runs = []
     for scene, frame, stamp in scenes:
         run = Run(state_to_dict(scene, frame, stamp), stamp)
@@ -500,9 +524,9 @@ def record_bag(path, scenes: list[tuple[Scene, str, int]], options: CheckOptions
         if zero_times:
             for r in run.reports:
                 r["solve_time"] = 0.0
-        run.report_stamps = [stamp + k + 1 for k in range(len(run.reports))]
+        run.report_stamps = step_stamps(stamp, len(run.reports))
         runs.append(run)
-    write_runs(path, runs, [r.reports for r in runs], options)
+    write_runs(path, runs, [r.reports for r in runs], options, markers=markers)
     return runs
 
 
@@ -543,8 +567,8 @@ def offline_reports(runs: list[Run], options: CheckOptions,
             replayed.append(replay_run(run, options))
         else:   # a design or poses message the node dropped unchecked is not checked
             header = report_header(run.state.get("header"))
-            replayed.append([report_to_dict(r, header) for r in asbuilt_reports(
-                asbuilt[i], options)] if run.reports else [])
+            replayed.append([report_to_dict(r, header) for r in asbuilt_check(
+                asbuilt[i], options).reports] if run.reports else [])
         if on_run is not None:
             on_run(i, run)
     return replayed
@@ -552,12 +576,14 @@ def offline_reports(runs: list[Run], options: CheckOptions,
 
 def replay_bag(path, output=None, *, options: CheckOptions | None = None, compare: bool = True,
                recheck: Recheck = offline_reports, tolerances: Tolerances = Tolerances(),
-               write: bool = True, on_run: Callable[[int, Run], None] | None = None
-               ) -> ReplayResult:
+               write: bool = True, markers: bool = True,
+               on_run: Callable[[int, Run], None] | None = None) -> ReplayResult:
     """Re-check every state of the bag at ``path`` with ``recheck`` (offline; or through a
     live rbe_node: :func:`rbe_ros.ros.live.live_recheck`), write the states and the new
     reports to ``output`` (default: path + "_replay"; never overwritten; ``write=False``:
-    no bag), and with ``compare`` list the differences from the recorded reports."""
+    no bag; ``markers``: with the reports' markers), and with ``compare`` list the
+    differences from the recorded reports (markers are drawings of the reports: not
+    compared)."""
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"no bag at {str(path)!r}")
@@ -568,13 +594,13 @@ def replay_bag(path, output=None, *, options: CheckOptions | None = None, compar
     runs = read_runs(path)
     replayed = recheck(runs, options, on_run)
     if write:
-        write_runs(out, runs, replayed, options)
+        write_runs(out, runs, replayed, options, markers=markers)
     differences = compare_runs(runs, replayed, tolerances=tolerances) if compare else []
     return ReplayResult(runs, replayed, differences, out if write else None, options)
 
 
 __all__ = ["DESIGN", "Difference", "OPTIONS_KEY", "POSES", "ReplayResult", "Run", "STATE",
-           "Tolerances", "asbuilt_reports", "asbuilt_scenes", "bag_options", "compare_report",
+           "Tolerances", "asbuilt_check", "asbuilt_scenes", "bag_options", "compare_report",
            "compare_runs", "default_output", "free_weights", "merge_message", "offline_reports",
            "options_from_json", "options_to_json", "read_runs", "record_bag", "replay_bag",
-           "replay_run", "state_reports", "write_runs"]
+           "replay_run", "state_reports", "step_stamps", "write_runs"]

@@ -39,7 +39,6 @@ import time
 from pathlib import Path
 
 import rclpy
-from builtin_interfaces.msg import Time
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType, SetParametersResult)
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
@@ -61,16 +60,16 @@ from ..geometry.contacts import ContactOptions
 from ..io import cdr
 from ..io.bag import BagWriter, typestore
 from ..io.inputs import load_design
+from ..io.markers import MARKER_TYPE, run_markers, step_markers
 from ..io.messages import report_header, report_to_dict, state_to_dict
 from ..io.poses import AsBuilt
-from ..io.replay import (DESIGN, OPTIONS_KEY, POSES, asbuilt_reports, merge_message,
+from ..io.replay import (DESIGN, OPTIONS_KEY, POSES, asbuilt_check, merge_message,
                          options_to_json)
 from ..rbe.cones import CONES, FRICTION_MODELS
 from ..rbe.result import Report, Status
 from ..rbe.solver import OBJECTIVES, SolveOptions
 from ..scene import Scene, SceneError, ValidationLimits
 from .convert import dict_to_message, message_to_dict, scene_from_msg
-from .markers import report_markers
 
 NODE_NAME = "rbe_node"
 
@@ -149,6 +148,9 @@ PARAMETERS = {
                          "a timestamp suffix", read_only=True),
     "frame_id": _string("world", "frame of reports and markers when a received state has an "
                         "empty header frame_id"),
+    "record_markers": (True, ParameterDescriptor(
+        type=ParameterType.PARAMETER_BOOL, description="with mcap_path: record the markers of "
+        "every report too (false: a lean log of states and reports)")),
     "max_blocks": _integer(ValidationLimits().max_blocks, "largest number of blocks of a state; "
                            "a larger one gets an INVALID_INPUT report", 1, 1_000_000),
     "check_time_limit": _double(0.0, "time limit in s of each solver call of a check (a check "
@@ -219,6 +221,7 @@ class RbeNode(Node):
         # reports go out as CDR bytes made from their message dicts (rbe_ros.io.cdr): ~6x faster
         # than building the rclpy message (an object per Point) and serialising it
         self._encode_report = cdr.encoder(typestore(), "rbe_msgs/msg/StabilityReport")
+        self._encode_markers = cdr.encoder(typestore(), MARKER_TYPE)
         self._report_pub = self.create_publisher(StabilityReport, "~/report", LATCHED_QOS)
         self._marker_pub = self.create_publisher(MarkerArray, "~/markers", LATCHED_QOS)
         # raw: the callback gets the CDR bytes; a state is converted to a message only when
@@ -246,6 +249,7 @@ class RbeNode(Node):
         self.report_topic = self._report_pub.topic_name
         self.design_topic = self._design_sub.topic_name
         self.poses_topic = self._poses_sub.topic_name
+        self.marker_topic = self._marker_pub.topic_name
         self._open_bag()
         self._worker = threading.Thread(target=self._work, name="rbe_state_worker", daemon=True)
         self._worker.start()
@@ -318,6 +322,7 @@ class RbeNode(Node):
         self._bag.add_topic(self.state_topic, "rbe_msgs/msg/AssemblyState")
         self._bag.add_topic(self.report_topic, "rbe_msgs/msg/StabilityReport",
                             transient_local=True)
+        self._bag.add_topic(self.marker_topic, MARKER_TYPE, transient_local=True)
         # added with their first message: a bag of states alone has only their topics
         self._later_topics = {self.design_topic: ("rbe_msgs/msg/AssemblyState", True),
                               self.poses_topic: ("rbe_msgs/msg/BlockPoses", False)}
@@ -384,16 +389,26 @@ class RbeNode(Node):
         self._record(topic or self.state_topic, state if raw is None else raw)
         return report_header(message_to_dict(state.header), self.get_parameter("frame_id").value)
 
-    def _publish(self, scene: Scene | None, report: Report, header: dict) -> bytes:
+    def _publish(self, scene: Scene | None, report: Report, header: dict,
+                 state: AssemblyState | None = None) -> bytes:
         """Record, then publish ``report`` and its markers; returns the report's CDR bytes
         (``deserialize_message(data, StabilityReport)`` where a message is needed). Recorded
-        first, so that a report anyone received is in the bag even if the node is killed."""
+        first, so that a report anyone received is in the bag even if the node is killed.
+        ``state``: the state of a check that failed, drawn as it came (the blocks at fault
+        of invalid input highlighted)."""
         report.dropped_states = self._dropped
         data = self._encode_report(report_to_dict(report, header, arrays=True))
         self._record(self.report_topic, data)
         self._report_pub.publish(data)
-        self._marker_pub.publish(report_markers(scene, report, header["frame_id"],
-                                                Time(**header["stamp"])))
+        if state is None:
+            markers = step_markers(scene, report, header)
+        else:
+            [markers] = run_markers(self._drawable(state), [report_to_dict(report, header)],
+                                    self.check_options())
+        markers = self._encode_markers(markers)
+        if self.get_parameter("record_markers").value:
+            self._record(self.marker_topic, markers)
+        self._marker_pub.publish(markers)
         where = f" step {report.step_index} ({report.block_placed})" \
             if report.step_index >= 0 else ""
         text = f"{header['frame_id']}{where}: {report.status.name}: {report.message}"
@@ -404,6 +419,10 @@ class RbeNode(Node):
         else:
             self.get_logger().info(text)
         return data
+
+    def _drawable(self, state: AssemblyState) -> dict:
+        """The message dict of an unchecked ``state`` to draw, if within the block limit."""
+        return message_to_dict(state) if len(state.blocks) <= self.limits().max_blocks else {}
 
     def check(self, state: AssemblyState, header: dict, sequence: bool, *,
               cancelled=None, on_step=None) -> tuple[StateCheck, list[bytes]]:
@@ -427,7 +446,7 @@ class RbeNode(Node):
         options = self.check_options()
         result = check_state(read, sequence, options, on_step=publish, cancelled=stop)
         if result.error is not None:
-            sent.append(self._publish(result.scene, result.error, header))
+            sent.append(self._publish(result.scene, result.error, header, state))
         return result, sent
 
     def check_whole(self, state: AssemblyState, header: dict) -> bytes:
@@ -515,8 +534,14 @@ class RbeNode(Node):
 
     def _check_asbuilt(self, header: dict, scene) -> None:
         """Check an as-built scene (or report why there is none) as a whole."""
-        (report,) = asbuilt_reports(scene, self.check_options())
-        self._publish(scene if isinstance(scene, Scene) else None, report, header)
+        result = asbuilt_check(scene, self.check_options())
+        if result.error is None:
+            self._publish(result.scene, result.reports[0], header)
+            return
+        # drawn as a state that failed: what could be merged, the blocks at fault highlighted
+        state = AssemblyState() if result.scene is None else \
+            dict_to_message(state_to_dict(result.scene), AssemblyState)
+        self._publish(None, result.error, header, state)
 
     def _load_design_file(self, path: str) -> None:
         """The design of ``design_file``, sent through :meth:`_on_design` as the message a

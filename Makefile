@@ -43,6 +43,19 @@ bench: setup
 	$(PY) -m pip check --disable-pip-version-check
 	$(PY) benchmarks/bench.py $(BENCH_ARGS)
 
+# Mutation score of the core (rbe/, geometry/, the verdict) with a fast test selection:
+# docs/MUTATION.md (scripts/mutation.py; mutmut into .venv from requirements/mutation.txt,
+# checked with pip check; 1-2 hours on 2 busy cores, niced; reruns test only what changed).
+# make planted-bugs: the planted bugs of issue 17, each with the tests that catch it.
+.PHONY: mutation planted-bugs
+mutation: setup
+	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements/mutation.txt
+	$(PY) -m pip check --disable-pip-version-check
+	nice -n 10 $(PY) scripts/mutation.py $(MUTATION_ARGS)
+
+planted-bugs: setup
+	nice -n 10 $(PY) scripts/planted_bugs.py
+
 # Re-record the regression bags of bags/ (deterministic: same code, same files; ~30 s).
 bags: setup
 	$(PY) scripts/make_bags.py

@@ -17,6 +17,7 @@ from pathlib import Path
 
 from dataclasses import replace
 
+from .analysis.asbuilt import declared
 from .analysis.assembly import Assembly
 from .analysis.friction import minimum_friction
 from .analysis.options import CheckOptions, HoldSearch
@@ -99,6 +100,11 @@ def _solver_arguments(parser: argparse.ArgumentParser) -> None:
     c.add_argument("--vertex-tol", type=float, default=defaults.vertex_tol, metavar="R",
                    help="vertices this close to their neighbours' chord are left out "
                    f"(default {defaults.vertex_tol:g}; 0 keeps all)")
+    c.add_argument("--pose-uncertainty", type=uncertainty, default=None,
+                   metavar="POS_M[,ANGLE_DEG]", help="as-built poses: every pose is known to "
+                   "within POS_M metres and ANGLE_DEG degrees (about 3 sigma); contacts and the "
+                   "interpenetration limit then follow from it (README: Checking as-built "
+                   "poses; default: the scene's \"pose_uncertainty\", else design geometry)")
     h = parser.add_argument_group("suggested holds (unstable checks)")
     h.add_argument("--no-suggest-holds", action="store_true",
                    help="do not search the smallest set of blocks to hold")
@@ -108,6 +114,14 @@ def _solver_arguments(parser: argparse.ArgumentParser) -> None:
     h.add_argument("--hold-max-checks", type=int, default=HoldSearch().max_checks, metavar="N",
                    help="sub-assembly checks the exact search may spend "
                    f"(default {HoldSearch().max_checks})")
+
+
+def uncertainty(text: str) -> tuple[float, float]:
+    """POS_M[,ANGLE_DEG] (argparse type: ValueError for anything else)."""
+    parts = [float(x) for x in text.split(",")]
+    if not 1 <= len(parts) <= 2 or not all(math.isfinite(x) and x >= 0 for x in parts):
+        raise ValueError(text)
+    return parts[0], parts[1] if len(parts) > 1 else 0.0
 
 
 def _options(args) -> CheckOptions:
@@ -123,7 +137,9 @@ def _options(args) -> CheckOptions:
                        max_checks=args.hold_max_checks)
     contact = ContactOptions(distance_tol=args.distance_tol, angle_tol_deg=args.angle_tol,
                              min_area=args.min_area, min_width=args.min_width,
-                             vertex_tol=args.vertex_tol)
+                             vertex_tol=args.vertex_tol,
+                             **dict(zip(("pose_uncertainty_m", "pose_uncertainty_deg"),
+                                        args.pose_uncertainty or ())))
     return CheckOptions(solve=solve, mu_threshold=args.mu_threshold, tension_tol=args.tension_tol,
                         limits=ValidationLimits(max_blocks=args.max_blocks), holds=holds,
                         full_solve=args.full_solve, contact=contact)
@@ -140,7 +156,8 @@ def _scene(args) -> tuple[Scene, Assembly | None]:
     if args.poses:
         scene = scene_at_poses(scene, load_poses(args.poses))
     if args.interfaces == "compare":
-        diff = compare_interfaces(Assembly.from_scene(scene, _options(args).contact), stored)
+        diff = compare_interfaces(Assembly.from_scene(
+            scene, declared(_options(args), scene).contact), stored)
         args.interfaces_compare = diff
         as_json = getattr(args, "json", False)
         if not (as_json and args.command == "check"):
@@ -151,8 +168,8 @@ def _scene(args) -> tuple[Scene, Assembly | None]:
 
 def _assembly(args) -> Assembly:
     """The validated assembly of ``args.scene`` (the limits of the options; SceneError)."""
-    options = _options(args)
     scene, stored = _scene(args)
+    options = declared(_options(args), scene)
     return validated_assembly(scene, options.limits, options.contact, stored)
 
 
@@ -264,8 +281,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _run_check(args) -> int:
-    options = _options(args)
     scene, stored = _scene(args)
+    options = declared(_options(args), scene)      # recorded in the bag as checked
     if args.bag:
         _prepare_bag_dir(Path(args.bag), args.force)
     if stored is not None and (args.sequence or args.bag):

@@ -147,13 +147,15 @@ class Hold:
 @dataclass(frozen=True)
 class Scene:
     """An assembly of blocks under gravity, with an optional insertion sequence of block ids
-    and temporary supports (holds) by step."""
+    and temporary supports (holds) by step. ``pose_uncertainty`` (m, deg): how well the
+    poses are known (measured, as built; about 3 sigma), None for design geometry."""
 
     name: str
     blocks: tuple[Block, ...]
     gravity: np.ndarray = field(default_factory=lambda: np.array(DEFAULT_GRAVITY))
     sequence: tuple[str, ...] = ()
     holds: tuple[Hold, ...] = ()
+    pose_uncertainty: tuple[float, float] | None = None
 
     def block(self, block_id: str) -> Block:
         for b in self.blocks:
@@ -233,9 +235,10 @@ def finite_array(value, shape, what: str) -> np.ndarray:
     return arr
 
 
-def make_scene(name: str, blocks, gravity=DEFAULT_GRAVITY, sequence=(), holds=()) -> Scene:
+def make_scene(name: str, blocks, gravity=DEFAULT_GRAVITY, sequence=(), holds=(),
+               pose_uncertainty=None) -> Scene:
     """A validated scene: unique ids, a support, a sequence of existing free blocks, holds of
-    existing blocks within the steps."""
+    existing blocks within the steps, a pose uncertainty of two numbers >= 0 (or None)."""
     blocks = tuple(blocks)
     if not blocks:
         raise SceneError("the scene has no blocks")
@@ -262,7 +265,21 @@ def make_scene(name: str, blocks, gravity=DEFAULT_GRAVITY, sequence=(), holds=()
             raise SceneError(f"sequence names block {s!r} twice")
         seq_seen.add(s)
     steps = len(seq) or sum(not b.support for b in blocks)
-    return Scene(str(name), blocks, g, seq, _check_holds(holds, seen, steps))
+    return Scene(str(name), blocks, g, seq, _check_holds(holds, seen, steps),
+                 _check_uncertainty(pose_uncertainty))
+
+
+def _check_uncertainty(value) -> tuple[float, float] | None:
+    """A declared pose uncertainty: [position m] or [position m, angle deg], finite, >= 0."""
+    if value is None:
+        return None
+    what = '"pose_uncertainty" must be [position m, angle deg]'
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or not 1 <= len(value) <= 2:
+        raise SceneError(f"{what}, got {value!r}")
+    arr = finite_array(list(value) + [0.0] * (2 - len(value)), (2,), what.split(" must")[0])
+    if np.any(arr < 0):
+        raise SceneError(f"{what}, both >= 0, got {list(value)}")
+    return float(arr[0]), float(arr[1])
 
 
 def _check_holds(holds, ids: set[str], steps: int) -> tuple[Hold, ...]:

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 from ..rbe.result import Report, Status
 from ..scene import Scene, SceneError
+from .asbuilt import annotate_sensitivity, declared
 from .assembly import Assembly
 from .holds import annotate_holds
 from .incremental import StepChecker
@@ -28,12 +29,14 @@ def check_scene(scene: Scene, options: CheckOptions = CheckOptions(),
     report names the smallest set of blocks to hold (``suggested_holds``, see
     :class:`~rbe_ros.analysis.options.HoldSearch`)."""
     start = time.perf_counter()
+    options = declared(options, scene)
     assembly = validated_assembly(scene, options.limits, options.contact, assembly)
     held: tuple[str, ...] = ()
     if scene.holds:
         present, held = final_state(scene)
         assembly = assembly.subset(present, held)
     report = check(assembly, options)
+    annotate_sensitivity(report, assembly, options)
     annotate_holds(report, assembly, held, options)
     report.solve_time = time.perf_counter() - start
     return report
@@ -48,6 +51,7 @@ def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
     the reports so far are returned.
     """
     start = time.perf_counter()
+    options = declared(options, scene)
     full = validated_assembly(scene, options.limits, options.contact)
     contact_time = time.perf_counter() - start
     steps = sequence_steps(scene)
@@ -59,6 +63,7 @@ def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
         assembly = full.subset(step.present, step.held)
         report = checker.check(assembly)
         report.step_index, report.block_placed = step.index, step.block
+        annotate_sensitivity(report, assembly, options)
         annotate_holds(report, assembly, step.held, options)
         report.solve_time += contact_time / len(steps)
         reports.append(report)

@@ -17,7 +17,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..rbe.result import InterfaceResult, Report, Status
+from ..rbe.result import InterfaceResult, NearContact, Report, Status
 from ..scene import (BOX_FACES, Hold, Scene, SceneError, blame, box_vertices, make_block,
                      make_scene)
 
@@ -298,6 +298,10 @@ def report_to_dict(report: Report, header: dict, *, arrays: bool = False) -> dic
         "message": str(report.message),
         "model": str(report.model),
         "dropped_states": int(report.dropped_states),
+        "near_contacts": [{"block_a": str(c.block_a), "block_b": str(c.block_b),
+                           "gap": float(c.gap), "overlap_area": float(c.overlap_area)}
+                          for c in report.near_contacts],
+        "verdict_sensitive": bool(report.verdict_sensitive),
     }
 
 
@@ -314,6 +318,9 @@ def report_from_dict(d: Mapping) -> Report:
         suggested_holds=[str(b) for b in d.get("suggested_holds", [])],
         model=str(d.get("model", "full")),
         dropped_states=int(d.get("dropped_states", 0)),
+        near_contacts=[NearContact(str(c["block_a"]), str(c["block_b"]), float(c["gap"]),
+                                   float(c["overlap_area"])) for c in d.get("near_contacts", [])],
+        verdict_sensitive=bool(d.get("verdict_sensitive", False)),
     )
 
 

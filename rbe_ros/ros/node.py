@@ -89,7 +89,8 @@ RANGES = {"friction_coefficient": (0.0, 10.0, True), "friction_threshold": (0.0,
           "contact_distance_tolerance": (0.0, 1.0, False),
           "contact_angle_tolerance_deg": (0.0, 90.0, False),
           "contact_min_area": (0.0, 1.0, False), "contact_min_width": (0.0, 1.0, False),
-          "contact_vertex_tolerance": (0.0, 1.0, False)}
+          "contact_vertex_tolerance": (0.0, 1.0, False),
+          "pose_uncertainty_m": (0.0, 1.0, False), "pose_uncertainty_deg": (0.0, 90.0, False)}
 
 
 def _double(value: float, description: str, low: float, high: float) -> tuple:
@@ -172,6 +173,14 @@ PARAMETERS = {
     "contact_vertex_tolerance": _double(
         _CONTACT.vertex_tol, "contact detection: interface vertices closer than this "
         "to their neighbours' chord are left out, relative to the size", 0.0, 1.0),
+    # as-built poses (README: Checking as-built poses); 0 and 0: design geometry
+    "pose_uncertainty_m": _double(
+        _CONTACT.pose_uncertainty_m, "as-built poses: every block's position is known to "
+        "within this many m (about 3 sigma); contacts and the interpenetration limit follow "
+        "from it. 0 (with pose_uncertainty_deg 0): design geometry", 0.0, 1.0),
+    "pose_uncertainty_deg": _double(
+        _CONTACT.pose_uncertainty_deg, "as-built poses: every block's orientation is known to "
+        "within this many degrees (about 3 sigma)", 0.0, 90.0),
 }
 
 
@@ -269,7 +278,9 @@ class RbeNode(Node):
                                 angle_tol_deg=float(value("contact_angle_tolerance_deg")),
                                 min_area=float(value("contact_min_area")),
                                 min_width=float(value("contact_min_width")),
-                                vertex_tol=float(value("contact_vertex_tolerance"))),
+                                vertex_tol=float(value("contact_vertex_tolerance")),
+                                pose_uncertainty_m=float(value("pose_uncertainty_m")),
+                                pose_uncertainty_deg=float(value("pose_uncertainty_deg"))),
                             holds=HoldSearch(enabled=bool(value("suggest_holds")),
                                              max_size=int(value("hold_search_max_size")),
                                              max_checks=int(value("hold_search_max_checks"))))

@@ -37,7 +37,7 @@ paper: setup
 # Speed against accuracy against compas_cra, PyBullet and MuJoCo: docs/BENCHMARKS.md and
 # docs/bench/ (20-30 minutes). The physics engines go into .venv (requirements/bench.txt,
 # checked with pip check); compas-cra into a scratch venv (RBE_COMPAS_VENV, default
-# /tmp/rbe-compas-venv). make bench BENCH_ARGS=--quick: a subset in under 3 minutes,
+# .venv-compas, made by make setup). make bench BENCH_ARGS=--quick: a subset in under 3 minutes,
 # written to out/bench-quick/.
 .PHONY: bench
 bench: setup
@@ -69,4 +69,4 @@ screenshot: setup browser
 	$(PY) scripts/view_screenshot.py
 
 clean:
-	rm -rf build $(VENV)
+	rm -rf build $(VENV) .venv-compas

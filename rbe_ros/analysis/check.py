@@ -13,6 +13,7 @@ import math
 import time
 from dataclasses import dataclass, field, replace
 
+from ..deadline import CheckTimeout, stage, time_budget
 from ..geometry.contacts import ContactOptions
 from ..rbe.cones import cone_capacity
 from ..rbe.model import build_model
@@ -69,20 +70,32 @@ def check_scene(scene: Scene, options: CheckOptions = CheckOptions()) -> Report:
     With holds, the assembly is the state after the last step: supports whose hold ends are
     taken away, free blocks held to the end are supports (``held_blocks``). An unstable
     report names the smallest set of blocks to hold (``suggested_holds``, see
-    :class:`HoldSearch`)."""
+    :class:`HoldSearch`). The whole check, geometry included, is bounded by the solve
+    options' ``time_limit``: over it, the report is SOLVER_FAILED naming the stage."""
     from .holds import annotate_holds            # deferred: holds imports this module
     from .sequence import final_state
 
     start = time.perf_counter()
-    assembly = validated_assembly(scene, options.limits, options.contact)
-    held: tuple[str, ...] = ()
-    if scene.holds:
-        present, held = final_state(scene)
-        assembly = assembly.subset(present, held)
-    report = check(assembly, options)
-    annotate_holds(report, assembly, held, options)
+    try:
+        with time_budget(options.solve.time_limit):
+            assembly = validated_assembly(scene, options.limits, options.contact)
+            held: tuple[str, ...] = ()
+            if scene.holds:
+                present, held = final_state(scene)
+                assembly = assembly.subset(present, held)
+            with stage("solve"):
+                report = check(assembly, options)
+            with stage("hold search"):
+                annotate_holds(report, assembly, held, options)
+    except CheckTimeout as exc:
+        report = timeout_report(exc)
     report.solve_time = time.perf_counter() - start
     return report
+
+
+def timeout_report(exc: CheckTimeout) -> Report:
+    """The report of a check stopped at its time limit."""
+    return Report(False, Status.SOLVER_FAILED, f"solver failed: {exc}")
 
 
 def check(assembly: Assembly, options: CheckOptions = CheckOptions()) -> Report:

@@ -7,9 +7,10 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from ..deadline import CheckTimeout, stage, time_budget
 from ..rbe.result import Report
 from ..scene import Scene
-from .check import CheckOptions
+from .check import CheckOptions, timeout_report
 from .validate import validated_assembly
 from .holds import annotate_holds
 from .incremental import StepChecker
@@ -63,21 +64,39 @@ def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
     """One report per step, in order. Contacts are detected once on the whole scene.
 
     ``on_step(report, total)`` is called after each step; when ``cancelled()`` turns true
-    the reports so far are returned.
+    the reports so far are returned. The solve options' ``time_limit`` bounds each step, and
+    the contact detection on the whole scene: a step over it is SOLVER_FAILED naming the
+    stage, and the sequence goes on; contacts over it make every step's report SOLVER_FAILED.
     """
     start = time.perf_counter()
-    full = validated_assembly(scene, options.limits, options.contact)
-    contact_time = time.perf_counter() - start
     steps = sequence_steps(scene)
+    limit = options.solve.time_limit
+    try:
+        with time_budget(limit):
+            full = validated_assembly(scene, options.limits, options.contact)
+    except CheckTimeout as exc:
+        full, geometry_timeout = None, exc
+    contact_time = time.perf_counter() - start
     checker = StepChecker(options, local=not options.full_solve)
     reports = []
     for step in steps:
         if cancelled is not None and cancelled():
             break
-        assembly = full.subset(step.present, step.held)
-        report = checker.check(assembly)
+        step_start = time.perf_counter()
+        try:
+            if full is None:
+                raise geometry_timeout
+            assembly = full.subset(step.present, step.held)
+            with time_budget(limit):
+                with stage("solve"):
+                    report = checker.check(assembly)
+                with stage("hold search"):
+                    annotate_holds(report, assembly, step.held, options)
+        except CheckTimeout as exc:
+            report = timeout_report(exc)
+            report.num_blocks = len(step.present)
+            report.solve_time = time.perf_counter() - step_start
         report.step_index, report.block_placed = step.index, step.block
-        annotate_holds(report, assembly, step.held, options)
         report.solve_time += contact_time / len(steps)
         reports.append(report)
         if on_step is not None:

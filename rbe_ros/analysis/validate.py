@@ -8,6 +8,7 @@ A block that touches nothing is not invalid: the check's verdict says so (INFEAS
 """
 from __future__ import annotations
 
+from ..deadline import stage
 from ..geometry.contacts import ContactOptions
 from ..geometry.overlap import find_penetration
 from ..scene import Scene, SceneError, ValidationLimits, validate_scene
@@ -35,8 +36,10 @@ def validated_assembly(scene: Scene, limits: ValidationLimits | None = Validatio
                        contact: ContactOptions = ContactOptions()) -> Assembly:
     """The assembly of ``scene`` after every validation (none with ``limits=None``)."""
     if limits is not None:
-        validate_scene(scene, limits)
-    assembly = Assembly.from_scene(scene, contact)
-    if limits is not None:
-        validate_assembly(assembly, limits, contact)
+        with stage("validation"):
+            validate_scene(scene, limits)
+    with stage("geometry"):
+        assembly = Assembly.from_scene(scene, contact)
+        if limits is not None:
+            validate_assembly(assembly, limits, contact)
     return assembly

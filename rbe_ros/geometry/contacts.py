@@ -17,6 +17,7 @@ from functools import cached_property
 import numpy as np
 import shapely
 
+from ..deadline import checkpoint
 from .block import PosedBlock
 from .clip import clip_convex, padded_rings
 from .kern import kern, kerns_ragged
@@ -177,6 +178,7 @@ def detect_interfaces(blocks: list[PosedBlock], options: ContactOptions = Contac
     if not len(fa):
         return []
 
+    checkpoint()
     # the overlap of the two outlines, in the frame of face a
     outline_a, outline_b = outlines[fa], outlines[fb]
     coords_a, index_a = shapely.get_coordinates(outline_a, return_index=True)
@@ -193,6 +195,7 @@ def detect_interfaces(blocks: list[PosedBlock], options: ContactOptions = Contac
                                                  scale, 0.5 * options.min_width * scale))
     ring, counts, owner, area, centroid2d = _overlaps(outline_a, coords_a, index_a, outline_b,
                                                       coords_b, index_b, simple, scale, meet)
+    checkpoint()
     ok = area > options.min_area * scale[owner] ** 2
     if not ok.all():
         ring, counts = ring[np.repeat(ok, counts)], counts[ok]

@@ -255,7 +255,7 @@ def markdown(result: dict) -> str:
     L += _scaling_table(result)
     L += _armadillo_section(result)
     L += ["## Methods and parameters", "",
-          "- **ours**: `rbe_ros.analysis.check.check_scene` (contact detection, model, Clarabel, verdict),"
+          "- **ours**: `rbe_ros.analysis.pipeline.check_scene` (contact detection, model, Clarabel, verdict),"
           " objective QP or LP, friction-net, cone `soc` (exact), `pyramid8` (8 facets, inscribed),"
           " `pyramid8-outer` (circumscribed, as compas_cra), `pyramid4` (|fu|, |fv| <= mu fn, as"
           " compas_rbe); verdict `report.stable`. On a scene that fails, the check makes two more"

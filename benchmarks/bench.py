@@ -7,7 +7,7 @@ Methods, all run in this one process run, scene by scene (compas_cra in a subpro
 own venv, see _bench_cra_driver.py):
 
 * ours in each configuration: objective QP / LP x friction cone exact (soc) / 8-sided
-  inscribed / 8-sided circumscribed / 4-sided (``rbe_ros.analysis.check.check_scene``,
+  inscribed / 8-sided circumscribed / 4-sided (``rbe_ros.analysis.pipeline.check_scene``,
   interface detection included; tilt capacities with ``tilt_capacity``);
 * the default problem stated in cvxpy (``_cvxpy_rbe.py``), same detection and matrices;
 * compas_cra 0.8.0 ``rbe_solve`` (IPOPT), on the same scenes exported with
@@ -44,7 +44,8 @@ from timing import best_of  # noqa: E402
 
 from rbe_ros import generators as gen  # noqa: E402
 from rbe_ros.analysis.assembly import Assembly  # noqa: E402
-from rbe_ros.analysis.check import CheckOptions, check_scene  # noqa: E402
+from rbe_ros.analysis.options import CheckOptions  # noqa: E402
+from rbe_ros.analysis.pipeline import check_scene
 from rbe_ros.analysis.tilt import horizontal, tilt_capacity  # noqa: E402
 from rbe_ros.geometry.contacts import ContactOptions  # noqa: E402
 from rbe_ros.rbe.model import build_model  # noqa: E402
@@ -341,7 +342,7 @@ class Cra:
         return json.loads(line)
 
     def export(self, scene: Scene, interfaces: bool) -> str:
-        from rbe_ros.compas_io import save_compas_assembly
+        from rbe_ros.io.compas import save_compas_assembly
         self.count += 1
         path = self.tmp / f"scene{self.count:04d}.json"
         save_compas_assembly(rotated_for_gravity(scene), path, interfaces=interfaces)
@@ -509,7 +510,7 @@ def scaling(args, cra, engines) -> list[dict]:
 
 def armadillo(cra, engines) -> dict | None:
     """compas_cra's largest sample: rbe_solve on its stored interfaces against our full check."""
-    from rbe_ros.compas_io import load_compas_assembly
+    from rbe_ros.io.compas import load_compas_assembly
     if cra is None:
         return None
     path = Path(cra.versions["samples"]) / "armadillo_cra.json"

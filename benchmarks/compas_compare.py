@@ -154,7 +154,7 @@ def our_scene(record: dict):
     node key -> block index."""
     from dataclasses import replace
 
-    from rbe_ros.compas_io import load_compas_assembly
+    from rbe_ros.io.compas import load_compas_assembly
 
     supports = record.get("supports")
     scene = load_compas_assembly(record["path"], supports=supports, density=1.0)
@@ -291,20 +291,14 @@ def _check_options(prep):
     """Our check with compas_cra's solve settings, without the search for blocks to hold
     that an unstable check would otherwise add (no part of an RBE solve; it can take longer
     than the check itself)."""
-    from dataclasses import fields
+    from rbe_ros.analysis.options import CheckOptions, HoldSearch
 
-    from rbe_ros.analysis import check as check_module
-
-    extra = {}
-    names = {f.name for f in fields(check_module.CheckOptions)}
-    if hasattr(check_module, "HoldSearch") and "holds" in names:
-        extra["holds"] = check_module.HoldSearch(enabled=False)
-    return check_module.CheckOptions(prep.options, contact=prep.contact, **extra)
+    return CheckOptions(prep.options, contact=prep.contact, holds=HoldSearch(enabled=False))
 
 
 def _check_own(prep):
     """Our full check from the blocks alone (the timed "full check")."""
-    from rbe_ros.analysis.check import check_scene
+    from rbe_ros.analysis.pipeline import check_scene
     return check_scene(prep.scene, _check_options(prep))
 
 
@@ -376,7 +370,7 @@ def compare_sample(record: dict, repeat: int = 3) -> dict:
     own = _match_own(record, interfaces, index, scene, report, g)
     if volume_err > 1e-6:   # the same detection, with compas_cra's volumes and centres
         from rbe_ros.analysis.assembly import Assembly
-        from rbe_ros.analysis.check import check
+        from rbe_ros.analysis.verdict import check
         assembly = replace(Assembly.from_scene(scene, contact), blocks=as_cra)
         same_mass = _match_own(record, interfaces, index, scene, check(assembly, _check_options(prep)), g)
         own["with_cra_mass"] = {k: v for k, v in same_mass.items() if k.startswith("agreement")}

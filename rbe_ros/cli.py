@@ -15,26 +15,52 @@ import sys
 import time
 from pathlib import Path
 
+from dataclasses import replace
+
 from .analysis.assembly import Assembly
-from .analysis.check import CheckOptions, HoldSearch, check, check_scene
 from .analysis.friction import minimum_friction
+from .analysis.options import CheckOptions, HoldSearch
+from .analysis.pipeline import check_scene, check_sequence, first_failing_step
+from .analysis.planning import plan_sequence
 from .analysis.tilt import DIRECTIONS, tilt_capacity
-from .analysis.virtual import ANALYSES, virtual_assembly
-from .analysis.sequence import check_sequence, first_failing_step
 from .analysis.validate import validated_assembly
+from .analysis.verdict import check
+from .analysis.virtual import ANALYSES, virtual_assembly
+from .generators import GENERATORS
 from .geometry.contacts import ContactOptions
+from .io.figures import draw_report
+from .io.messages import header_dict, report_to_dict, state_to_dict
+from .io.replay import (REPORT_TOPIC, STATE_TOPIC, Run, default_output, offline_reports,
+                        replay_bag, write_runs)
+from .io.report import format_table, json_number, report_json
+from .io.scene_json import scene_to_dict
 from .rbe.cones import CONES
 from .rbe.solver import SolveOptions
-from .report import format_table, json_number, report_json
-from .generators import GENERATORS
-from .scene import Scene, SceneError, ValidationLimits, load_scene, scene_to_dict
+from .io.inputs import load_design
+from .io.poses import load_poses, scene_at_poses
+from .io.stored_interfaces import compare_interfaces
+from .scene import Scene, SceneError, ValidationLimits
 
-#: Topics under which the CLI records, the names the node uses (node name rbe_node).
-STATE_TOPIC = "/rbe_node/assembly"
-REPORT_TOPIC = "/rbe_node/report"
+
+def _input_arguments(parser: argparse.ArgumentParser) -> None:
+    i = parser.add_argument_group("input (the scene: a scene JSON or a COMPAS Assembly JSON, "
+                                  "either gzipped as *.gz)")
+    i.add_argument("--poses", metavar="POSES.json",
+                   help='measured poses {"poses": {ID: {"position": [x, y, z], "orientation": '
+                   '[x, y, z, w]}}}: the design\'s supports and the measured blocks at their '
+                   'measured poses are checked; blocks not measured are not placed')
+    i.add_argument("--density", type=float, default=None, metavar="KG_M3",
+                   help="density of the blocks of a COMPAS file that gives them none "
+                   "(default 2500)")
+    i.add_argument("--interfaces", choices=("detected", "stored", "compare"),
+                   default="detected", help="detected (default); stored: check on the "
+                   "interfaces a COMPAS file stores, as given; compare: list how the detected "
+                   "ones differ from the stored ones (missing, extra, area), then check on the "
+                   "detected ones")
 
 
 def _solver_arguments(parser: argparse.ArgumentParser) -> None:
+    _input_arguments(parser)
     g = parser.add_argument_group("RBE model")
     g.add_argument("--mu", type=float, default=0.6, help="friction coefficient (default 0.6)")
     g.add_argument("--mu-threshold", type=float, default=None,
@@ -103,10 +129,31 @@ def _options(args) -> CheckOptions:
                         full_solve=args.full_solve, contact=contact)
 
 
+def _scene(args) -> tuple[Scene, Assembly | None]:
+    """The scene of ``args.scene`` (``--poses`` applied) and, with ``--interfaces stored``,
+    its assembly on the stored interfaces (else None: detected in the check). With
+    ``--interfaces compare`` the differences are printed first (to stderr after --json)."""
+    if args.poses and args.interfaces != "detected":
+        raise ValueError("--interfaces stored and compare are of the blocks as the file has "
+                         "them, not at measured poses (--poses)")
+    scene, stored = load_design(args.scene, args.density, stored=args.interfaces != "detected")
+    if args.poses:
+        scene = scene_at_poses(scene, load_poses(args.poses))
+    if args.interfaces == "compare":
+        diff = compare_interfaces(Assembly.from_scene(scene, _options(args).contact), stored)
+        args.interfaces_compare = diff
+        as_json = getattr(args, "json", False)
+        if not (as_json and args.command == "check"):
+            print("\n".join(diff.lines()), file=sys.stderr if as_json else sys.stdout)
+        stored = None
+    return scene, stored
+
+
 def _assembly(args) -> Assembly:
     """The validated assembly of ``args.scene`` (the limits of the options; SceneError)."""
     options = _options(args)
-    return validated_assembly(load_scene(args.scene), options.limits, options.contact)
+    scene, stored = _scene(args)
+    return validated_assembly(scene, options.limits, options.contact, stored)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -203,9 +250,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _run_check(args) -> int:
     options = _options(args)
-    scene = load_scene(args.scene)
+    scene, stored = _scene(args)
     if args.bag:
         _prepare_bag_dir(Path(args.bag), args.force)
+    if stored is not None and (args.sequence or args.bag):
+        raise ValueError("--interfaces stored checks the assembly as a whole, and is not "
+                         "recorded (a replay detects the interfaces): no --sequence or --bag")
     if args.sequence:
         def progress(report, total: int) -> None:
             if report.step_index == 0:      # after validation: bad input gives one line only
@@ -217,8 +267,10 @@ def _run_check(args) -> int:
         out = {"scene": scene.name, "first_failing_step": first_failing_step(reports),
                "steps": [report_json(r) for r in reports]}
     else:
-        reports = [check_scene(scene, options)]
+        reports = [check_scene(scene, options, stored)]
         out = {"scene": scene.name, **report_json(reports[0])}
+    if args.interfaces == "compare":
+        out["interfaces_compare"] = args.interfaces_compare.to_json()
     if args.bag:
         _record(Path(args.bag), scene, reports, options, args.sequence)
     if args.json:
@@ -277,8 +329,6 @@ def _run_analyse(args) -> int:
 
 
 def _run_figure(args) -> int:
-    from .figures import draw_report
-
     assembly, report = _analysed(args)
     title = f"{args.analysis + ': ' if args.analysis else ''}{report.message}"
     print(f"figure written to {draw_report(assembly, report, args.output, title=title, view=tuple(args.view))}")
@@ -326,11 +376,6 @@ def _record(path: Path, scene: Scene, reports, options: CheckOptions, sequence: 
     """Write the scene's state and every report, as the node would have published them, and
     the options (so that ``rbe-ros replay`` re-checks the same way). The state holds the
     order checked (``sequence``) or no sequence (a check as a whole)."""
-    from dataclasses import replace
-
-    from .messages import header_dict, report_to_dict, state_to_dict
-    from .replay import Run, write_runs
-
     order = (scene.sequence or tuple(b.id for b in scene.blocks if not b.support)) \
         if sequence else ()
     stamp = time.time_ns()
@@ -342,10 +387,11 @@ def _record(path: Path, scene: Scene, reports, options: CheckOptions, sequence: 
 
 
 def _run_plan(args) -> int:
-    from .analysis.planning import plan_sequence
-
     options = _options(args)
-    scene = load_scene(args.scene)
+    scene, stored = _scene(args)
+    if stored is not None:
+        raise ValueError("plan detects the interfaces of every partial assembly (not "
+                         "--interfaces stored)")
     if not args.json:
         print(f"planning {scene.name}: {sum(not b.support for b in scene.blocks)} blocks to "
               f"place, at most {args.max_held} held", file=sys.stderr)
@@ -374,8 +420,6 @@ def _run_plan(args) -> int:
 
 
 def _run_replay(args) -> int:
-    from .replay import default_output, replay_bag
-
     if args.node_name and not args.live:
         raise ValueError("--node-name needs --live")
     out = Path(args.output) if args.output else default_output(args.bag)
@@ -387,9 +431,14 @@ def _run_replay(args) -> int:
         print(f"  run {i}: {run.describe()}: {len(run.reports)} recorded reports",
               file=sys.stderr)
 
+    recheck = offline_reports
+    if args.live:
+        # rclpy is loaded only for --live: every other command runs without ROS
+        from .ros.live import live_recheck
+        recheck = live_recheck(args.node_name, timeout=args.timeout)
     try:
-        result = replay_bag(args.bag, out, compare=args.compare, live=args.live,
-                            node_name=args.node_name, timeout=args.timeout, on_run=progress)
+        result = replay_bag(args.bag, out, compare=args.compare, recheck=recheck,
+                            on_run=progress)
     except RuntimeError as exc:     # the live node failed or exited
         raise ValueError(str(exc)) from None
     reports = sum(len(r) for r in result.replayed)

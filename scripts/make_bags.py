@@ -4,7 +4,7 @@ solve times zeroed, so a rerun on the same code writes byte-identical files.
 
 Each bag holds AssemblyState messages on /rbe_node/assembly and the StabilityReports the
 checker made for them on /rbe_node/report (exactly what ``rbe_node`` would publish; replay
-with ``rbe-ros replay BAG --compare`` or ``rbe_ros.testing.assert_bag_replays``). The check
+with ``rbe-ros replay BAG --compare`` or ``rbe_ros.io.testing.assert_bag_replays``). The check
 options (the defaults) are in metadata.yaml, custom_data ``rbe_ros.check_options``.
 
 * stack_tips: five 1 m boxes, each shifted 0.3 m further along x than the one below. Run 0
@@ -50,11 +50,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from rbe_ros import generators  # noqa: E402
-from rbe_ros.analysis.check import CheckOptions  # noqa: E402
+from rbe_ros.analysis.options import CheckOptions  # noqa: E402
 from rbe_ros.analysis.planning import plan_sequence  # noqa: E402
-from rbe_ros.analysis.sequence import check_sequence  # noqa: E402
+from rbe_ros.analysis.pipeline import check_sequence  # noqa: E402
 from rbe_ros.generators import _prism  # noqa: E402
-from rbe_ros.replay import record_bag  # noqa: E402
+from rbe_ros.io.replay import record_bag  # noqa: E402
 from rbe_ros.scene import Hold, make_scene  # noqa: E402
 
 #: Stamps of the recorded states: 2024-01-01T00:00:00Z plus one second per run.

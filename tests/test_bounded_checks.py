@@ -6,56 +6,25 @@ import numpy as np
 import pytest
 from scipy.spatial import ConvexHull
 
+from rbe_ros import generators as gen
 from rbe_ros.analysis import incremental
-from rbe_ros.analysis.check import CheckOptions, check_scene
-from rbe_ros.analysis.sequence import check_sequence
+from rbe_ros.analysis.options import CheckOptions
+from rbe_ros.analysis.pipeline import check_scene, check_sequence
 from rbe_ros.deadline import CheckTimeout, checkpoint, stage, time_budget
 from rbe_ros.geometry import block as block_module
 from rbe_ros.geometry.block import ANGLE_TOL, PLANE_TOL, _group_planes, pose_block
 from rbe_ros.geometry.support import projection_extents
 from rbe_ros.rbe.result import Status
 from rbe_ros.rbe.solver import SolveOptions
-from rbe_ros.scene import box_block, make_block, make_scene
 
 from helpers import stacked_boxes
 
 DENSITY = 2000.0
-RADIUS, HEIGHT = 0.3, 0.2
-
-
-def hull_dome(vertices: int, seed: int = 0, rim: int = 1000):
-    """A convex block of ``vertices`` vertices: random points on the upper half of an
-    ellipsoid over a flat base, a regular ``rim``-gon of radius RADIUS (the hull triangulates
-    the base into many coplanar triangles, one face to find)."""
-    rng = np.random.default_rng(seed)
-    p = rng.normal(size=(vertices - rim, 3))
-    p /= np.linalg.norm(p, axis=1)[:, None]
-    p[:, 2] = np.abs(p[:, 2]) + 1e-2
-    t = np.linspace(0.0, 2.0 * math.pi, rim, endpoint=False)
-    points = np.vstack((p, np.column_stack((np.cos(t), np.sin(t), np.zeros(rim)))))
-    points *= [RADIUS, RADIUS, HEIGHT]
-    hull = ConvexHull(points)
-    faces = []
-    for simplex, plane in zip(hull.simplices, hull.equations):
-        a, b, c = points[simplex]
-        faces.append(simplex if np.cross(b - a, c - a) @ plane[:3] > 0 else simplex[::-1])
-    assert len(hull.vertices) == vertices
-    return points, [[int(i) for i in f] for f in faces]
-
-
-def dome_scene(count: int = 1, vertices: int = 10_000):
-    ground = box_block("ground", (0.8 * count, 0.8, 0.1), (0, 0, -0.05), support=True,
-                       density=DENSITY)
-    points, faces = hull_dome(vertices)
-    # scaled a little each, so that every block is a distinct mesh to analyse
-    blocks = [ground] + [make_block(f"dome{k}", points * (1 + 1e-3 * k), faces,
-                                    position=(0.8 * (k - (count - 1) / 2), 0, 0),
-                                    density=DENSITY) for k in range(count)]
-    return make_scene("domes", blocks)
+RADIUS = 0.3            # of the domes' base (convex_domes' default)
 
 
 def test_a_10000_vertex_convex_mesh_is_checked_in_under_2_s():
-    scene = dome_scene()
+    scene = gen.convex_domes(density=DENSITY)
     block_module._shape.cache_clear()
     # CPU time of this process: the bound is on the work, not on the load of a shared machine
     start = time.process_time()
@@ -64,7 +33,8 @@ def test_a_10000_vertex_convex_mesh_is_checked_in_under_2_s():
     assert spent < 2.0, f"{spent:.2f} s"
     # oracles: weight and centre of mass from the hull's tetrahedra (scipy's triangulation),
     # which the one interface carries (the dome on its flat base, inside the 1000-gon)
-    hull = ConvexHull(scene.blocks[1].vertices)
+    dome = scene.blocks[1]
+    hull = ConvexHull(dome.vertices + dome.position)
     tets = hull.points[hull.simplices]
     apex = hull.points.mean(axis=0)
     tet_volumes = np.abs(np.einsum("ij,ij->i", tets[:, 0] - apex,
@@ -115,17 +85,15 @@ def test_faces_are_grouped_by_plane_as_a_linear_scan_groups_them():
 
 def test_projection_extents_equal_the_full_product():
     rng = np.random.default_rng(4)
-    points, _ = hull_dome(3000, seed=4)
-    inside = rng.uniform(-0.5, 0.5, size=(500, 3)) * [RADIUS, RADIUS, HEIGHT] + [0, 0, 0.1]
-    points = np.vstack((points, inside))          # points inside the hull change nothing
+    dome = gen.convex_domes(vertices=3000, rim=100, seed=4).blocks[1]
+    inside = rng.uniform(-0.1, 0.1, size=(500, 3))
+    points = np.vstack((dome.vertices, inside))    # points inside the hull change nothing
     axes = rng.normal(size=(5000, 3))
     product = points @ axes.T
     extents = projection_extents(points, axes)
     assert np.allclose(extents[:, 0], product.min(axis=0), rtol=0, atol=1e-14)
     assert np.allclose(extents[:, 1], product.max(axis=0), rtol=0, atol=1e-14)
-    posed = pose_block(make_block("d", points[:3000], hull_dome(3000, seed=4)[1],
-                                  density=DENSITY))
-    assert posed.convex
+    assert pose_block(dome).convex
 
 
 def test_the_deadline_names_the_stage_and_nests():
@@ -143,8 +111,8 @@ def test_the_deadline_names_the_stage_and_nests():
 
 def test_a_time_limit_bounds_the_geometry_stage():
     """Twelve distinct 10,000-vertex meshes: about 7 s of shape analysis unbounded (see
-    docs/NODE_OPERATIONS.md); with a 0.5 s limit the answer comes within 1 s."""
-    scene = dome_scene(12)
+    docs/BOUNDED_CHECKS.md); with a 0.5 s limit the answer comes within 1 s."""
+    scene = gen.convex_domes(12)
     block_module._shape.cache_clear()
     start = time.perf_counter()
     report = check_scene(scene, CheckOptions(solve=SolveOptions(time_limit=0.5)))
@@ -155,7 +123,7 @@ def test_a_time_limit_bounds_the_geometry_stage():
 
 
 def test_a_time_limit_bounds_each_step_of_a_sequence(monkeypatch):
-    scene = dome_scene(3, vertices=2000)
+    scene = gen.convex_domes(3, vertices=2000)
     block_module._shape.cache_clear()
     reports = check_sequence(scene, CheckOptions(solve=SolveOptions(time_limit=1e-4)))
     assert [r.step_index for r in reports] == [0, 1, 2]

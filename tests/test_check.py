@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from rbe_ros.analysis.check import CheckOptions, check_scene
+from rbe_ros.analysis.options import CheckOptions
+from rbe_ros.analysis.pipeline import check_scene
 from rbe_ros.rbe.result import Status
 from rbe_ros.rbe.solver import SolveOptions
 from rbe_ros.scene import Scene, box_block, make_scene

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from rbe_ros.bag import read_bag
+from rbe_ros.io.bag import read_bag
 from rbe_ros.cli import main
 
 EXAMPLE = Path(__file__).parents[1] / "examples" / "build_sequence.json"
@@ -110,7 +110,8 @@ def test_unreadable_and_invalid_files(tmp_path, capsys):
 def test_contact_options_from_the_command_line(tmp_path, capsys):
     """A box 5 mm above the slab (0.5% of its size): floating at the default distance
     tolerance, resting on the slab with --distance-tol 0.01; a negative tolerance is refused."""
-    from rbe_ros.scene import box_block, make_scene, scene_to_dict
+    from rbe_ros.scene import box_block, make_scene
+    from rbe_ros.io.scene_json import scene_to_dict
     scene = make_scene("gap", [box_block("ground", (4, 4, 0.2), (0, 0, -0.1), support=True,
                                          density=2000),
                                box_block("box", (1, 1, 1), (0, 0, 0.505), density=2000)])

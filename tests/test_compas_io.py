@@ -14,8 +14,9 @@ import pytest
 
 from rbe_ros import generators as gen
 from rbe_ros.analysis.assembly import Assembly
-from rbe_ros.analysis.check import CheckOptions, check_scene
-from rbe_ros.compas_io import (compas_interfaces, compas_samples_dir, load_compas_assembly,
+from rbe_ros.analysis.options import CheckOptions
+from rbe_ros.analysis.pipeline import check_scene
+from rbe_ros.io.compas import (compas_interfaces, compas_samples_dir, load_compas_assembly,
                                save_compas_assembly)
 from rbe_ros.geometry.block import pose_block
 from rbe_ros.geometry.contacts import ContactOptions

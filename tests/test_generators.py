@@ -8,11 +8,12 @@ import trimesh
 
 from rbe_ros import generators as gen
 from rbe_ros.analysis.assembly import Assembly
-from rbe_ros.analysis.check import CheckOptions, check_scene
+from rbe_ros.analysis.options import CheckOptions
+from rbe_ros.analysis.pipeline import check_scene
 from rbe_ros.geometry.block import pose_block
 from rbe_ros.rbe.result import Status
 from rbe_ros.rbe.solver import SolveOptions
-from rbe_ros.scene import scene_to_dict
+from rbe_ros.io.scene_json import scene_to_dict
 
 SMALL = {  # every generator, small enough to be quick
     "two-blocks": dict(shift=0.3),
@@ -24,6 +25,7 @@ SMALL = {  # every generator, small enough to be quick
     "buttressed-arch-inner": dict(springing="inner"),
     "dome": dict(slices=8, courses=4),
     "running-bond-wall": dict(courses=3, bricks_per_course=3),
+    "convex-domes": dict(count=2, vertices=200, rim=40),
 }
 
 

@@ -8,7 +8,8 @@ import shapely
 
 from rbe_ros import generators as gen
 from rbe_ros.analysis.assembly import Assembly
-from rbe_ros.analysis.check import CheckOptions, check
+from rbe_ros.analysis.options import CheckOptions
+from rbe_ros.analysis.verdict import check
 from rbe_ros.analysis.friction import minimum_friction
 from rbe_ros.analysis.tilt import tilt_capacity
 from rbe_ros.analysis.virtual import ANALYSES, virtual_assembly

@@ -23,7 +23,7 @@ from hypothesis import assume, given
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from rbe_ros.analysis.check import check_scene
+from rbe_ros.analysis.pipeline import check_scene
 from rbe_ros.rbe.result import Status
 from rbe_ros.scene import box_block, make_scene
 

@@ -11,13 +11,13 @@ from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 from ruamel.yaml import YAML
 
-from rbe_ros import bag
-from rbe_ros.analysis.check import CheckOptions
+from rbe_ros.io import bag
+from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.cli import main
-from rbe_ros.replay import (OPTIONS_KEY, Tolerances, bag_options, compare_report,
-                            free_weights, options_from_json, options_to_json, read_runs,
-                            replay_bag, write_runs)
-from rbe_ros.testing import assert_bag_replays, bag_paths, parametrize_bags
+from rbe_ros.io.replay import (OPTIONS_KEY, Tolerances, bag_options, compare_report, free_weights,
+                               options_from_json, options_to_json, read_runs, replay_bag,
+                               write_runs)
+from rbe_ros.io.testing import assert_bag_replays, bag_paths, parametrize_bags
 
 REPO = Path(__file__).resolve().parents[1]
 BAGS = REPO / "bags"

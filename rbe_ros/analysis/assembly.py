@@ -4,8 +4,6 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from ..geometry.block import PosedBlock, pose_blocks
 from ..geometry.contacts import ContactOptions, Interface, detect_interfaces
@@ -43,16 +41,3 @@ class Assembly:
                            for it in self.interfaces if it.a in index and it.b in index
                            and not (blocks[index[it.a]].support and blocks[index[it.b]].support))
         return Assembly(blocks, interfaces, self.gravity)
-
-    def floating_blocks(self) -> list[str]:
-        """Free blocks with no chain of interfaces to a support (no equilibrium is possible)."""
-        n = len(self.blocks)
-        if not n:
-            return []
-        a = [it.a for it in self.interfaces]
-        b = [it.b for it in self.interfaces]
-        graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(n, n))
-        _, labels = connected_components(graph, directed=False)
-        grounded = {labels[i] for i, blk in enumerate(self.blocks) if blk.support}
-        return [blk.id for i, blk in enumerate(self.blocks)
-                if not blk.support and labels[i] not in grounded]

@@ -33,13 +33,16 @@ def validate_assembly(assembly: Assembly, limits: ValidationLimits = ValidationL
 
 
 def validated_assembly(scene: Scene, limits: ValidationLimits | None = ValidationLimits(),
-                       contact: ContactOptions = ContactOptions()) -> Assembly:
-    """The assembly of ``scene`` after every validation (none with ``limits=None``)."""
+                       contact: ContactOptions = ContactOptions(),
+                       assembly: Assembly | None = None) -> Assembly:
+    """The assembly of ``scene`` after every validation (none with ``limits=None``).
+    ``assembly``: the scene's blocks on interfaces found elsewhere (stored in a COMPAS
+    file), validated instead of detecting them."""
     if limits is not None:
         with stage("validation"):
             validate_scene(scene, limits)
     with stage("geometry"):
-        assembly = Assembly.from_scene(scene, contact)
+        assembly = assembly or Assembly.from_scene(scene, contact)
         if limits is not None:
             validate_assembly(assembly, limits, contact)
     return assembly

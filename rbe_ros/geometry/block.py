@@ -149,17 +149,20 @@ def _shape(vertex_bytes: bytes, count: int, faces) -> _Shape:
     """Cached by the exact mesh, so identical blocks share it (raises ValueError)."""
     checkpoint()
     vertices = np.frombuffer(vertex_bytes).reshape(count, 3)
-    tri = np.array([(f[0], f[i], f[i + 1]) for f in faces for i in range(1, len(f) - 1)])
-    if not _is_closed(tri):
+    ragged = _Ragged(faces)
+    if not _is_closed(ragged.fans()):
         raise ValueError("mesh is not closed (every edge must join exactly two faces,"
                          " wound consistently)")
-    volume, centroid = _volume_centroid(_centre_fans(vertices, faces))
+    centres = ragged.sums(vertices[ragged.corners]) / ragged.counts[:, None]
+    volume, centroid = _volume_centroid(_centre_fans(vertices, ragged, centres))
     scale = float(np.ptp(vertices, axis=0).max())
     if not volume > 1e-9 * scale ** 3:
         raise ValueError(f"mesh has no volume or is wound inside out (volume {volume:.3g} m^3)")
     size = volume ** (1.0 / 3.0)
-    planes = _planar_faces(vertices, faces, size)
+    checkpoint()
+    planes = _planar_faces(vertices, ragged, centres, size)
     normals, offsets = planes[0], planes[1]
+    checkpoint()
     extents = projection_extents(vertices, normals)
     convex = bool((extents[:, 1] - offsets).max(initial=0.0) <= 1e-6 * size)
     return _Shape(*planes, volume, centroid, extents, convex)
@@ -174,19 +177,48 @@ def _is_closed(tri: np.ndarray) -> bool:
     return len(np.unique(keys)) == len(keys) and bool(np.isin(reverse, keys).all())
 
 
-def _centre_fans(vertices: np.ndarray, faces) -> np.ndarray:
-    """Triangles (m, 3, 3) fanning each face from its vertex mean: the same as any fan for
-    planar faces, and for slightly non-planar ones (scanned or exported meshes) the symmetric
-    choice COMPAS makes too."""
-    out = []
-    for f in faces:
-        pts = vertices[list(f)]
-        if len(f) == 3:
-            out.append(pts[None])
-            continue
-        centre = np.broadcast_to(pts.mean(axis=0), pts.shape)
-        out.append(np.stack((centre, pts, np.concatenate((pts[1:], pts[:1]))), axis=1))
-    return np.concatenate(out)
+class _Ragged:
+    """The faces of a mesh as one array of corner indices, face after face."""
+
+    def __init__(self, faces):
+        self.counts = np.fromiter((len(f) for f in faces), dtype=np.intp, count=len(faces))
+        self.corners = np.fromiter(chain.from_iterable(faces), dtype=np.intp,
+                                   count=int(self.counts.sum()))
+        self.starts = np.cumsum(self.counts) - self.counts
+        self.face_of_corner = np.repeat(np.arange(len(faces)), self.counts)
+
+    def sums(self, values: np.ndarray, of: np.ndarray | None = None) -> np.ndarray:
+        """Per face, the sum of the rows of ``values`` (m, 3) whose face is ``of`` (default:
+        one row per corner)."""
+        of = self.face_of_corner if of is None else of
+        return np.column_stack([np.bincount(of, values[:, k], len(self.counts))
+                                for k in range(3)])
+
+    def fans(self) -> np.ndarray:
+        """(m, 3) vertex indices: each face as triangles (f0, f[i], f[i+1]), i = 1 .. k-2."""
+        fans = np.maximum(self.counts - 2, 0)
+        self.fan_face = np.repeat(np.arange(len(self.counts)), fans)
+        second = (self.starts[self.fan_face] + np.arange(len(self.fan_face))
+                  - np.repeat(np.cumsum(fans) - fans, fans) + 1)
+        c = self.corners
+        return np.column_stack((c[self.starts[self.fan_face]], c[second], c[second + 1]))
+
+
+def _centre_fans(vertices: np.ndarray, ragged: _Ragged, centres: np.ndarray) -> np.ndarray:
+    """Triangles (m, 3, 3) fanning each face from its vertex mean ``centres``: the same as
+    any fan for planar faces, and for slightly non-planar ones (scanned or exported meshes)
+    the symmetric choice COMPAS makes too. Triangles are kept as they are."""
+    k = ragged.counts
+    per_face = np.where(k == 3, 1, k)
+    face = np.repeat(np.arange(len(k)), per_face)
+    j = np.arange(len(face)) - np.repeat(np.cumsum(per_face) - per_face, per_face)
+    first = ragged.starts[face]
+    triangle = (k == 3)[face]
+    points = np.concatenate((vertices, centres))
+    apex = np.where(triangle, ragged.corners[first], len(vertices) + face)
+    b = ragged.corners[first + np.where(triangle, 1, j)]
+    c = ragged.corners[first + np.where(triangle, 2, (j + 1) % k[face])]
+    return points[np.column_stack((apex, b, c))]
 
 
 def _volume_centroid(triangles: np.ndarray) -> tuple[float, np.ndarray]:
@@ -194,26 +226,19 @@ def _volume_centroid(triangles: np.ndarray) -> tuple[float, np.ndarray]:
     return float(props["volume"]), np.asarray(props["center_mass"], dtype=float)
 
 
-def _planar_faces(vertices: np.ndarray, faces, size: float):
+def _planar_faces(vertices: np.ndarray, ragged: _Ragged, centres: np.ndarray, size: float):
     """Faces grouped by plane, each with a frame and one merged 2D outline (block frame).
 
     A face joins the first plane (in face order) whose normal is within ANGLE_TOL of its own
     and whose offset is within PLANE_TOL of the size; the candidates come from a k-d tree, so
     grouping the F faces costs about F log F (a 10,000-vertex hull has 20,000 triangles), and
     the normals, offsets and outlines are computed for all faces at once."""
-    counts = np.fromiter((len(f) for f in faces), dtype=np.intp, count=len(faces))
-    corners = np.fromiter(chain.from_iterable(faces), dtype=np.intp, count=int(counts.sum()))
-    starts = np.cumsum(counts) - counts
+    counts, corners, corner_face = ragged.counts, ragged.corners, ragged.face_of_corner
     # area vectors from each face's fan of triangles around its first vertex
-    fans = np.maximum(counts - 2, 0)
-    fan_face = np.repeat(np.arange(len(faces)), fans)
-    second = starts[fan_face] + np.arange(len(fan_face)) - np.repeat(np.cumsum(fans) - fans, fans) + 1
-    apex = vertices[corners[starts[fan_face]]]
-    area = 0.5 * cross(vertices[corners[second]] - apex, vertices[corners[second + 1]] - apex)
-    area_vectors = _per_group(fan_face, area, len(faces))
+    fan = vertices[ragged.fans()]
+    area_vectors = ragged.sums(0.5 * cross(fan[:, 1] - fan[:, 0], fan[:, 2] - fan[:, 0]),
+                               ragged.fan_face)
     lengths = np.sqrt((area_vectors ** 2).sum(axis=1))
-    corner_face = np.repeat(np.arange(len(faces)), counts)
-    centres = _per_group(corner_face, vertices[corners], len(faces)) / counts[:, None]
     kept = np.flatnonzero(lengths > 0.0)                  # degenerate sliver faces go
     normals = area_vectors[kept] / lengths[kept, None]
     offsets = (normals * centres[kept]).sum(axis=1)
@@ -222,9 +247,9 @@ def _planar_faces(vertices: np.ndarray, faces, size: float):
     u, v = tangent_basis(n)
     origins = centres[kept[first]]
     # every kept face's outline in its plane's frame, then merged per plane
-    member = np.zeros(len(faces), dtype=bool)
+    member = np.zeros(len(counts), dtype=bool)
     member[kept] = True
-    plane_of_face = np.full(len(faces), -1)
+    plane_of_face = np.full(len(counts), -1)
     plane_of_face[kept] = group
     on = member[corner_face]
     plane = plane_of_face[corner_face[on]]
@@ -241,11 +266,6 @@ def _planar_faces(vertices: np.ndarray, faces, size: float):
     return n, offsets[first], origins, u, v, shared
 
 
-def _per_group(group: np.ndarray, values: np.ndarray, count: int) -> np.ndarray:
-    """Sums of the rows of ``values`` (m, 3) by ``group`` index (count groups)."""
-    return np.column_stack([np.bincount(group, values[:, k], count) for k in range(3)])
-
-
 def _group_planes(normals: np.ndarray, offsets: np.ndarray, plane_tol: float):
     """Each face's plane index and each plane's first face: face j joins the plane of the
     first face i < j starting a plane with n_i . n_j > cos(ANGLE_TOL) and |d_i - d_j| <=
@@ -259,6 +279,8 @@ def _group_planes(normals: np.ndarray, offsets: np.ndarray, plane_tol: float):
     group = np.full(len(normals), -1)
     first = []
     for i, candidates in enumerate(near):
+        if i % 4096 == 0:
+            checkpoint()
         if group[i] >= 0:
             continue
         group[i] = len(first)

@@ -36,6 +36,7 @@ class _Climber:
 
     def __init__(self, points: np.ndarray):
         hull = ConvexHull(points)
+        checkpoint()
         self.points = points
         n = len(points)
         a, b = hull.simplices.T, hull.simplices[:, [1, 2, 0]].T

@@ -1,6 +1,6 @@
 """Live replay: play recorded states into a running ``rbe_node`` and collect its reports.
 
-Used by :func:`rbe_ros.replay.replay_bag` with ``live=True``. The node is started here
+:func:`live_recheck` is what :func:`rbe_ros.io.replay.replay_bag` takes as ``recheck``. The node is started here
 (``python -m rbe_ros.ros.node`` under a unique node name, with the parameters of the bag's
 check options, in the ROS_DOMAIN_ID of the environment) or, with ``node_name``, the running
 node of that name is used as it is (its parameters must match the bag's options).
@@ -31,7 +31,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
-from ..analysis.check import CheckOptions, HoldSearch
+from ..analysis.options import CheckOptions, HoldSearch
 from ..geometry.contacts import ContactOptions
 from ..rbe.solver import Weights
 from .convert import dict_to_message, message_to_dict
@@ -231,4 +231,13 @@ def live_reports(runs, options: CheckOptions, *, node_name: str | None = None, c
             rclpy.try_shutdown(context=context)
 
 
-__all__ = ["NodeProcess", "live_reports", "node_parameters"]
+def live_recheck(node_name: str | None = None, context=None, timeout: float = 120.0):
+    """A ``recheck`` for :func:`rbe_ros.io.replay.replay_bag`: through a live rbe_node
+    (started here, or the running one named ``node_name``; see :func:`live_reports`)."""
+    def recheck(runs, options: CheckOptions, on_run=None) -> list[list[dict]]:
+        return live_reports(runs, options, node_name=node_name, context=context,
+                            timeout=timeout, on_run=on_run)
+    return recheck
+
+
+__all__ = ["NodeProcess", "live_recheck", "live_reports", "node_parameters"]

@@ -55,16 +55,17 @@ from rbe_msgs.msg import AssemblyState, StabilityReport
 from rbe_msgs.srv import CheckAssembly
 from visualization_msgs.msg import MarkerArray
 
-from .. import cdr
-from ..analysis.check import CheckOptions, HoldSearch, check_scene
-from ..analysis.sequence import check_sequence, sequence_steps
-from ..bag import BagWriter, typestore
+from ..analysis.options import CheckOptions, HoldSearch
+from ..analysis.pipeline import StateCheck, check_state
 from ..geometry.contacts import ContactOptions
-from ..messages import report_to_dict
+from ..io import cdr
+from ..io.bag import BagWriter, typestore
+from ..io.messages import report_header, report_to_dict
+from ..io.replay import OPTIONS_KEY, options_to_json
 from ..rbe.cones import CONES, FRICTION_MODELS
 from ..rbe.result import Report, Status
 from ..rbe.solver import OBJECTIVES, SolveOptions
-from ..scene import Scene, SceneError, ValidationLimits
+from ..scene import Scene, ValidationLimits
 from .convert import message_to_dict, scene_from_msg
 from .markers import report_markers
 
@@ -200,7 +201,7 @@ class RbeNode(Node):
         self._service_group = MutuallyExclusiveCallbackGroup()
         self._action_group = ReentrantCallbackGroup()
 
-        # reports go out as CDR bytes made from their message dicts (rbe_ros.cdr): ~6x faster
+        # reports go out as CDR bytes made from their message dicts (rbe_ros.io.cdr): ~6x faster
         # than building the rclpy message (an object per Point) and serialising it
         self._encode_report = cdr.encoder(typestore(), "rbe_msgs/msg/StabilityReport")
         self._report_pub = self.create_publisher(StabilityReport, "~/report", LATCHED_QOS)
@@ -286,8 +287,6 @@ class RbeNode(Node):
             while path.exists():
                 k += 1
                 path = path.with_name(f"{stem}_{k}")
-        from ..replay import OPTIONS_KEY, options_to_json
-
         # the options at the start, so that `rbe-ros replay` re-checks the same way
         self._bag = BagWriter(path, custom_data={OPTIONS_KEY: options_to_json(self.check_options())})
         self._bag.add_topic(self.state_topic, "rbe_msgs/msg/AssemblyState")
@@ -351,10 +350,7 @@ class RbeNode(Node):
         """Record ``state`` (its CDR bytes ``raw`` if given) and return the header dict its
         reports carry."""
         self._record(self.state_topic, state if raw is None else raw)
-        header = message_to_dict(state.header)
-        if not header["frame_id"]:
-            header["frame_id"] = self.get_parameter("frame_id").value
-        return header
+        return report_header(message_to_dict(state.header), self.get_parameter("frame_id").value)
 
     def _publish(self, scene: Scene | None, report: Report, header: dict) -> bytes:
         """Record, then publish ``report`` and its markers; returns the report's CDR bytes
@@ -377,24 +373,35 @@ class RbeNode(Node):
             self.get_logger().info(text)
         return data
 
-    def _error_report(self, exc: Exception) -> Report:
-        if isinstance(exc, SceneError):
-            return Report(False, Status.INVALID_INPUT, f"invalid input: {exc}")
-        self.get_logger().error(f"check failed: {type(exc).__name__}: {exc}")
-        return Report(False, Status.SOLVER_FAILED,
-                      f"check failed: {type(exc).__name__}: {exc}")
+    def check(self, state: AssemblyState, header: dict, sequence: bool, *,
+              cancelled=None, on_step=None) -> tuple[StateCheck, list[bytes]]:
+        """Check ``state`` (every step, or the whole assembly: ``sequence``) through the
+        dispatch replay uses too (:func:`check_state`), publishing each report; never raises.
+        ``on_step(report, data, total)`` gets each step's report and its CDR bytes once
+        published. Returns the check and the CDR bytes of every report published."""
+        sent: list[bytes] = []
+
+        def read(with_sequence: bool) -> Scene:
+            return scene_from_msg(state, sequence=with_sequence, limits=options.limits)
+
+        def publish(report: Report, scene: Scene, total: int) -> None:
+            sent.append(self._publish(scene, report, header))
+            if on_step is not None:
+                on_step(report, sent[-1], total)
+
+        def stop() -> bool:
+            return self._closing or (cancelled is not None and cancelled())
+
+        options = self.check_options()
+        result = check_state(read, sequence, options, on_step=publish, cancelled=stop)
+        if result.error is not None:
+            sent.append(self._publish(result.scene, result.error, header))
+        return result, sent
 
     def check_whole(self, state: AssemblyState, header: dict) -> bytes:
         """Check the assembly of ``state`` as it is (sequence ignored); publish the report
         and return its CDR bytes."""
-        scene = None
-        try:
-            options = self.check_options()
-            scene = scene_from_msg(state, sequence=False, limits=options.limits)
-            report = check_scene(scene, options)
-        except Exception as exc:
-            report = self._error_report(exc)
-        return self._publish(scene, report, header)
+        return self.check(state, header, False)[1][-1]
 
     def _on_state(self, data: bytes) -> None:
         """Subscription callback (raw CDR): put the state in the slot for the worker (never
@@ -434,19 +441,7 @@ class RbeNode(Node):
         """Check a state from the topic (as a whole, or every step of its sequence) and
         publish the reports; never raises. ``raw``: its CDR bytes, recorded as they came."""
         try:
-            header = self._received(state, raw)
-            if not state.sequence:
-                self.check_whole(state, header)
-                return
-            scene = None
-            try:
-                options = self.check_options()
-                scene = scene_from_msg(state, limits=options.limits)
-                check_sequence(scene, options,
-                               on_step=lambda report, _total: self._publish(scene, report, header),
-                               cancelled=lambda: self._closing)
-            except Exception as exc:
-                self._publish(scene, self._error_report(exc), header)
+            self.check(state, self._received(state, raw), bool(state.sequence))
         except Exception as exc:  # publishing itself failed (e.g. during shutdown)
             self.get_logger().error(f"state not handled: {type(exc).__name__}: {exc}")
 
@@ -464,11 +459,9 @@ class RbeNode(Node):
     def _execute_sequence(self, goal_handle) -> CheckSequence.Result:
         result = CheckSequence.Result(first_failing_step=-1)
         reports: list[StabilityReport] = []
-        header: dict = {}
-        scene = None
 
-        def on_step(report: Report, total: int) -> None:
-            msg = deserialize_message(self._publish(scene, report, header), StabilityReport)
+        def on_step(report: Report, data: bytes, total: int) -> None:
+            msg = deserialize_message(data, StabilityReport)
             reports.append(msg)
             if result.first_failing_step < 0 and not report.stable:
                 result.first_failing_step = report.step_index
@@ -477,30 +470,23 @@ class RbeNode(Node):
 
         try:
             state = goal_handle.request.assembly
-            header = self._received(state)
-            options = self.check_options()
-            scene = scene_from_msg(state, limits=options.limits)
-            steps = check_sequence(
-                scene, options, on_step=on_step,
-                cancelled=lambda: goal_handle.is_cancel_requested or self._closing)
-            total = len(sequence_steps(scene))
-            finished = len(steps) == total
+            check, sent = self.check(state, self._received(state), True, on_step=on_step,
+                                     cancelled=lambda: goal_handle.is_cancel_requested)
+            if check.error is not None:
+                reports.append(deserialize_message(sent[-1], StabilityReport))
         except Exception as exc:
-            try:
-                data = self._publish(scene, self._error_report(exc), header)
-                reports.append(deserialize_message(data, StabilityReport))
-            except Exception as exc2:
-                self.get_logger().error(f"goal not handled: {type(exc2).__name__}: {exc2}")
+            self.get_logger().error(f"goal not handled: {type(exc).__name__}: {exc}")
             result.reports = reports
             goal_handle.abort()
             return result
         result.reports = reports
-        if finished:
+        if check.finished:
             goal_handle.succeed()
-        elif goal_handle.is_cancel_requested:
-            self.get_logger().info(f"sequence check canceled after {len(reports)}/{total} steps")
+        elif check.error is None and goal_handle.is_cancel_requested:
+            self.get_logger().info(f"sequence check canceled after {len(reports)}/"
+                                   f"{check.total} steps")
             goal_handle.canceled()
-        else:  # shutting down
+        else:  # the state could not be checked, or shutting down
             goal_handle.abort()
         return result
 

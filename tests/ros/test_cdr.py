@@ -1,9 +1,9 @@
-"""rbe_ros.cdr against rclpy: the bytes of ``serialize_message``, read back by
+"""rbe_ros.io.cdr against rclpy: the bytes of ``serialize_message``, read back by
 ``deserialize_message`` as the same message (no DDS).
 
 rclpy's ``serialize_message`` leaves the padding bytes of its buffer uninitialised: heap
 garbage that changes from run to run (in the report of a 117-block wall ~8800 of 168k bytes,
-all padding; a buffer fresh from mmap is zeros). rbe_ros.cdr writes zeros there, as rosbags
+all padding; a buffer fresh from mmap is zeros). rbe_ros.io.cdr writes zeros there, as rosbags
 does. So rclpy's bytes are made in a process whose malloc returns zeroed memory
 (:func:`rclpy_bytes`), where they are reproducible; :func:`test_rclpy_differs_only_in_padding`
 shows the difference otherwise.
@@ -28,10 +28,10 @@ from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
 from rbe_client import stacked_boxes
-from rbe_ros import bag, cdr
-from rbe_ros.analysis.check import check_scene
+from rbe_ros.io import bag, cdr
+from rbe_ros.analysis.pipeline import check_scene
 from rbe_ros.generators import running_bond_wall
-from rbe_ros.messages import header_dict, report_to_dict, state_to_dict
+from rbe_ros.io.messages import header_dict, report_to_dict, state_to_dict
 from rbe_ros.rbe.result import InterfaceResult, Report, Status
 from rbe_ros.ros.convert import dict_to_message, message_to_dict
 from rbe_ros.ros.markers import report_markers

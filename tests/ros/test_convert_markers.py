@@ -15,10 +15,10 @@ from std_msgs.msg import Header
 from visualization_msgs.msg import Marker
 
 from rbe_client import canonical, stacked_boxes
-from rbe_ros.analysis.check import check_scene
+from rbe_ros.analysis.pipeline import check_scene
 from rbe_ros.generators import running_bond_wall
 from rbe_ros.geometry.block import pose_block
-from rbe_ros.messages import header_dict, report_to_dict, state_to_dict
+from rbe_ros.io.messages import header_dict, report_to_dict, state_to_dict
 from rbe_ros.rbe.result import InterfaceResult, Report, Status
 from rbe_ros.ros.convert import (dict_to_message, message_to_dict, scene_from_msg,
                                  set_message_fields)

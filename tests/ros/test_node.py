@@ -24,8 +24,8 @@ from visualization_msgs.msg import Marker
 
 from rbe_client import (TIMEOUT, Client, NodeProcess, canonical, stacked_boxes, state_msg,
                         tower, wait_future, wait_until)
-from rbe_ros import bag
-from rbe_ros.scene import load_scene
+from rbe_ros.io import bag
+from rbe_ros.io.scene_json import load_scene
 
 REPO = Path(__file__).resolve().parents[2]
 WEIGHT = 2000.0 * 1.0 * 9.81   # one 1 m box of density 2000 under g = 9.81

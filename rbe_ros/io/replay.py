@@ -44,13 +44,17 @@ from pathlib import Path
 
 import numpy as np
 
-from .analysis.check import CheckOptions, HoldSearch, check_scene
-from .analysis.sequence import check_sequence, final_state, sequence_steps
-from .geometry.contacts import ContactOptions
-from .messages import header_stamp_ns, report_to_dict, scene_from_state_dict, state_to_dict
-from .rbe.result import Report, Status
-from .rbe.solver import SolveOptions, Weights
-from .scene import Scene, SceneError
+from ..analysis.options import CheckOptions, HoldSearch
+from ..analysis.pipeline import check_state
+from ..analysis.steps import final_state, sequence_steps
+from ..geometry.block import pose_block
+from ..geometry.contacts import ContactOptions
+from ..rbe.result import Report
+from ..rbe.solver import SolveOptions, Weights
+from ..scene import Scene, SceneError
+from .bag import BagWriter, read_bag, read_custom_data
+from .messages import (header_stamp_ns, report_header, report_to_dict, scene_from_state_dict,
+                       state_to_dict)
 
 OPTIONS_KEY = "rbe_ros.check_options"
 STATE_TYPE = "rbe_msgs/msg/AssemblyState"
@@ -91,8 +95,6 @@ def options_from_json(text: str) -> CheckOptions:
 
 def bag_options(path) -> CheckOptions:
     """The check options recorded in the bag at ``path``, else the defaults."""
-    from .bag import read_custom_data
-
     text = read_custom_data(path).get(OPTIONS_KEY)
     return options_from_json(text) if text else CheckOptions()
 
@@ -127,8 +129,6 @@ class Run:
 def read_runs(path) -> list[Run]:
     """The runs of a bag: every AssemblyState in log-time order, each with the reports whose
     header stamp is its stamp (a report goes to the latest such state before it)."""
-    from .bag import read_bag
-
     runs: list[Run] = []
     by_key: dict[tuple[int, int], list[Run]] = {}
     for m in read_bag(path):
@@ -150,37 +150,24 @@ def read_runs(path) -> list[Run]:
     return runs
 
 
-def check_state(state: dict, options: CheckOptions = CheckOptions()) -> list[Report]:
-    """The reports ``rbe_node`` makes for ``state`` (a message dict), in order."""
-    try:
-        if state.get("sequence"):
-            return check_sequence(scene_from_state_dict(state), options)
-        return [check_scene(scene_from_state_dict({**state, "sequence": []}), options)]
-    except SceneError as exc:
-        return [Report(False, Status.INVALID_INPUT, f"invalid input: {exc}")]
-    except Exception as exc:        # as the node: a failed check is a report, not a crash
-        return [Report(False, Status.SOLVER_FAILED, f"check failed: {type(exc).__name__}: {exc}")]
+def state_reports(state: dict, options: CheckOptions = CheckOptions()) -> list[Report]:
+    """The reports ``rbe_node`` makes for ``state`` (a message dict), in order: the node's
+    own dispatch, :func:`rbe_ros.analysis.pipeline.check_state`."""
+    def read(sequence: bool) -> Scene:
+        return scene_from_state_dict(state if sequence else {**state, "sequence": []})
 
-
-def report_header(state: dict, frame_id: str = "world") -> dict:
-    header = json.loads(json.dumps(state.get("header") or {}))
-    header.setdefault("stamp", {"sec": 0, "nanosec": 0})
-    if not header.get("frame_id"):
-        header["frame_id"] = frame_id
-    return header
+    return check_state(read, bool(state.get("sequence")), options).reports
 
 
 def replay_run(run: Run, options: CheckOptions = CheckOptions()) -> list[dict]:
     """The report dicts of re-checking ``run.state``."""
-    header = report_header(run.state)
-    return [report_to_dict(r, header) for r in check_state(run.state, options)]
+    header = report_header(run.state.get("header"))
+    return [report_to_dict(r, header) for r in state_reports(run.state, options)]
 
 
 def free_weights(state: dict) -> dict[int, float]:
     """Free weight W (N) by step index (-1: the whole assembly) of a state: the weight of the
     free blocks present and not held. Empty if the state cannot be read."""
-    from .geometry.block import pose_block
-
     try:
         scene = scene_from_state_dict(state)
         whole = scene_from_state_dict({**state, "sequence": []})
@@ -426,8 +413,6 @@ def format_differences(runs: list[Run], differences: list[Difference], limit: in
 def write_runs(path, runs: list[Run], replayed: list[list[dict]], options: CheckOptions) -> None:
     """A bag with every run's state and its ``replayed`` reports (at the recorded report
     times where there are as many, else just after the state); the options in custom_data."""
-    from .bag import BagWriter
-
     with BagWriter(path, custom_data={OPTIONS_KEY: options_to_json(options)}) as bag:
         topics: set[str] = set()
         for run, reports in zip(runs, replayed):
@@ -484,13 +469,27 @@ def default_output(path) -> Path:
     return path.with_name(path.name + "_replay")
 
 
+#: Re-checks runs: ``recheck(runs, options, on_run)`` -> the report dicts of each run.
+Recheck = Callable[[list[Run], CheckOptions, Callable[[int, Run], None] | None], list[list[dict]]]
+
+
+def offline_reports(runs: list[Run], options: CheckOptions,
+                    on_run: Callable[[int, Run], None] | None = None) -> list[list[dict]]:
+    """The report dicts of re-checking every run here, as the node would."""
+    replayed = []
+    for i, run in enumerate(runs):
+        replayed.append(replay_run(run, options))
+        if on_run is not None:
+            on_run(i, run)
+    return replayed
+
+
 def replay_bag(path, output=None, *, options: CheckOptions | None = None, compare: bool = True,
-               live: bool = False, node_name: str | None = None,
-               tolerances: Tolerances = Tolerances(), write: bool = True,
-               context=None, timeout: float = 120.0,
-               on_run: Callable[[int, Run], None] | None = None) -> ReplayResult:
-    """Re-check every state of the bag at ``path`` (offline, or ``live`` through an rbe_node:
-    started here, or the running one named ``node_name``), write the states and the new
+               recheck: Recheck = offline_reports, tolerances: Tolerances = Tolerances(),
+               write: bool = True, on_run: Callable[[int, Run], None] | None = None
+               ) -> ReplayResult:
+    """Re-check every state of the bag at ``path`` with ``recheck`` (offline; or through a
+    live rbe_node: :func:`rbe_ros.ros.live.live_recheck`), write the states and the new
     reports to ``output`` (default: path + "_replay"; never overwritten; ``write=False``:
     no bag), and with ``compare`` list the differences from the recorded reports."""
     path = Path(path)
@@ -501,17 +500,7 @@ def replay_bag(path, output=None, *, options: CheckOptions | None = None, compar
         raise FileExistsError(f"{str(out)!r} exists already, not overwriting it")
     options = options or bag_options(path)
     runs = read_runs(path)
-    if live:
-        from .ros.live import live_reports
-
-        replayed = live_reports(runs, options, node_name=node_name, context=context,
-                                timeout=timeout, on_run=on_run)
-    else:
-        replayed = []
-        for i, run in enumerate(runs):
-            replayed.append(replay_run(run, options))
-            if on_run is not None:
-                on_run(i, run)
+    replayed = recheck(runs, options, on_run)
     if write:
         write_runs(out, runs, replayed, options)
     differences = compare_runs(runs, replayed, tolerances=tolerances) if compare else []
@@ -519,6 +508,6 @@ def replay_bag(path, output=None, *, options: CheckOptions | None = None, compar
 
 
 __all__ = ["Difference", "OPTIONS_KEY", "ReplayResult", "Run", "Tolerances", "bag_options",
-           "check_state", "compare_report", "compare_runs", "default_output", "free_weights",
-           "options_from_json", "options_to_json", "read_runs", "record_bag", "replay_bag",
-           "replay_run", "write_runs"]
+           "compare_report", "compare_runs", "default_output", "free_weights",
+           "offline_reports", "options_from_json", "options_to_json", "read_runs", "record_bag", "replay_bag",
+           "replay_run", "state_reports", "write_runs"]

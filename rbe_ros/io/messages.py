@@ -3,7 +3,7 @@
 A message dict is a plain nested dict/list shaped exactly like the ROS message, as
 ``rosidl_runtime_py.message_to_ordereddict`` gives it: field names as keys, nested messages as
 dicts (``geometry_msgs/Point`` as ``{"x", "y", "z"}``), arrays as lists, numbers as Python
-``float``/``int``. :mod:`rbe_ros.cdr` encodes them to CDR bytes (the node's reports, bags);
+``float``/``int``. :mod:`rbe_ros.io.cdr` encodes them to CDR bytes (the node's reports, bags);
 :mod:`rbe_ros.ros.convert` turns them into rclpy messages and back (a ``set_message_fields``
 like rosidl_runtime_py's).
 Nothing here imports rclpy or the generated ``rbe_msgs`` package.
@@ -17,9 +17,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from .rbe.result import InterfaceResult, Report, Status
-from .scene import (BOX_FACES, Hold, Scene, SceneError, box_vertices, make_block,
-                    make_scene)
+from ..rbe.result import InterfaceResult, Report, Status
+from ..scene import BOX_FACES, Hold, Scene, SceneError, box_vertices, make_block, make_scene
 
 SOLID_PRIMITIVE_BOX = 1  # shape_msgs/SolidPrimitive.BOX
 _XYZ = ("x", "y", "z")
@@ -84,6 +83,14 @@ def header_dict(frame_id: str, stamp_ns: int) -> dict:
     """A std_msgs/Header dict (stamp split into sec and nanosec)."""
     sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
     return {"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": str(frame_id)}
+
+
+def report_header(state_header: Mapping | None, frame_id: str = "world") -> dict:
+    """The header of the reports answering a state with ``state_header``: its stamp, and
+    its frame or ``frame_id`` when that is empty (the node's ``frame_id`` parameter)."""
+    header = {"stamp": dict((state_header or {}).get("stamp") or {"sec": 0, "nanosec": 0}),
+              "frame_id": str((state_header or {}).get("frame_id") or frame_id)}
+    return header
 
 
 def header_stamp_ns(header: Mapping) -> int:
@@ -266,7 +273,7 @@ def report_to_dict(report: Report, header: dict, *, arrays: bool = False) -> dic
     """An rbe_msgs/StabilityReport dict of ``report`` (``header``: see :func:`header_dict`).
 
     ``arrays=True``: the same dict, but each sequence of Points/Vector3s as an (n, 3) float
-    array and each float64[] as a 1-D float array: the form that :mod:`rbe_ros.cdr` (the
+    array and each float64[] as a 1-D float array: the form that :mod:`rbe_ros.io.cdr` (the
     node's reports) and :func:`rbe_ros.ros.convert.dict_to_message` take without a dict per
     point. Not for comparisons.
     """

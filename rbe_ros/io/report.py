@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import math
 
-from .rbe.result import InterfaceResult, Report
+from ..rbe.result import InterfaceResult, Report
 
 
 def json_number(x: float):

@@ -4,10 +4,10 @@ A bag is what ``ros2 bag record -s mcap`` makes: a directory ``<name>/`` holding
 ``<name>_0.mcap`` (profile ``ros2``; one schema per type, encoding ``ros2msg`` with the complete
 concatenated .msg text; channels with message encoding ``cdr`` and metadata
 ``offered_qos_profiles``/``topic_type_hash``; a ``rosbag2`` metadata record) and a version-9
-``metadata.yaml``. CDR is written by :mod:`rbe_ros.cdr` (the bytes rclpy gives) and read by
+``metadata.yaml``. CDR is written by :mod:`rbe_ros.io.cdr` (the bytes rclpy gives) and read by
 rosbags' deserializer; the container is written with the ``mcap`` library (rosbags' own
 writer keeps up to 1 MiB of messages in memory and writes nothing recoverable before close).
-Messages go in and come out as *message dicts* (:mod:`rbe_ros.messages`); raw CDR bytes
+Messages go in and come out as *message dicts* (:mod:`rbe_ros.io.messages`); raw CDR bytes
 (``rclpy.serialization.serialize_message``) are accepted as well. Never imports rclpy.
 """
 from __future__ import annotations
@@ -132,7 +132,7 @@ def _scalar(typ: str, value):
 
 
 def to_dict(store: Typestore, msgtype: str, obj) -> dict:
-    """The message dict of a rosbags message object (what :func:`rbe_ros.cdr.encode` takes)."""
+    """The message dict of a rosbags message object (what :func:`rbe_ros.io.cdr.encode` takes)."""
     return {name: _value_to_dict(store, desc, getattr(obj, name))
             for name, desc in store.fielddefs[msgtype][1]}
 

@@ -1,0 +1,63 @@
+"""Pose noise: the as-built poses a robot or a camera reports, drawn around the design.
+
+One model of measurement error, shared by every study that perturbs poses (the as-built
+noise suite, Monte Carlo margins): each free block's position gets independent Gaussian
+noise per axis, and its orientation a rotation about a uniformly random axis through the
+block's position by a Gaussian angle. Supports stay where they are (the ground, a scaffold
+are the reference the poses are measured in). Draws come from the caller's numpy Generator
+in a fixed order (all positions, then all axes, then all angles), so a seed gives the same
+scene on every machine.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ..scene import Scene
+
+
+@dataclass(frozen=True)
+class PoseNoise:
+    """Standard deviations of the pose error of one block."""
+
+    position_sigma: float = 0.0     # m, per axis
+    angle_sigma_deg: float = 0.0    # deg, of the rotation angle about a random axis
+
+    def __post_init__(self):
+        for name in ("position_sigma", "angle_sigma_deg"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise ValueError(f"pose noise {name} must be a finite number >= 0, not {value!r}")
+
+
+def perturb_poses(positions: np.ndarray, orientations: np.ndarray, noise: PoseNoise,
+                  rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Noisy copies of ``positions`` (n, 3) and unit quaternions ``orientations`` (n, 4,
+    x y z w): the noise rotation is applied in the scene frame, about each block's position."""
+    positions = np.asarray(positions, dtype=float).reshape(-1, 3)
+    orientations = np.asarray(orientations, dtype=float).reshape(-1, 4)
+    n = len(positions)
+    shift = rng.normal(0.0, noise.position_sigma, size=(n, 3))
+    axis = rng.normal(size=(n, 3))
+    axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-300)
+    angle = np.radians(rng.normal(0.0, noise.angle_sigma_deg, size=n))
+    if not n:
+        return positions.copy(), orientations.copy()
+    turned = Rotation.from_rotvec(axis * angle[:, None]) * Rotation.from_quat(orientations)
+    return positions + shift, turned.as_quat()
+
+
+def perturb_scene(scene: Scene, noise: PoseNoise, rng: np.random.Generator) -> Scene:
+    """``scene`` with the pose of every free block perturbed (supports kept exactly)."""
+    free = [k for k, b in enumerate(scene.blocks) if not b.support]
+    if not free:
+        return scene
+    pos, quat = perturb_poses([scene.blocks[k].position for k in free],
+                              [scene.blocks[k].orientation for k in free], noise, rng)
+    blocks = list(scene.blocks)
+    for k, p, q in zip(free, pos, quat):
+        blocks[k] = replace(blocks[k], position=p, orientation=q)
+    return replace(scene, blocks=tuple(blocks))

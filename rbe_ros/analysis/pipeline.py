@@ -10,6 +10,7 @@ from dataclasses import dataclass
 from ..deadline import CheckTimeout, stage, time_budget
 from ..rbe.result import Report, Status
 from ..scene import Scene, SceneError
+from .asbuilt import annotate_sensitivity, declared
 from .assembly import Assembly
 from .holds import annotate_holds
 from .incremental import StepChecker
@@ -31,6 +32,7 @@ def check_scene(scene: Scene, options: CheckOptions = CheckOptions(),
     bounded by the solve options' ``time_limit``: over it, the report is SOLVER_FAILED
     naming the stage (:func:`timeout_report`)."""
     start = time.perf_counter()
+    options = declared(options, scene)
     try:
         with time_budget(options.solve.time_limit):
             assembly = validated_assembly(scene, options.limits, options.contact, assembly)
@@ -40,6 +42,8 @@ def check_scene(scene: Scene, options: CheckOptions = CheckOptions(),
                 assembly = assembly.subset(present, held)
             with stage("solve"):
                 report = check(assembly, options)
+            with stage("sensitivity"):
+                annotate_sensitivity(report, assembly, options)
             with stage("hold search"):
                 annotate_holds(report, assembly, held, options)
     except CheckTimeout as exc:
@@ -59,6 +63,7 @@ def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
     stage, and the sequence goes on; contacts over it make every step's report SOLVER_FAILED.
     """
     start = time.perf_counter()
+    options = declared(options, scene)
     steps = sequence_steps(scene)
     limit = options.solve.time_limit
     try:
@@ -80,6 +85,8 @@ def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
             with time_budget(limit):
                 with stage("solve"):
                     report = checker.check(assembly)
+                with stage("sensitivity"):
+                    annotate_sensitivity(report, assembly, options)
                 with stage("hold search"):
                     annotate_holds(report, assembly, step.held, options)
         except CheckTimeout as exc:

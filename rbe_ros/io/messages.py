@@ -17,8 +17,9 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..rbe.result import InterfaceResult, Report, Status
-from ..scene import BOX_FACES, Hold, Scene, SceneError, box_vertices, make_block, make_scene
+from ..rbe.result import InterfaceResult, NearContact, Report, Status
+from ..scene import (BOX_FACES, Hold, Scene, SceneError, blame, box_vertices, make_block,
+                     make_scene)
 
 SOLID_PRIMITIVE_BOX = 1  # shape_msgs/SolidPrimitive.BOX
 _XYZ = ("x", "y", "z")
@@ -186,7 +187,10 @@ def scene_from_state_dict(d) -> Scene:
     if not isinstance(d, Mapping):
         raise SceneError("an AssemblyState must be a mapping (message dict), "
                          f"got {type(d).__name__}")
-    blocks = [_block_from_dict(i, b) for i, b in enumerate(_list(d, "blocks", "AssemblyState"))]
+    blocks = []
+    for i, b in enumerate(_list(d, "blocks", "AssemblyState")):
+        with blame(b.get("id") if isinstance(b, Mapping) else ""):
+            blocks.append(_block_from_dict(i, b))
     sequence = _list(d, "sequence", "AssemblyState")
     if not all(isinstance(s, str) for s in sequence):
         raise SceneError("AssemblyState.sequence must be a list of block ids (strings)")
@@ -212,6 +216,35 @@ def _hold_from_dict(index: int, raw) -> Hold:
     if until_step < -1:
         raise SceneError(f"{where}: until_step must be -1 (to the end) or a step, got {until_step}")
     return Hold(block, from_step, None if until_step == -1 else until_step)
+
+
+# --- BlockPoses -------------------------------------------------------------------------------
+
+def poses_to_dict(poses, frame_id: str = "world", stamp_ns: int = 0) -> dict:
+    """An rbe_msgs/BlockPoses dict of ``{id: (position, orientation)}``."""
+    return {"header": header_dict(frame_id, stamp_ns), "ids": [str(i) for i in poses],
+            "poses": [{"position": _vec(p), "orientation": _vec(q, _XYZW)}
+                      for p, q in poses.values()]}
+
+
+def poses_from_dict(d) -> dict:
+    """``{id: (position, orientation)}`` of an rbe_msgs/BlockPoses dict (SceneError; the
+    values are checked by :func:`rbe_ros.poses.scene_at_poses`)."""
+    ids = _list(d, "ids", "BlockPoses")
+    poses = _list(d, "poses", "BlockPoses")
+    if len(ids) != len(poses):
+        raise SceneError(f"BlockPoses has {len(ids)} ids but {len(poses)} poses")
+    out = {}
+    for i, (bid, pose) in enumerate(zip(ids, poses)):
+        if not isinstance(bid, str) or not bid:
+            raise SceneError(f"BlockPoses.ids[{i}] is not a block id (a non-empty string)")
+        if bid in out:
+            raise SceneError(f"BlockPoses names block {bid!r} twice")
+        where = f"BlockPoses: block {bid!r}"
+        out[bid] = (_xyz(_field(pose, "position", {}, where), f"{where}: position"),
+                    _xyz(_field(pose, "orientation", {}, where), f"{where}: orientation",
+                         _XYZW, (0.0, 0.0, 0.0, 1.0)))
+    return out
 
 
 # --- StabilityReport --------------------------------------------------------------------------
@@ -294,6 +327,10 @@ def report_to_dict(report: Report, header: dict, *, arrays: bool = False) -> dic
         "message": str(report.message),
         "model": str(report.model),
         "dropped_states": int(report.dropped_states),
+        "near_contacts": [{"block_a": str(c.block_a), "block_b": str(c.block_b),
+                           "gap": float(c.gap), "overlap_area": float(c.overlap_area)}
+                          for c in report.near_contacts],
+        "verdict_sensitive": bool(report.verdict_sensitive),
     }
 
 
@@ -310,8 +347,12 @@ def report_from_dict(d: Mapping) -> Report:
         suggested_holds=[str(b) for b in d.get("suggested_holds", [])],
         model=str(d.get("model", "full")),
         dropped_states=int(d.get("dropped_states", 0)),
+        near_contacts=[NearContact(str(c["block_a"]), str(c["block_b"]), float(c["gap"]),
+                                   float(c["overlap_area"])) for c in d.get("near_contacts", [])],
+        verdict_sensitive=bool(d.get("verdict_sensitive", False)),
     )
 
 
-__all__ = ["SOLID_PRIMITIVE_BOX", "header_dict", "header_stamp_ns", "state_to_dict",
+__all__ = ["SOLID_PRIMITIVE_BOX", "header_dict", "header_stamp_ns", "poses_from_dict",
+           "poses_to_dict", "state_to_dict",
            "scene_from_state_dict", "report_to_dict", "report_from_dict"]

@@ -34,6 +34,9 @@ def report_json(report: Report) -> dict:
            "held_blocks": list(report.held_blocks),
            "suggested_holds": list(report.suggested_holds), "model": report.model,
            "dropped_states": report.dropped_states,
+           "near_contacts": [{"block_a": c.block_a, "block_b": c.block_b, "gap": c.gap,
+                              "overlap_area": c.overlap_area} for c in report.near_contacts],
+           "verdict_sensitive": report.verdict_sensitive,
            "interfaces": [interface_json(r) for r in report.interfaces]}
     if report.step_index >= 0:
         out = {"step": report.step_index, "block": report.block_placed, **out}

@@ -20,6 +20,7 @@ from .analysis.check import CheckOptions, HoldSearch, check, check_scene
 from .analysis.friction import minimum_friction
 from .analysis.tilt import DIRECTIONS, tilt_capacity
 from .analysis.virtual import ANALYSES, virtual_assembly
+from .analysis.margin import DEFAULT_DIRECTIONS
 from .analysis.sequence import check_sequence, first_failing_step
 from .analysis.validate import validated_assembly
 from .geometry.contacts import ContactOptions
@@ -52,6 +53,10 @@ def _solver_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--full-solve", action="store_true",
                    help="sequences: solve every step's whole assembly (default: local models "
                    "where they prove the verdict; the report's model says which answered)")
+    g.add_argument("--margin", action="store_true",
+                   help="report margin_g: the smallest horizontal acceleration (share of g) "
+                   f"that topples or slides each checked assembly, over {DEFAULT_DIRECTIONS} "
+                   "directions, and margin_direction")
     g.add_argument("--max-blocks", type=int, default=ValidationLimits().max_blocks,
                    metavar="N", help="refuse scenes of more blocks (default "
                    f"{ValidationLimits().max_blocks}; the other sane ranges: README)")
@@ -99,7 +104,8 @@ def _options(args) -> CheckOptions:
                              vertex_tol=args.vertex_tol)
     return CheckOptions(solve=solve, mu_threshold=args.mu_threshold, tension_tol=args.tension_tol,
                         limits=ValidationLimits(max_blocks=args.max_blocks), holds=holds,
-                        full_solve=args.full_solve, contact=contact)
+                        full_solve=args.full_solve, contact=contact,
+                        margin_directions=DEFAULT_DIRECTIONS if args.margin else 0)
 
 
 def _assembly(args) -> Assembly:

@@ -13,6 +13,7 @@ identity quaternion), exactly as ``set_message_fields`` would leave it.
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 
 import numpy as np
@@ -287,6 +288,8 @@ def report_to_dict(report: Report, header: dict, *, arrays: bool = False) -> dic
         "message": str(report.message),
         "model": str(report.model),
         "dropped_states": int(report.dropped_states),
+        "margin_g": float(report.margin_g),
+        "margin_direction": _vec(report.margin_direction),
     }
 
 
@@ -303,6 +306,9 @@ def report_from_dict(d: Mapping) -> Report:
         suggested_holds=[str(b) for b in d.get("suggested_holds", [])],
         model=str(d.get("model", "full")),
         dropped_states=int(d.get("dropped_states", 0)),
+        margin_g=float(d.get("margin_g", math.nan)),
+        margin_direction=np.array(_xyz(d.get("margin_direction", {}), "margin_direction"),
+                                  dtype=float),
     )
 
 

@@ -72,7 +72,7 @@ def options_to_json(options: CheckOptions) -> str:
                       "allow_tension": s.allow_tension},
             "mu_threshold": options.mu_threshold, "tension_tol": options.tension_tol,
             "contact": asdict(options.contact), "full_solve": options.full_solve,
-            "holds": asdict(options.holds)}
+            "holds": asdict(options.holds), "margin_directions": options.margin_directions}
     return json.dumps(data, sort_keys=True)
 
 
@@ -86,7 +86,8 @@ def options_from_json(text: str) -> CheckOptions:
                         tension_tol=data.get("tension_tol", 1e-5),
                         contact=ContactOptions(**data.get("contact", {})),
                         full_solve=data.get("full_solve", False),
-                        holds=HoldSearch(**data.get("holds", {})))
+                        holds=HoldSearch(**data.get("holds", {})),
+                        margin_directions=data.get("margin_directions", 0))
 
 
 def bag_options(path) -> CheckOptions:

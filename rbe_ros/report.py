@@ -34,6 +34,8 @@ def report_json(report: Report) -> dict:
            "held_blocks": list(report.held_blocks),
            "suggested_holds": list(report.suggested_holds), "model": report.model,
            "dropped_states": report.dropped_states,
+           "margin_g": json_number(report.margin_g),
+           "margin_direction": report.margin_direction.tolist(),
            "interfaces": [interface_json(r) for r in report.interfaces]}
     if report.step_index >= 0:
         out = {"step": report.step_index, "block": report.block_placed, **out}
@@ -49,15 +51,18 @@ def hold_note(r: Report) -> str:
 
 
 def format_table(reports: list[Report]) -> str:
-    """One row per report: step, block, verdict, max tension, worst |V|/N, time and reason;
+    """One row per report: step, block, verdict, max tension, worst |V|/N, time, the margin
+    (when computed) and reason;
     the reason notes the blocks held at the step and, when unstable, the ones to hold."""
-    head = ("step", "block", "verdict", "max tension N", "worst |V|/N", "solve ms", "reason")
+    margin = any(math.isfinite(r.margin_g) for r in reports)
+    head = ("step", "block", "verdict", "max tension N", "worst |V|/N", "solve ms") \
+        + ("margin g",) * margin + ("reason",)
     rows = [head]
     for r in reports:
         ratio = f"{r.worst_friction_ratio:.3f}" if math.isfinite(r.worst_friction_ratio) else "inf"
         rows.append((str(r.step_index) if r.step_index >= 0 else "-", r.block_placed or "-",
-                     r.status.name, f"{r.max_tension:.1f}", ratio, f"{1e3 * r.solve_time:.1f}",
-                     r.message + hold_note(r)))
+                     r.status.name, f"{r.max_tension:.1f}", ratio, f"{1e3 * r.solve_time:.1f}")
+                    + (f"{r.margin_g:.3f}",) * margin + (r.message + hold_note(r),))
     widths = [max(len(row[i]) for row in rows) for i in range(len(head) - 1)]
     lines = ["  ".join(c.ljust(w) if i < 3 else c.rjust(w) for i, (c, w) in enumerate(zip(row, widths)))
              + "  " + row[-1] for row in rows]

@@ -21,6 +21,7 @@ from ..rbe.resultants import interface_results
 from ..rbe.solver import SolveOptions, solve
 from ..scene import Scene, ValidationLimits
 from .assembly import Assembly
+from .margin import annotate_margin
 from .validate import validated_assembly
 
 
@@ -55,6 +56,8 @@ class CheckOptions:
     contact: ContactOptions = field(default_factory=ContactOptions)
     full_solve: bool = False            # sequences: always solve the whole partial assembly
     holds: HoldSearch = field(default_factory=HoldSearch)   # suggested holds of unstable checks
+    #: Horizontal directions of the stability margin (margin.py); 0: no margin computed.
+    margin_directions: int = 0
     #: Sane ranges checked before the geometry stage (None: no validation); see validate.py.
     limits: ValidationLimits | None = field(default_factory=ValidationLimits)
 
@@ -81,6 +84,7 @@ def check_scene(scene: Scene, options: CheckOptions = CheckOptions()) -> Report:
         assembly = assembly.subset(present, held)
     report = check(assembly, options)
     annotate_holds(report, assembly, held, options)
+    annotate_margin(report, assembly, options.solve, options.margin_directions)
     report.solve_time = time.perf_counter() - start
     return report
 

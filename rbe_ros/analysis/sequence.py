@@ -12,6 +12,7 @@ from ..scene import Scene
 from .check import CheckOptions
 from .validate import validated_assembly
 from .holds import annotate_holds
+from .margin import annotate_margin
 from .incremental import StepChecker
 
 
@@ -78,6 +79,7 @@ def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
         report = checker.check(assembly)
         report.step_index, report.block_placed = step.index, step.block
         annotate_holds(report, assembly, step.held, options)
+        annotate_margin(report, assembly, options.solve, options.margin_directions)
         report.solve_time += contact_time / len(steps)
         reports.append(report)
         if on_step is not None:

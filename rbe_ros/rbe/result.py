@@ -1,6 +1,7 @@
 """Results of an RBE check: per-interface forces and resultants, and the verdict."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from enum import IntEnum
 
@@ -58,3 +59,7 @@ class Report:
     held_blocks: list[str] = field(default_factory=list)      # free blocks held as supports
     suggested_holds: list[str] = field(default_factory=list)  # smallest set to hold, if unstable
     dropped_states: int = 0   # node: states on ~/assembly dropped unchecked so far (overload)
+    #: Smallest horizontal acceleration (share of g) that topples or slides the checked
+    #: assembly over the margin's directions, 0 when it does not stand; NaN: not computed.
+    margin_g: float = math.nan
+    margin_direction: np.ndarray = field(default_factory=lambda: np.zeros(3))  # body force, unit

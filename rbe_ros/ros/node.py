@@ -57,6 +57,7 @@ from visualization_msgs.msg import MarkerArray
 
 from .. import cdr
 from ..analysis.check import CheckOptions, HoldSearch, check_scene
+from ..analysis.margin import DEFAULT_DIRECTIONS
 from ..analysis.sequence import check_sequence, sequence_steps
 from ..bag import BagWriter, typestore
 from ..geometry.contacts import ContactOptions
@@ -146,6 +147,11 @@ PARAMETERS = {
     "full_solve": (False, ParameterDescriptor(
         type=ParameterType.PARAMETER_BOOL, description="sequences: solve every step's whole "
         "assembly instead of local models (a report's model field says which answered)")),
+    "compute_margin": (False, ParameterDescriptor(
+        type=ParameterType.PARAMETER_BOOL, description="reports carry margin_g: the smallest "
+        "horizontal acceleration (share of g) that topples or slides the checked assembly, over "
+        f"{DEFAULT_DIRECTIONS} directions, and margin_direction (costs about one solve per "
+        "direction)")),
     "suggest_holds": (HoldSearch().enabled, ParameterDescriptor(
         type=ParameterType.PARAMETER_BOOL, description="an unstable report names the smallest "
         "set of blocks to hold (suggested_holds)")),
@@ -259,6 +265,7 @@ class RbeNode(Node):
         return CheckOptions(solve=solve, mu_threshold=threshold if threshold > 0 else None,
                             tension_tol=float(value("tension_tolerance")),
                             limits=self.limits(), full_solve=bool(value("full_solve")),
+                            margin_directions=DEFAULT_DIRECTIONS if value("compute_margin") else 0,
                             contact=ContactOptions(
                                 distance_tol=float(value("contact_distance_tolerance")),
                                 angle_tol_deg=float(value("contact_angle_tolerance_deg")),

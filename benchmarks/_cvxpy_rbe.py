@@ -59,12 +59,13 @@ def check_scene(scene, mu: float, contact=None) -> tuple[bool, float]:
     """Verdict and wall time of one full check: contact detection and the equilibrium matrix
     by rbe_ros (as in ours), then the problem stated, compiled and solved by cvxpy."""
     from rbe_ros.analysis.assembly import Assembly
+    from rbe_ros.analysis.graph import ContactGraph
     from rbe_ros.geometry.contacts import ContactOptions
     from rbe_ros.rbe.model import build_model
 
     start = time.perf_counter()
     assembly = Assembly.from_scene(scene, contact or ContactOptions())
-    if assembly.floating_blocks():
+    if ContactGraph(assembly).floating_blocks():
         return False, time.perf_counter() - start
     model = build_model(assembly.blocks, assembly.interfaces, assembly.gravity)
     ok = CvxpyRBE(model, mu).stands()

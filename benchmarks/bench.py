@@ -7,7 +7,7 @@ Methods, all run in this one process run, scene by scene (compas_cra in a subpro
 own venv, see _bench_cra_driver.py):
 
 * ours in each configuration: objective QP / LP x friction cone exact (soc) / 8-sided
-  inscribed / 8-sided circumscribed / 4-sided (``rbe_ros.analysis.check.check_scene``,
+  inscribed / 8-sided circumscribed / 4-sided (``rbe_ros.analysis.pipeline.check_scene``,
   interface detection included; tilt capacities with ``tilt_capacity``);
 * the default problem stated in cvxpy (``_cvxpy_rbe.py``), same detection and matrices;
 * compas_cra 0.8.0 ``rbe_solve`` (IPOPT), on the same scenes exported with
@@ -36,15 +36,17 @@ from scipy.spatial.transform import Rotation
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(ROOT / "tests"))   # the independent references (tests/oracles/)
 
-import _arch_limit as arch_limit  # noqa: E402
 import _physics as physics  # noqa: E402
 from machine import machine_summary  # noqa: E402
+from oracles import arch_limit  # noqa: E402
 from timing import best_of  # noqa: E402
 
 from rbe_ros import generators as gen  # noqa: E402
 from rbe_ros.analysis.assembly import Assembly  # noqa: E402
-from rbe_ros.analysis.check import CheckOptions, check_scene  # noqa: E402
+from rbe_ros.analysis.options import CheckOptions  # noqa: E402
+from rbe_ros.analysis.pipeline import check_scene
 from rbe_ros.analysis.tilt import horizontal, tilt_capacity  # noqa: E402
 from rbe_ros.geometry.contacts import ContactOptions  # noqa: E402
 from rbe_ros.rbe.model import build_model  # noqa: E402
@@ -197,7 +199,7 @@ def arch_cases(quick: bool) -> tuple[list[Case], dict]:
         for f, ok in ((1.01, True), (0.99, False)):
             cases.append(Case(f"arch {n} voussoirs, t = t_min x{f:g}", "arch thickness", "verdict",
                               gen.semicircular_arch(n, f * t), mu, ok,
-                              f"t_min/R = {t:.6f} for n = {n} (thrust-line LP, _arch_limit.py;"
+                              f"t_min/R = {t:.6f} for n = {n} (thrust-line LP, tests/oracles/arch_limit.py;"
                               f" continuous 0.107426, Cocchetti & Rizzi 2020)",
                               physics=not quick or n == 15))
     n, ratio = 15, 0.15
@@ -341,7 +343,7 @@ class Cra:
         return json.loads(line)
 
     def export(self, scene: Scene, interfaces: bool) -> str:
-        from rbe_ros.compas_io import save_compas_assembly
+        from rbe_ros.io.compas import save_compas_assembly
         self.count += 1
         path = self.tmp / f"scene{self.count:04d}.json"
         save_compas_assembly(rotated_for_gravity(scene), path, interfaces=interfaces)
@@ -509,7 +511,7 @@ def scaling(args, cra, engines) -> list[dict]:
 
 def armadillo(cra, engines) -> dict | None:
     """compas_cra's largest sample: rbe_solve on its stored interfaces against our full check."""
-    from rbe_ros.compas_io import load_compas_assembly
+    from rbe_ros.io.compas import load_compas_assembly
     if cra is None:
         return None
     path = Path(cra.versions["samples"]) / "armadillo_cra.json"
@@ -561,7 +563,7 @@ def main(argv=None) -> int:
     parser.add_argument("--out", type=Path, help="docs folder (default docs/, or out/bench-quick with --quick)")
     parser.add_argument("--no-cra", action="store_true", help="leave compas_cra out")
     parser.add_argument("--no-physics", action="store_true", help="leave the physics engines out")
-    parser.add_argument("--cra-venv", type=Path, default=Path(os.environ.get("RBE_COMPAS_VENV", "/tmp/rbe-compas-venv")))
+    parser.add_argument("--cra-venv", type=Path, default=Path(os.environ.get("RBE_COMPAS_VENV", ROOT / ".venv-compas")))
     args = parser.parse_args(argv)
     out = args.out or (ROOT / "out" / "bench-quick" if args.quick else ROOT / "docs")
     t0 = time.perf_counter()

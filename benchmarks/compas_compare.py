@@ -1,6 +1,6 @@
 """Our RBE solve against the authors' own, compas_cra 0.8.0 ``rbe_solve``, on its samples.
 
-    python3 benchmarks/compas_compare.py [--venv /tmp/rbe-compas-venv] [--samples cubes,shelf]
+    python3 benchmarks/compas_compare.py [--venv .venv-compas] [--samples cubes,shelf]
 
 Any python will do. The script (a) makes a scratch venv with ``compas-cra==0.8.0`` (once;
 compas-cra is no dependency of this project and never enters its venv), (b) runs
@@ -35,7 +35,7 @@ sys.path.insert(0, str(HERE))
 from timing import best_of  # noqa: E402
 DOCS = ROOT / "docs"
 PROJECT_PYTHON = ROOT / ".venv" / "bin" / "python"
-DEFAULT_VENV = Path("/tmp/rbe-compas-venv")
+DEFAULT_VENV = ROOT / ".venv-compas"     # made by scripts/setup.sh (make setup)
 CRA_VERSION = "0.8.0"
 CRA_REQUIREMENT = f"compas-cra=={CRA_VERSION}"
 VENV_ENV = "RBE_COMPAS_VENV"
@@ -114,11 +114,14 @@ def cra_versions(python) -> dict:
 
 
 def cra_python_from_env() -> Path | None:
-    """A python with compas_cra: that of $RBE_COMPAS_VENV, else this one if it has it."""
+    """A python with compas_cra: that of $RBE_COMPAS_VENV, else of .venv-compas, else this one
+    if it has it."""
     env = os.environ.get(VENV_ENV)
     if env:
         python = venv_python(env)
         return python if python.exists() and has_cra(python) else None
+    if has_cra(venv_python(DEFAULT_VENV)):
+        return venv_python(DEFAULT_VENV)
     try:
         found = importlib.util.find_spec("compas_cra") is not None
     except (ImportError, ValueError):
@@ -154,7 +157,7 @@ def our_scene(record: dict):
     node key -> block index."""
     from dataclasses import replace
 
-    from rbe_ros.compas_io import load_compas_assembly
+    from rbe_ros.io.compas import load_compas_assembly
 
     supports = record.get("supports")
     scene = load_compas_assembly(record["path"], supports=supports, density=1.0)
@@ -291,20 +294,14 @@ def _check_options(prep):
     """Our check with compas_cra's solve settings, without the search for blocks to hold
     that an unstable check would otherwise add (no part of an RBE solve; it can take longer
     than the check itself)."""
-    from dataclasses import fields
+    from rbe_ros.analysis.options import CheckOptions, HoldSearch
 
-    from rbe_ros.analysis import check as check_module
-
-    extra = {}
-    names = {f.name for f in fields(check_module.CheckOptions)}
-    if hasattr(check_module, "HoldSearch") and "holds" in names:
-        extra["holds"] = check_module.HoldSearch(enabled=False)
-    return check_module.CheckOptions(prep.options, contact=prep.contact, **extra)
+    return CheckOptions(prep.options, contact=prep.contact, holds=HoldSearch(enabled=False))
 
 
 def _check_own(prep):
     """Our full check from the blocks alone (the timed "full check")."""
-    from rbe_ros.analysis.check import check_scene
+    from rbe_ros.analysis.pipeline import check_scene
     return check_scene(prep.scene, _check_options(prep))
 
 
@@ -376,7 +373,7 @@ def compare_sample(record: dict, repeat: int = 3) -> dict:
     own = _match_own(record, interfaces, index, scene, report, g)
     if volume_err > 1e-6:   # the same detection, with compas_cra's volumes and centres
         from rbe_ros.analysis.assembly import Assembly
-        from rbe_ros.analysis.check import check
+        from rbe_ros.analysis.verdict import check
         assembly = replace(Assembly.from_scene(scene, contact), blocks=as_cra)
         same_mass = _match_own(record, interfaces, index, scene, check(assembly, _check_options(prep)), g)
         own["with_cra_mass"] = {k: v for k, v in same_mass.items() if k.startswith("agreement")}

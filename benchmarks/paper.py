@@ -17,11 +17,12 @@ from machine import machine_summary
 
 from rbe_ros import generators as gen
 from rbe_ros.analysis.assembly import Assembly
-from rbe_ros.analysis.check import CheckOptions, check
+from rbe_ros.analysis.options import CheckOptions
+from rbe_ros.analysis.verdict import check
 from rbe_ros.analysis.friction import minimum_friction
 from rbe_ros.analysis.tilt import tilt_capacity
 from rbe_ros.analysis.virtual import virtual_assembly
-from rbe_ros.figures import draw_report
+from rbe_ros.io.figures import draw_report
 from rbe_ros.rbe.solver import SolveOptions
 
 DOCS = Path(__file__).resolve().parents[1] / "docs"

@@ -20,10 +20,10 @@ sys.path.insert(0, str(ROOT))
 
 from rbe_ros import generators  # noqa: E402
 from rbe_ros.analysis.assembly import Assembly  # noqa: E402
-from rbe_ros.analysis.check import check  # noqa: E402
+from rbe_ros.analysis.verdict import check  # noqa: E402
 from rbe_ros.analysis.planning import plan_sequence  # noqa: E402
-from rbe_ros.analysis.sequence import sequence_steps  # noqa: E402
-from rbe_ros.scene import scene_to_dict  # noqa: E402
+from rbe_ros.analysis.steps import sequence_steps  # noqa: E402
+from rbe_ros.io.scene_json import scene_to_dict  # noqa: E402
 
 
 def main(argv=None) -> int:

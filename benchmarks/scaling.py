@@ -28,14 +28,15 @@ import numpy as np
 
 from machine import machine_summary
 
-from rbe_ros import cdr
+from rbe_ros.io import cdr
 from rbe_ros import generators as gen
 from rbe_ros.analysis.assembly import Assembly
-from rbe_ros.analysis.check import check, check_scene
+from rbe_ros.analysis.verdict import check
+from rbe_ros.analysis.pipeline import check_scene
 from rbe_ros.analysis.incremental import MIN_LOCAL_BLOCKS, StepChecker
-from rbe_ros.analysis.sequence import sequence_steps
-from rbe_ros.bag import typestore
-from rbe_ros.messages import header_dict, report_to_dict
+from rbe_ros.analysis.steps import sequence_steps
+from rbe_ros.io.bag import typestore
+from rbe_ros.io.messages import header_dict, report_to_dict
 from rbe_ros.rbe.solver import solver_timing
 
 DOCS = Path(__file__).resolve().parents[1] / "docs"
@@ -56,10 +57,10 @@ def best_of(repeats: int, fn):
 
 def walls(sizes, repeats):
     """Per wall: (blocks, interfaces, verdict, check s, solver s, message s, markers s)."""
-    from builtin_interfaces.msg import Time
-    from rbe_ros.ros.markers import report_markers
+    from rbe_ros.io.markers import MARKER_TYPE, step_markers
 
     encode = cdr.encoder(typestore(), "rbe_msgs/msg/StabilityReport")    # as the node does
+    encode_markers = cdr.encoder(typestore(), MARKER_TYPE)
     rows = []
     for courses, bricks in sizes:
         scene = gen.running_bond_wall(courses=courses, bricks_per_course=bricks)
@@ -67,8 +68,8 @@ def walls(sizes, repeats):
         header = header_dict("world", 0)
         _, message, _ = best_of(repeats,
                                 lambda: encode(report_to_dict(report, header, arrays=True)))
-        stamp = Time(**header["stamp"])
-        _, markers, _ = best_of(repeats, lambda: report_markers(scene, report, "world", stamp))
+        _, markers, _ = best_of(repeats, lambda: encode_markers(step_markers(scene, report,
+                                                                             header)))
         rows.append((len(scene.blocks), len(report.interfaces), report.status.name, total, solver,
                      message, markers))
         print(f"wall {len(scene.blocks)} blocks: {total:.3f} s, solver {solver:.3f} s, message"
@@ -132,7 +133,7 @@ def main() -> int:
              "## One check of a running-bond wall", "",
              "Check: validation, contacts, model, solve, results (`check_scene`). Message: the"
              " StabilityReport the node publishes, from the report to its message dict to CDR"
-             " bytes (`rbe_ros.cdr`). Outside the solver:"
+             " bytes (`rbe_ros.io.cdr`). Outside the solver:"
              " the share of the check, and of check + message, not spent in the solver (Clarabel's"
              " set-up and iterations). Markers (RViz, published with every report) apart.", "",
              "| blocks | interfaces | verdict | check [s] | in the solver [s] | message [s] |"

@@ -15,27 +15,55 @@ import sys
 import time
 from pathlib import Path
 
+from dataclasses import replace
+
+from .analysis.asbuilt import declared
 from .analysis.assembly import Assembly
-from .analysis.check import CheckOptions, HoldSearch, check, check_scene
 from .analysis.friction import minimum_friction
-from .analysis.tilt import DIRECTIONS, tilt_capacity
-from .analysis.virtual import ANALYSES, virtual_assembly
 from .analysis.margin import DEFAULT_DIRECTIONS
-from .analysis.sequence import check_sequence, first_failing_step
+from .analysis.options import CheckOptions, HoldSearch
+from .analysis.pipeline import check_scene, check_sequence, first_failing_step
+from .analysis.planning import plan_sequence
+from .analysis.tilt import DIRECTIONS, tilt_capacity
 from .analysis.validate import validated_assembly
+from .analysis.verdict import check
+from .analysis.virtual import ANALYSES, virtual_assembly
+from .generators import GENERATORS
 from .geometry.contacts import ContactOptions
+from .io.figures import draw_report
+from .io.messages import header_dict, report_to_dict, state_to_dict
+from .io.replay import (REPORT_TOPIC, STATE_TOPIC, Run, bag_options, default_output,
+                        offline_reports, read_runs, replay_bag, step_stamps, write_runs)
+from .io.report import format_table, json_number, report_json
+from .io.view import ViewRun, checked_runs, write_html
+from .io.scene_json import scene_to_dict
 from .rbe.cones import CONES
 from .rbe.solver import SolveOptions
-from .report import format_table, json_number, report_json
-from .generators import GENERATORS
-from .scene import Scene, SceneError, ValidationLimits, load_scene, scene_to_dict
+from .io.inputs import load_design
+from .io.poses import load_poses, scene_at_poses
+from .io.stored_interfaces import compare_interfaces
+from .scene import Scene, SceneError, ValidationLimits
 
-#: Topics under which the CLI records, the names the node uses (node name rbe_node).
-STATE_TOPIC = "/rbe_node/assembly"
-REPORT_TOPIC = "/rbe_node/report"
+
+def _input_arguments(parser: argparse.ArgumentParser) -> None:
+    i = parser.add_argument_group("input (the scene: a scene JSON or a COMPAS Assembly JSON, "
+                                  "either gzipped as *.gz)")
+    i.add_argument("--poses", metavar="POSES.json",
+                   help='measured poses {"poses": {ID: {"position": [x, y, z], "orientation": '
+                   '[x, y, z, w]}}}: the design\'s supports and the measured blocks at their '
+                   'measured poses are checked; blocks not measured are not placed')
+    i.add_argument("--density", type=float, default=None, metavar="KG_M3",
+                   help="density of the blocks of a COMPAS file that gives them none "
+                   "(default 2500)")
+    i.add_argument("--interfaces", choices=("detected", "stored", "compare"),
+                   default="detected", help="detected (default); stored: check on the "
+                   "interfaces a COMPAS file stores, as given; compare: list how the detected "
+                   "ones differ from the stored ones (missing, extra, area), then check on the "
+                   "detected ones")
 
 
 def _solver_arguments(parser: argparse.ArgumentParser) -> None:
+    _input_arguments(parser)
     g = parser.add_argument_group("RBE model")
     g.add_argument("--mu", type=float, default=0.6, help="friction coefficient (default 0.6)")
     g.add_argument("--mu-threshold", type=float, default=None,
@@ -50,13 +78,13 @@ def _solver_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--time-limit", type=float, default=0.0, metavar="S",
                    help="time limit of each solver call in s (check: a check makes one to "
                    "three); over it the verdict is SOLVER_FAILED (default 0: none)")
-    g.add_argument("--full-solve", action="store_true",
-                   help="sequences: solve every step's whole assembly (default: local models "
-                   "where they prove the verdict; the report's model says which answered)")
     g.add_argument("--margin", action="store_true",
                    help="report margin_g: the smallest horizontal acceleration (share of g) "
                    f"that topples or slides each checked assembly, over {DEFAULT_DIRECTIONS} "
                    "directions, and margin_direction")
+    g.add_argument("--full-solve", action="store_true",
+                   help="sequences: solve every step's whole assembly (default: local models "
+                   "where they prove the verdict; the report's model says which answered)")
     g.add_argument("--max-blocks", type=int, default=ValidationLimits().max_blocks,
                    metavar="N", help="refuse scenes of more blocks (default "
                    f"{ValidationLimits().max_blocks}; the other sane ranges: README)")
@@ -77,6 +105,11 @@ def _solver_arguments(parser: argparse.ArgumentParser) -> None:
     c.add_argument("--vertex-tol", type=float, default=defaults.vertex_tol, metavar="R",
                    help="vertices this close to their neighbours' chord are left out "
                    f"(default {defaults.vertex_tol:g}; 0 keeps all)")
+    c.add_argument("--pose-uncertainty", type=uncertainty, default=None,
+                   metavar="POS_M[,ANGLE_DEG]", help="as-built poses: every pose is known to "
+                   "within POS_M metres and ANGLE_DEG degrees (about 3 sigma); contacts and the "
+                   "interpenetration limit then follow from it (README: Checking as-built "
+                   "poses; default: the scene's \"pose_uncertainty\", else design geometry)")
     h = parser.add_argument_group("suggested holds (unstable checks)")
     h.add_argument("--no-suggest-holds", action="store_true",
                    help="do not search the smallest set of blocks to hold")
@@ -86,6 +119,14 @@ def _solver_arguments(parser: argparse.ArgumentParser) -> None:
     h.add_argument("--hold-max-checks", type=int, default=HoldSearch().max_checks, metavar="N",
                    help="sub-assembly checks the exact search may spend "
                    f"(default {HoldSearch().max_checks})")
+
+
+def uncertainty(text: str) -> tuple[float, float]:
+    """POS_M[,ANGLE_DEG] (argparse type: ValueError for anything else)."""
+    parts = [float(x) for x in text.split(",")]
+    if not 1 <= len(parts) <= 2 or not all(math.isfinite(x) and x >= 0 for x in parts):
+        raise ValueError(text)
+    return parts[0], parts[1] if len(parts) > 1 else 0.0
 
 
 def _options(args) -> CheckOptions:
@@ -101,17 +142,41 @@ def _options(args) -> CheckOptions:
                        max_checks=args.hold_max_checks)
     contact = ContactOptions(distance_tol=args.distance_tol, angle_tol_deg=args.angle_tol,
                              min_area=args.min_area, min_width=args.min_width,
-                             vertex_tol=args.vertex_tol)
+                             vertex_tol=args.vertex_tol,
+                             **dict(zip(("pose_uncertainty_m", "pose_uncertainty_deg"),
+                                        args.pose_uncertainty or ())))
     return CheckOptions(solve=solve, mu_threshold=args.mu_threshold, tension_tol=args.tension_tol,
                         limits=ValidationLimits(max_blocks=args.max_blocks), holds=holds,
                         full_solve=args.full_solve, contact=contact,
                         margin_directions=DEFAULT_DIRECTIONS if args.margin else 0)
 
 
+def _scene(args) -> tuple[Scene, Assembly | None]:
+    """The scene of ``args.scene`` (``--poses`` applied) and, with ``--interfaces stored``,
+    its assembly on the stored interfaces (else None: detected in the check). With
+    ``--interfaces compare`` the differences are printed first (to stderr after --json)."""
+    if args.poses and args.interfaces != "detected":
+        raise ValueError("--interfaces stored and compare are of the blocks as the file has "
+                         "them, not at measured poses (--poses)")
+    scene, stored = load_design(args.scene, args.density, stored=args.interfaces != "detected")
+    if args.poses:
+        scene = scene_at_poses(scene, load_poses(args.poses))
+    if args.interfaces == "compare":
+        diff = compare_interfaces(Assembly.from_scene(
+            scene, declared(_options(args), scene).contact), stored)
+        args.interfaces_compare = diff
+        as_json = getattr(args, "json", False)
+        if not (as_json and args.command == "check"):
+            print("\n".join(diff.lines()), file=sys.stderr if as_json else sys.stdout)
+        stored = None
+    return scene, stored
+
+
 def _assembly(args) -> Assembly:
     """The validated assembly of ``args.scene`` (the limits of the options; SceneError)."""
-    options = _options(args)
-    return validated_assembly(load_scene(args.scene), options.limits, options.contact)
+    scene, stored = _scene(args)
+    options = declared(_options(args), scene)
+    return validated_assembly(scene, options.limits, options.contact, stored)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -125,6 +190,8 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("--bag", metavar="DIR",
                        help="record states and reports as a rosbag2 MCAP bag in DIR")
     check.add_argument("--force", action="store_true", help="replace an existing --bag DIR")
+    check.add_argument("--no-markers", action="store_true",
+                       help="--bag without the markers of the reports (a lean log)")
     check.add_argument("--strict", action="store_true",
                        help="exit 1 when an assembly or step is not stable")
     _solver_arguments(check)
@@ -189,6 +256,17 @@ def build_parser() -> argparse.ArgumentParser:
     _solver_arguments(plan)
     plan.set_defaults(run=_run_plan)
 
+    view = sub.add_parser("view", help="write one self-contained HTML report of a scene's "
+                          "check or of a bag: 3D view, step slider, table of steps, options")
+    view.add_argument("scene", metavar="SCENE|BAG", help="a scene file (checked here, every "
+                      "step when it has a sequence) or a rosbag2 bag (directory or .mcap: its "
+                      "states and reports as recorded, with its options)")
+    view.add_argument("-o", "--output", required=True, help="HTML file to write")
+    view.add_argument("--sequence", action="store_true",
+                      help="a scene without a sequence: check every block in file order")
+    _solver_arguments(view)
+    view.set_defaults(run=_run_view)
+
     replay = sub.add_parser("replay", help="re-check the states of a bag, write a bag of the "
                             "new reports and compare them with the recorded ones")
     replay.add_argument("bag", help="rosbag2 MCAP bag directory (or .mcap file)")
@@ -200,6 +278,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help="with --live: use the running node NAME (e.g. rbe_node)")
     replay.add_argument("-o", "--output", metavar="DIR",
                         help="bag to write (default: BAG_replay; never overwritten)")
+    replay.add_argument("--no-markers", action="store_true",
+                        help="write the new bag without the markers of the reports")
     replay.add_argument("--timeout", type=float, default=120.0, metavar="S",
                         help="--live: seconds to wait for each answer (default 120)")
     replay.set_defaults(run=_run_replay)
@@ -207,10 +287,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _run_check(args) -> int:
-    options = _options(args)
-    scene = load_scene(args.scene)
+    scene, stored = _scene(args)
+    options = declared(_options(args), scene)      # recorded in the bag as checked
     if args.bag:
         _prepare_bag_dir(Path(args.bag), args.force)
+    if stored is not None and (args.sequence or args.bag):
+        raise ValueError("--interfaces stored checks the assembly as a whole, and is not "
+                         "recorded (a replay detects the interfaces): no --sequence or --bag")
     if args.sequence:
         def progress(report, total: int) -> None:
             if report.step_index == 0:      # after validation: bad input gives one line only
@@ -222,10 +305,12 @@ def _run_check(args) -> int:
         out = {"scene": scene.name, "first_failing_step": first_failing_step(reports),
                "steps": [report_json(r) for r in reports]}
     else:
-        reports = [check_scene(scene, options)]
+        reports = [check_scene(scene, options, stored)]
         out = {"scene": scene.name, **report_json(reports[0])}
+    if args.interfaces == "compare":
+        out["interfaces_compare"] = args.interfaces_compare.to_json()
     if args.bag:
-        _record(Path(args.bag), scene, reports, options, args.sequence)
+        _record(Path(args.bag), scene, reports, options, args.sequence, not args.no_markers)
     if args.json:
         print(json.dumps(out, indent=1))
     else:
@@ -282,8 +367,6 @@ def _run_analyse(args) -> int:
 
 
 def _run_figure(args) -> int:
-    from .figures import draw_report
-
     assembly, report = _analysed(args)
     title = f"{args.analysis + ': ' if args.analysis else ''}{report.message}"
     print(f"figure written to {draw_report(assembly, report, args.output, title=title, view=tuple(args.view))}")
@@ -327,30 +410,28 @@ def _prepare_bag_dir(path: Path, force: bool) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
 
 
-def _record(path: Path, scene: Scene, reports, options: CheckOptions, sequence: bool) -> None:
-    """Write the scene's state and every report, as the node would have published them, and
-    the options (so that ``rbe-ros replay`` re-checks the same way). The state holds the
-    order checked (``sequence``) or no sequence (a check as a whole)."""
-    from dataclasses import replace
-
-    from .messages import header_dict, report_to_dict, state_to_dict
-    from .replay import Run, write_runs
-
+def _record(path: Path, scene: Scene, reports, options: CheckOptions, sequence: bool,
+            markers: bool) -> None:
+    """Write the scene's state and every report (and with ``markers`` its markers), as the
+    node would have published them, a step a second, and the options (so that ``rbe-ros
+    replay`` re-checks the same way). The state holds the order checked (``sequence``) or no
+    sequence (a check as a whole)."""
     order = (scene.sequence or tuple(b.id for b in scene.blocks if not b.support)) \
         if sequence else ()
     stamp = time.time_ns()
     header = header_dict("world", stamp)
     run = Run(state_to_dict(replace(scene, sequence=order), "world", stamp), stamp,
               STATE_TOPIC, [report_to_dict(r, header) for r in reports],
-              [stamp + k + 1 for k in range(len(reports))], REPORT_TOPIC)
-    write_runs(path, [run], [run.reports], options)
+              step_stamps(stamp, len(reports)), REPORT_TOPIC)
+    write_runs(path, [run], [run.reports], options, markers=markers)
 
 
 def _run_plan(args) -> int:
-    from .analysis.planning import plan_sequence
-
     options = _options(args)
-    scene = load_scene(args.scene)
+    scene, stored = _scene(args)
+    if stored is not None:
+        raise ValueError("plan detects the interfaces of every partial assembly (not "
+                         "--interfaces stored)")
     if not args.json:
         print(f"planning {scene.name}: {sum(not b.support for b in scene.blocks)} blocks to "
               f"place, at most {args.max_held} held", file=sys.stderr)
@@ -378,9 +459,29 @@ def _run_plan(args) -> int:
     return 0 if plan.feasible else 1
 
 
-def _run_replay(args) -> int:
-    from .replay import default_output, replay_bag
+def _run_view(args) -> int:
+    source = Path(args.scene)
+    if source.suffix == ".mcap" or (source / "metadata.yaml").is_file():
+        options = bag_options(source)
+        runs = [ViewRun(f"run {k}", run.state, run.reports)
+                for k, run in enumerate(read_runs(source))]
+        title = source.name
+    else:
+        options = _options(args)
+        scene, _ = _scene(args)
+        order = scene.sequence or tuple(b.id for b in scene.blocks if not b.support)
+        steps = args.sequence or bool(scene.sequence)
+        state = state_to_dict(replace(scene, sequence=order if steps else ()), "world")
+        runs = checked_runs([(scene.name, state)], options)
+        title = scene.name
+    if not runs:
+        raise ValueError(f"{source}: no states to show")
+    path = write_html(args.output, runs, options, title)
+    print(f"{sum(len(r.reports) for r in runs)} reports of {len(runs)} states written to {path}")
+    return 0
 
+
+def _run_replay(args) -> int:
     if args.node_name and not args.live:
         raise ValueError("--node-name needs --live")
     out = Path(args.output) if args.output else default_output(args.bag)
@@ -392,9 +493,14 @@ def _run_replay(args) -> int:
         print(f"  run {i}: {run.describe()}: {len(run.reports)} recorded reports",
               file=sys.stderr)
 
+    recheck = offline_reports
+    if args.live:
+        # rclpy is loaded only for --live: every other command runs without ROS
+        from .ros.live import live_recheck
+        recheck = live_recheck(args.node_name, timeout=args.timeout)
     try:
-        result = replay_bag(args.bag, out, compare=args.compare, live=args.live,
-                            node_name=args.node_name, timeout=args.timeout, on_run=progress)
+        result = replay_bag(args.bag, out, compare=args.compare, recheck=recheck,
+                            markers=not args.no_markers, on_run=progress)
     except RuntimeError as exc:     # the live node failed or exited
         raise ValueError(str(exc)) from None
     reports = sum(len(r) for r in result.replayed)

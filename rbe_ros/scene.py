@@ -1,4 +1,4 @@
-"""Scenes: blocks with shape, pose, mass and support flag; loading and validation.
+"""Scenes: blocks with shape, pose, mass and support flag, and their validation.
 
 A scene is the input of every analysis. It is immutable data in SI units; loading checks
 everything a later stage would otherwise trip over, so that bad input gives one clear
@@ -6,10 +6,10 @@ everything a later stage would otherwise trip over, so that bad input gives one 
 """
 from __future__ import annotations
 
-import json
 import math
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 
 import numpy as np
 
@@ -17,7 +17,24 @@ DEFAULT_GRAVITY = (0.0, 0.0, -9.81)
 
 
 class SceneError(ValueError):
-    """The scene cannot be analysed; the message names the block and the problem."""
+    """The scene cannot be analysed; the message names the block and the problem, and
+    ``blocks`` the ids of the blocks at fault (empty when no block is), so that a view can
+    highlight them."""
+
+    def __init__(self, message: str, blocks: Sequence[str] = ()):
+        super().__init__(message)
+        self.blocks = tuple(str(b) for b in blocks)
+
+
+@contextmanager
+def blame(*block_ids: str) -> Iterator[None]:
+    """A :class:`SceneError` raised inside, naming no block at fault, names ``block_ids``."""
+    try:
+        yield
+    except SceneError as exc:
+        if not exc.blocks:
+            exc.blocks = tuple(str(b) for b in block_ids if b)
+        raise
 
 
 @dataclass(frozen=True)
@@ -77,16 +94,16 @@ def validate_scene(scene: "Scene", limits: ValidationLimits = ValidationLimits()
     where = f"block {b.id!r}"
     if len(b.vertices) > limits.max_vertices:
         raise SceneError(f"{where}: {len(b.vertices)} vertices, more than the limit of "
-                         f"{limits.max_vertices}")
+                         f"{limits.max_vertices}", [b.id])
     if extent.min() < limits.min_size or extent.max() > limits.max_size:
         raise SceneError(f"{where}: size {' x '.join(f'{e:.6g}' for e in extent)} m is "
                          f"outside the sane range [{limits.min_size:g}, {limits.max_size:g}]"
-                         " m per edge")
+                         " m per edge", [b.id])
     if distance > limits.max_distance:
         raise SceneError(f"{where}: position {distance:.6g} m from the origin, farther "
-                         f"than the limit of {limits.max_distance:g} m")
+                         f"than the limit of {limits.max_distance:g} m", [b.id])
     raise SceneError(f"{where}: density {b.density:.6g} kg/m^3 is outside the sane "
-                     f"range [{limits.min_density:g}, {limits.max_density:g}] kg/m^3")
+                     f"range [{limits.min_density:g}, {limits.max_density:g}] kg/m^3", [b.id])
 
 
 @dataclass(frozen=True)
@@ -130,13 +147,15 @@ class Hold:
 @dataclass(frozen=True)
 class Scene:
     """An assembly of blocks under gravity, with an optional insertion sequence of block ids
-    and temporary supports (holds) by step."""
+    and temporary supports (holds) by step. ``pose_uncertainty`` (m, deg): how well the
+    poses are known (measured, as built; about 3 sigma), None for design geometry."""
 
     name: str
     blocks: tuple[Block, ...]
     gravity: np.ndarray = field(default_factory=lambda: np.array(DEFAULT_GRAVITY))
     sequence: tuple[str, ...] = ()
     holds: tuple[Hold, ...] = ()
+    pose_uncertainty: tuple[float, float] | None = None
 
     def block(self, block_id: str) -> Block:
         for b in self.blocks:
@@ -171,34 +190,35 @@ def box_block(block_id: str, size, position=(0, 0, 0), orientation=(0, 0, 0, 1),
 def make_block(block_id, vertices, faces, position=(0, 0, 0), orientation=(0, 0, 0, 1), *,
                density: float = 0.0, mass: float = 0.0, support: bool = False) -> Block:
     """A validated block (raises :class:`SceneError`)."""
-    name = str(block_id)
-    where = f"block {name!r}"
-    verts = _finite_array(vertices, (-1, 3), f"{where}: vertices")
-    if len(verts) < 4:
-        raise SceneError(f"{where}: a block needs at least 4 vertices, got {len(verts)}")
-    try:
-        face_tuple = tuple(tuple(int(i) for i in f) for f in faces)
-    except (TypeError, ValueError):
-        raise SceneError(f"{where}: faces must be lists of vertex indices") from None
-    if len(face_tuple) < 4:
-        raise SceneError(f"{where}: a closed block needs at least 4 faces, got {len(face_tuple)}")
-    for f in face_tuple:
-        if len(f) < 3 or min(f) < 0 or max(f) >= len(verts):
-            raise SceneError(f"{where}: face {list(f)} is not a polygon of existing vertices")
-    pos = _finite_array(position, (3,), f"{where}: position")
-    quat = _finite_array(orientation, (4,), f"{where}: orientation")
-    norm = float(np.linalg.norm(quat))
-    if abs(norm - 1.0) > 1e-3:
-        raise SceneError(f"{where}: orientation quaternion (x, y, z, w) must have unit norm, has {norm:.6g}")
-    density, mass = float(density or 0.0), float(mass or 0.0)
-    if not (math.isfinite(density) and math.isfinite(mass)) or density < 0 or mass < 0:
-        raise SceneError(f"{where}: density and mass must be finite and non-negative")
-    if (density > 0) == (mass > 0):
-        raise SceneError(f"{where}: give exactly one of a positive density (kg/m^3) or mass (kg)")
-    return Block(name, verts, face_tuple, pos, quat / norm, density, mass, bool(support))
+    with blame(block_id):
+        name = str(block_id)
+        where = f"block {name!r}"
+        verts = finite_array(vertices, (-1, 3), f"{where}: vertices")
+        if len(verts) < 4:
+            raise SceneError(f"{where}: a block needs at least 4 vertices, got {len(verts)}")
+        try:
+            face_tuple = tuple(tuple(int(i) for i in f) for f in faces)
+        except (TypeError, ValueError):
+            raise SceneError(f"{where}: faces must be lists of vertex indices") from None
+        if len(face_tuple) < 4:
+            raise SceneError(f"{where}: a closed block needs at least 4 faces, got {len(face_tuple)}")
+        for f in face_tuple:
+            if len(f) < 3 or min(f) < 0 or max(f) >= len(verts):
+                raise SceneError(f"{where}: face {list(f)} is not a polygon of existing vertices")
+        pos = finite_array(position, (3,), f"{where}: position")
+        quat = finite_array(orientation, (4,), f"{where}: orientation")
+        norm = float(np.linalg.norm(quat))
+        if abs(norm - 1.0) > 1e-3:
+            raise SceneError(f"{where}: orientation quaternion (x, y, z, w) must have unit norm, has {norm:.6g}")
+        density, mass = float(density or 0.0), float(mass or 0.0)
+        if not (math.isfinite(density) and math.isfinite(mass)) or density < 0 or mass < 0:
+            raise SceneError(f"{where}: density and mass must be finite and non-negative")
+        if (density > 0) == (mass > 0):
+            raise SceneError(f"{where}: give exactly one of a positive density (kg/m^3) or mass (kg)")
+        return Block(name, verts, face_tuple, pos, quat / norm, density, mass, bool(support))
 
 
-def _finite_array(value, shape, what: str) -> np.ndarray:
+def finite_array(value, shape, what: str) -> np.ndarray:
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
@@ -215,9 +235,10 @@ def _finite_array(value, shape, what: str) -> np.ndarray:
     return arr
 
 
-def make_scene(name: str, blocks, gravity=DEFAULT_GRAVITY, sequence=(), holds=()) -> Scene:
+def make_scene(name: str, blocks, gravity=DEFAULT_GRAVITY, sequence=(), holds=(),
+               pose_uncertainty=None) -> Scene:
     """A validated scene: unique ids, a support, a sequence of existing free blocks, holds of
-    existing blocks within the steps."""
+    existing blocks within the steps, a pose uncertainty of two numbers >= 0 (or None)."""
     blocks = tuple(blocks)
     if not blocks:
         raise SceneError("the scene has no blocks")
@@ -229,7 +250,7 @@ def make_scene(name: str, blocks, gravity=DEFAULT_GRAVITY, sequence=(), holds=()
         seen.add(i)
     if not any(b.support for b in blocks):
         raise SceneError("the scene has no support block: nothing can carry the load")
-    g = _finite_array(gravity, (3,), "gravity")
+    g = finite_array(gravity, (3,), "gravity")
     if not np.any(g):
         g = np.array(DEFAULT_GRAVITY)
     seq = tuple(str(s) for s in sequence)
@@ -244,7 +265,21 @@ def make_scene(name: str, blocks, gravity=DEFAULT_GRAVITY, sequence=(), holds=()
             raise SceneError(f"sequence names block {s!r} twice")
         seq_seen.add(s)
     steps = len(seq) or sum(not b.support for b in blocks)
-    return Scene(str(name), blocks, g, seq, _check_holds(holds, seen, steps))
+    return Scene(str(name), blocks, g, seq, _check_holds(holds, seen, steps),
+                 _check_uncertainty(pose_uncertainty))
+
+
+def _check_uncertainty(value) -> tuple[float, float] | None:
+    """A declared pose uncertainty: [position m] or [position m, angle deg], finite, >= 0."""
+    if value is None:
+        return None
+    what = '"pose_uncertainty" must be [position m, angle deg]'
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or not 1 <= len(value) <= 2:
+        raise SceneError(f"{what}, got {value!r}")
+    arr = finite_array(list(value) + [0.0] * (2 - len(value)), (2,), what.split(" must")[0])
+    if np.any(arr < 0):
+        raise SceneError(f"{what}, both >= 0, got {list(value)}")
+    return float(arr[0]), float(arr[1])
 
 
 def _check_holds(holds, ids: set[str], steps: int) -> tuple[Hold, ...]:
@@ -273,100 +308,3 @@ def _check_holds(holds, ids: set[str], steps: int) -> tuple[Hold, ...]:
 
 def _is_int(x) -> bool:
     return isinstance(x, (int, np.integer)) and not isinstance(x, bool)
-
-
-def scene_from_dict(data: dict, base_dir: Path | None = None) -> Scene:
-    """Build a scene from the JSON scene format documented in the README."""
-    if not isinstance(data, dict):
-        raise SceneError("a scene must be a JSON object")
-    raw_blocks = data.get("blocks")
-    if not isinstance(raw_blocks, list):
-        raise SceneError('a scene needs a "blocks" list')
-    blocks = [_block_from_dict(i, b, base_dir) for i, b in enumerate(raw_blocks)]
-    seq = data.get("sequence") or ()
-    if not isinstance(seq, (list, tuple)):
-        raise SceneError('"sequence" must be a list of block ids')
-    holds = data.get("holds") or ()
-    if not isinstance(holds, (list, tuple)):
-        raise SceneError('"holds" must be a list of {"block", "from_step", "until_step"}')
-    return make_scene(data.get("name", "scene"), blocks, data.get("gravity", DEFAULT_GRAVITY), seq,
-                      [_hold_from_dict(i, h) for i, h in enumerate(holds)])
-
-
-def _hold_from_dict(index: int, raw) -> Hold:
-    if not isinstance(raw, dict) or "block" not in raw:
-        raise SceneError(f'hold #{index} must be an object with a "block"')
-    unknown = set(raw) - {"block", "from_step", "until_step"}
-    if unknown:
-        raise SceneError(f"hold #{index}: unknown keys {sorted(unknown)}")
-    return Hold(str(raw["block"]), raw.get("from_step", 0), raw.get("until_step"))
-
-
-def _block_from_dict(index: int, raw, base_dir: Path | None) -> Block:
-    if not isinstance(raw, dict):
-        raise SceneError(f"block #{index} must be a JSON object")
-    if "id" not in raw:
-        raise SceneError(f'block #{index} has no "id"')
-    bid = str(raw["id"])
-    shapes = [k for k in ("box", "mesh", "mesh_file") if k in raw]
-    if len(shapes) != 1:
-        raise SceneError(f'block {bid!r}: give exactly one shape: "box", "mesh" or "mesh_file"')
-    if "box" in raw:
-        size = _finite_array(raw["box"], (3,), f"block {bid!r}: box")
-        if np.any(size <= 0):
-            raise SceneError(f"block {bid!r}: box edge lengths must be positive")
-        vertices, faces = box_vertices(size), BOX_FACES
-    elif "mesh" in raw:
-        mesh = raw["mesh"]
-        if not isinstance(mesh, dict) or "vertices" not in mesh or "faces" not in mesh:
-            raise SceneError(f'block {bid!r}: "mesh" needs "vertices" and "faces"')
-        vertices, faces = mesh["vertices"], mesh["faces"]
-    else:
-        vertices, faces = _load_mesh_file(bid, raw["mesh_file"], base_dir)
-    return make_block(bid, vertices, faces, raw.get("position", (0, 0, 0)),
-                      raw.get("orientation", (0, 0, 0, 1)), density=raw.get("density", 0.0),
-                      mass=raw.get("mass", 0.0), support=bool(raw.get("support", False)))
-
-
-def _load_mesh_file(bid: str, rel: str, base_dir: Path | None):
-    import trimesh  # deferred: only mesh files need it at load time
-
-    path = (base_dir or Path.cwd()) / str(rel)
-    try:
-        mesh = trimesh.load(path, force="mesh", process=True)
-    except Exception as exc:  # trimesh raises many types for unreadable files
-        raise SceneError(f"block {bid!r}: cannot read mesh file {str(path)!r}: {exc}") from None
-    return np.asarray(mesh.vertices), [list(f) for f in mesh.faces]
-
-
-def load_scene(path) -> Scene:
-    """Read a scene JSON file (raises :class:`SceneError` for any problem)."""
-    path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise SceneError(f"cannot read scene {str(path)!r}: {exc.strerror}") from None
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise SceneError(f"{path.name}: invalid JSON at line {exc.lineno}: {exc.msg}") from None
-    return scene_from_dict(data, path.parent)
-
-
-def scene_to_dict(scene: Scene) -> dict:
-    """The JSON scene format of ``scene`` (meshes written inline)."""
-    blocks = []
-    for b in scene.blocks:
-        d = {"id": b.id, "support": b.support,
-             "mesh": {"vertices": b.vertices.tolist(), "faces": [list(f) for f in b.faces]},
-             "position": b.position.tolist(), "orientation": b.orientation.tolist()}
-        d["density" if b.density > 0 else "mass"] = b.density if b.density > 0 else b.mass
-        blocks.append(d)
-    out = {"name": scene.name, "gravity": scene.gravity.tolist(), "blocks": blocks}
-    if scene.sequence:
-        out["sequence"] = list(scene.sequence)
-    if scene.holds:
-        out["holds"] = [{"block": h.block, "from_step": h.from_step,
-                         **({} if h.until_step is None else {"until_step": h.until_step})}
-                        for h in scene.holds]
-    return out

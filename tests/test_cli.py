@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from rbe_ros.bag import read_bag
+from rbe_ros.io.bag import read_bag
 from rbe_ros.cli import main
 
 EXAMPLE = Path(__file__).parents[1] / "examples" / "build_sequence.json"
@@ -48,11 +48,20 @@ def test_check_records_a_bag_that_reads_back(tmp_path, capsys):
     bag = tmp_path / "run"
     assert main(["check", str(EXAMPLE), "--sequence", "--bag", str(bag)]) == 0
     messages = list(read_bag(bag))
-    assert [m.topic for m in messages] == ["/rbe_node/assembly"] + ["/rbe_node/report"] * 6
+    assert [m.topic for m in messages] == ["/rbe_node/assembly"] + [
+        "/rbe_node/report", "/rbe_node/markers"] * 6
     assert len(messages[0].data["blocks"]) == 7
-    assert messages[-1].data["status"] == 1 and messages[-1].data["block_placed"] == "cap"
+    assert messages[-2].data["status"] == 1 and messages[-2].data["block_placed"] == "cap"
+    # a step a second after the state, the markers at their report's time
+    assert [m.stamp_ns - messages[0].stamp_ns for m in messages[1:]] == [
+        k * 10**9 for k in range(1, 7) for _ in range(2)]
+    assert [m["text"] for m in messages[-1].data["markers"] if m["ns"] == "blocks"] == [
+        "ground", "pillar_left", "pillar_right", "lintel", "block_left", "wedge", "cap"]
     assert main(["check", str(EXAMPLE), "--bag", str(bag)]) == 2      # exists: refuses
     assert "exists" in capsys.readouterr().err
+    lean = tmp_path / "lean"
+    assert main(["check", str(EXAMPLE), "--sequence", "--bag", str(lean), "--no-markers"]) == 0
+    assert {m.topic for m in read_bag(lean)} == {"/rbe_node/assembly", "/rbe_node/report"}
 
 
 def test_tilt_and_min_friction_json(tmp_path, capsys):
@@ -110,7 +119,8 @@ def test_unreadable_and_invalid_files(tmp_path, capsys):
 def test_contact_options_from_the_command_line(tmp_path, capsys):
     """A box 5 mm above the slab (0.5% of its size): floating at the default distance
     tolerance, resting on the slab with --distance-tol 0.01; a negative tolerance is refused."""
-    from rbe_ros.scene import box_block, make_scene, scene_to_dict
+    from rbe_ros.scene import box_block, make_scene
+    from rbe_ros.io.scene_json import scene_to_dict
     scene = make_scene("gap", [box_block("ground", (4, 4, 0.2), (0, 0, -0.1), support=True,
                                          density=2000),
                                box_block("box", (1, 1, 1), (0, 0, 0.505), density=2000)])

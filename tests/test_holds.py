@@ -10,12 +10,16 @@ import pytest
 
 from rbe_ros import generators
 from rbe_ros.analysis.assembly import Assembly
-from rbe_ros.analysis.check import CheckOptions, HoldSearch, check, check_scene
+from rbe_ros.analysis.options import CheckOptions, HoldSearch
+from rbe_ros.analysis.verdict import check
+from rbe_ros.analysis.pipeline import check_scene
 from rbe_ros.analysis.holds import minimal_holds
-from rbe_ros.analysis.sequence import check_sequence, final_state, sequence_steps
+from rbe_ros.analysis.pipeline import check_sequence
+from rbe_ros.analysis.steps import final_state, sequence_steps
 from rbe_ros.cli import main
 from rbe_ros.rbe.result import Status
-from rbe_ros.scene import Hold, SceneError, make_scene, scene_from_dict, scene_to_dict
+from rbe_ros.scene import Hold, SceneError, make_scene
+from rbe_ros.io.scene_json import scene_from_dict, scene_to_dict
 
 WEIGHT = 2000.0 * 0.5 * 9.81          # a 1 x 1 x 0.5 m box of the stack generator
 

@@ -10,8 +10,9 @@ import pytest
 
 from helpers import equilibrium_residual
 from rbe_ros import generators as gen
-from rbe_ros.analysis.check import CheckOptions, HoldSearch
-from rbe_ros.analysis.sequence import check_sequence, sequence_steps
+from rbe_ros.analysis.options import CheckOptions, HoldSearch
+from rbe_ros.analysis.pipeline import check_sequence
+from rbe_ros.analysis.steps import sequence_steps
 from rbe_ros.scene import make_scene
 
 #: The paper's dome with 7 courses instead of 10 (84 free blocks): built block by block, its

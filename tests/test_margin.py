@@ -11,12 +11,14 @@ from scipy.spatial.transform import Rotation
 
 from rbe_ros import generators as gen
 from rbe_ros.analysis.assembly import Assembly
-from rbe_ros.analysis.check import CheckOptions, check_scene
+from rbe_ros.analysis.options import CheckOptions
+from rbe_ros.analysis.pipeline import check_scene
 from rbe_ros.analysis.margin import horizontal_directions, stability_margin
 from rbe_ros.cli import main
-from rbe_ros.messages import header_dict, report_from_dict, report_to_dict
+from rbe_ros.io.messages import header_dict, report_from_dict, report_to_dict
 from rbe_ros.rbe.solver import SolveOptions
-from rbe_ros.scene import box_block, load_scene, make_scene
+from rbe_ros.io.scene_json import load_scene
+from rbe_ros.scene import box_block, make_scene
 
 REL = 5e-3      # the bar: within 0.5%
 ANGLES = 2 * np.pi * np.arange(8) / 8

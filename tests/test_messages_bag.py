@@ -1,4 +1,4 @@
-"""Message dicts (rbe_ros.messages) and rosbag2 MCAP bags (rbe_ros.bag), without ROS."""
+"""Message dicts (rbe_ros.io.messages) and rosbag2 MCAP bags (rbe_ros.io.bag), without ROS."""
 from __future__ import annotations
 
 import math
@@ -18,7 +18,7 @@ from rosbags.highlevel import AnyReader
 from rosbags.interfaces import Nodetype
 from ruamel.yaml import YAML
 
-from rbe_ros import bag, cdr, messages
+from rbe_ros.io import bag, cdr, messages
 from rbe_ros.rbe.result import InterfaceResult, Report, Status
 from rbe_ros.scene import SceneError, box_block, box_vertices, make_block, make_scene
 
@@ -253,7 +253,7 @@ def test_killed_recording_is_recoverable(tmp_path):
     path = tmp_path / "killed"
     script = textwrap.dedent(f"""
         import sys, time
-        from rbe_ros import bag, messages
+        from rbe_ros.io import bag, messages
         w = bag.BagWriter({str(path)!r})
         w.add_topic("/rbe/report", "rbe_msgs/msg/StabilityReport")
         for i in range(5):
@@ -304,7 +304,7 @@ def test_holds_and_hold_report_fields_round_trip():
     assert bag.to_dict(store, "rbe_msgs/msg/AssemblyState", obj)["holds"] == d["holds"]
 
 
-# --- CDR (rbe_ros.cdr) ------------------------------------------------------------------------
+# --- CDR (rbe_ros.io.cdr) ------------------------------------------------------------------------
 
 REPORT = "rbe_msgs/msg/StabilityReport"
 _NUMPY = {"bool": np.bool_, "byte": np.uint8, "char": np.uint8, "int8": np.int8,

@@ -8,11 +8,14 @@ import pytest
 
 from rbe_ros import generators
 from rbe_ros.analysis.assembly import Assembly
-from rbe_ros.analysis.check import CheckOptions, HoldSearch, check
+from rbe_ros.analysis.options import CheckOptions, HoldSearch
+from rbe_ros.analysis.verdict import check
 from rbe_ros.analysis.planning import plan_sequence
-from rbe_ros.analysis.sequence import check_sequence, sequence_steps
+from rbe_ros.analysis.pipeline import check_sequence
+from rbe_ros.analysis.steps import sequence_steps
 from rbe_ros.cli import main
-from rbe_ros.scene import make_scene, scene_to_dict
+from rbe_ros.scene import make_scene
+from rbe_ros.io.scene_json import scene_to_dict
 
 
 def recheck(plan, original, max_held):

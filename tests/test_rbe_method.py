@@ -6,7 +6,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from rbe_ros.analysis.assembly import Assembly
-from rbe_ros.analysis.check import CheckOptions
+from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.analysis.friction import minimum_friction
 from rbe_ros.analysis.tilt import tilt_capacity
 from rbe_ros.geometry.kern import kern

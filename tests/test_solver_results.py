@@ -207,7 +207,7 @@ def test_an_ill_conditioned_glued_stack_is_solved_with_a_lower_penalty():
     """A random stack of the long property run: friction+ with the 1e6 tension penalty stops
     short of equilibrium with every setting (AlmostSolved, NumericalError); 100x lower, it
     is solved."""
-    from rbe_ros.analysis.check import check_scene
+    from rbe_ros.analysis.pipeline import check_scene
     from rbe_ros.rbe.result import Status
     from rbe_ros.scene import box_block, make_scene
     from scipy.spatial.transform import Rotation

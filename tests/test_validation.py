@@ -10,15 +10,17 @@ from scipy.spatial.transform import Rotation
 
 from rbe_ros import generators as gen
 from rbe_ros.analysis.assembly import Assembly
-from rbe_ros.analysis.check import CheckOptions, check_scene
-from rbe_ros.analysis.sequence import check_sequence
+from rbe_ros.analysis.options import CheckOptions
+from rbe_ros.analysis.pipeline import check_scene
+from rbe_ros.analysis.pipeline import check_sequence
 from rbe_ros.analysis.validate import validated_assembly
 from rbe_ros.cli import main
 from rbe_ros.geometry.overlap import find_penetration
 from rbe_ros.rbe.result import Status
 from rbe_ros.rbe.solver import SolveOptions
-from rbe_ros.scene import (SceneError, ValidationLimits, box_block, load_scene, make_block,
-                           make_scene, scene_from_dict, validate_scene)
+from rbe_ros.scene import (SceneError, ValidationLimits, box_block, make_block, make_scene,
+                           validate_scene)
+from rbe_ros.io.scene_json import load_scene, scene_from_dict
 
 from helpers import DENSITY, stacked_boxes
 

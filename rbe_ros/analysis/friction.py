@@ -7,7 +7,8 @@ from dataclasses import replace
 
 from ..rbe.model import build_model
 from .assembly import Assembly
-from .check import CheckOptions, stands
+from .options import CheckOptions
+from .verdict import feasible_without_tension
 
 MU_MAX = 100.0
 
@@ -18,7 +19,8 @@ def minimum_friction(assembly: Assembly, options: CheckOptions = CheckOptions(),
     model = build_model(assembly.blocks, assembly.interfaces, assembly.gravity)
 
     def stands_with(mu: float) -> bool:
-        return stands(model, replace(options, solve=replace(options.solve, mu=mu)))
+        with_mu = replace(options, solve=replace(options.solve, mu=mu))
+        return feasible_without_tension(model, with_mu)
 
     if not stands_with(math.inf):
         return math.inf

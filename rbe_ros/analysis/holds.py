@@ -6,7 +6,7 @@ between free blocks; supports and held blocks separate them. The equilibrium pro
 separable by component (the objective and the constraints of one component do not involve
 the others), so the assembly stands exactly when every component, with the supports it
 touches, stands. :class:`StabilityOracle` checks components with the plain checker
-(:func:`rbe_ros.analysis.check.check`) and caches each verdict by (free blocks, supports
+(:func:`rbe_ros.analysis.verdict.check`) and caches each verdict by (free blocks, supports
 touched), so a hold that splits one component does not re-solve the others.
 
 Exact search (:func:`minimal_holds`): iterative deepening on the number of held blocks with
@@ -34,12 +34,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..rbe.model import build_model
 from ..rbe.result import Report, Status
-from ..rbe.resultants import interface_results
-from ..rbe.solver import solve
 from .assembly import Assembly
-from .check import CheckOptions, HoldSearch, check
+from .graph import ContactGraph
+from .options import CheckOptions, HoldSearch
+from .verdict import check, is_stable
 
 #: Reports whose verdict a hold can change (not solver failures or bad input).
 HOLDABLE = (Status.TENSION_REQUIRED, Status.FRICTION_EXCEEDED, Status.INFEASIBLE)
@@ -71,41 +70,19 @@ class StabilityOracle:
                  cache: dict | None = None):
         self.assembly = assembly
         self.options = options
-        n = len(assembly.blocks)
-        self.ids = [b.id for b in assembly.blocks]
+        self.graph = ContactGraph(assembly)
+        self.ids = self.graph.ids
         self.index = {bid: k for k, bid in enumerate(self.ids)}
-        self.support = np.array([b.support for b in assembly.blocks], dtype=bool)
-        self.adjacent: list[set[int]] = [set() for _ in range(n)]
-        for it in assembly.interfaces:
-            self.adjacent[it.a].add(it.b)
-            self.adjacent[it.b].add(it.a)
+        self.support = self.graph.support
         self.height = np.array([-(b.centroid @ assembly.gravity) for b in assembly.blocks]) \
-            if n else np.zeros(0)
-        self.free = [k for k in range(n) if not self.support[k]]
+            if assembly.blocks else np.zeros(0)
         self.checks = 0
         self._shared = {} if cache is None else cache   # (free ids, touched ids) -> verdict
         self._cache: dict[tuple[frozenset, frozenset], Report] = {}
 
     def components(self, held) -> list[tuple[frozenset, frozenset]]:
         """(free blocks, supports and held blocks they touch) of each component, by index."""
-        held = set(held)
-        seen: set[int] = set()
-        out = []
-        for k in self.free:
-            if k in held or k in seen:
-                continue
-            comp, touched, stack = {k}, set(), [k]
-            while stack:
-                j = stack.pop()
-                for m in self.adjacent[j]:
-                    if self.support[m] or m in held:
-                        touched.add(m)
-                    elif m not in comp:
-                        comp.add(m)
-                        stack.append(m)
-            seen |= comp
-            out.append((frozenset(comp), frozenset(touched)))
-        return out
+        return self.graph.components(held)
 
     def _sub(self, component) -> Assembly:
         free, touched = component
@@ -122,7 +99,7 @@ class StabilityOracle:
         key = self._key(component)
         found = self._shared.get(key)
         if found is None:
-            found = _stands(self._sub(component), self.options)
+            found = is_stable(self._sub(component), self.options)
             self._shared[key] = found
             self.checks += 1
         return found
@@ -235,24 +212,17 @@ def _greedy(oracle: StabilityOracle, preferred, width: int) -> frozenset:
             if best_score is None or score < best_score:
                 best, best_score = k, score
         held.append(best)
-    for k in list(held):          # release what is not needed, earliest hold first
+    return frozenset(release_unneeded(oracle, held))
+
+
+def release_unneeded(oracle: StabilityOracle, held: list[int]) -> list[int]:
+    """``held`` without every hold whose release keeps the assembly standing, tried earliest
+    hold first: minimal by inclusion."""
+    for k in list(held):
         trial = [j for j in held if j != k]
         if oracle.stands(trial):
             held = trial
-    return frozenset(held)
-
-
-def _stands(assembly: Assembly, options: CheckOptions) -> bool:
-    """The verdict of :func:`check` (stable or not) without the explanation solves."""
-    if assembly.floating_blocks():
-        return False
-    model = build_model(assembly.blocks, assembly.interfaces, assembly.gravity)
-    solution = solve(model, options.solve)
-    if not solution.solved:
-        return False
-    return not any(r.tension or r.friction_exceeded for r in interface_results(
-        model, solution, mu_threshold=options.threshold, tension_tol=options.tension_tol,
-        mu=options.solve.mu))
+    return held
 
 
 def annotate_holds(report: Report, assembly: Assembly, held, options: CheckOptions) -> Report:
@@ -270,4 +240,4 @@ def annotate_holds(report: Report, assembly: Assembly, held, options: CheckOptio
     return report
 
 
-__all__ = ["HoldResult", "StabilityOracle", "annotate_holds", "minimal_holds"]
+__all__ = ["HoldResult", "StabilityOracle", "annotate_holds", "minimal_holds", "release_unneeded"]

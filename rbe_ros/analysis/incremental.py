@@ -25,7 +25,6 @@ region only.
 from __future__ import annotations
 
 import time
-from collections import deque
 from dataclasses import replace
 
 import numpy as np
@@ -33,10 +32,10 @@ import numpy as np
 from ..geometry.polygon import cross
 from ..rbe.model import build_model
 from ..rbe.result import InterfaceResult, Report, Status
-from ..rbe.resultants import interface_results
-from ..rbe.solver import solve
 from .assembly import Assembly
-from .check import CheckOptions, check, infeasible_report
+from .graph import ContactGraph
+from .options import CheckOptions
+from .verdict import check, infeasible_report, stable_forces
 
 #: Local regions larger than this share of the free blocks joined to the new ones (their
 #: component) go to the component's full problem: every failed local attempt costs two
@@ -90,7 +89,7 @@ class StepChecker:
         self._supports = frozenset(b.id for b in assembly.blocks if b.support)
 
     def _local(self, assembly: Assembly) -> Report | None:
-        graph = _Graph(assembly)
+        graph = ContactGraph(assembly)
         new = [k for k, b in enumerate(assembly.blocks) if b.id not in self._present]
         if not new:
             return None
@@ -101,7 +100,7 @@ class StepChecker:
             report = self._component(assembly, graph, component)
         return report
 
-    def _region(self, assembly: Assembly, graph: "_Graph", new: list[int],
+    def _region(self, assembly: Assembly, graph: ContactGraph, new: list[int],
                 component: set[int]) -> Report | None:
         """The report of the first region around ``new`` that settles the step, up to
         MAX_LOCAL_SHARE of ``component`` (the free blocks joined to the new ones)."""
@@ -124,7 +123,7 @@ class StepChecker:
             region = region | graph.free_neighbours(region)
         return None
 
-    def _restricted(self, assembly: Assembly, graph: "_Graph", region: set[int]) -> Report | None:
+    def _restricted(self, assembly: Assembly, graph: ContactGraph, region: set[int]) -> Report | None:
         """Stable report if R alone, loaded by the kept forces on its boundary, stands."""
         ids = {assembly.blocks[k].id for k in region | graph.support_neighbours(region)}
         local = assembly.subset(ids)
@@ -143,18 +142,15 @@ class StepChecker:
             wrench[:3] += forces.sum(axis=0)
             wrench[3:] += cross(kept.polygon - assembly.blocks[j].centroid, forces).sum(axis=0)
         model = build_model(local.blocks, local.interfaces, local.gravity)
-        solution = solve(model, self.options.solve, load=model.dead_load + model.wrench_load(wrenches))
-        if not solution.solved:
+        found = stable_forces(model, self.options, model.dead_load + model.wrench_load(wrenches))
+        if found is None:
             return None
-        results = interface_results(model, solution, mu_threshold=self.options.threshold,
-                                    tension_tol=self.options.tension_tol, mu=self.options.solve.mu)
-        if any(r.tension or r.friction_exceeded for r in results):
-            return None
+        solution, results = found
         return self._kept_elsewhere(assembly, local, results, len(region),
                                     max(float(solution.forces[1].max(initial=0.0)), 0.0),
                                     f"{_blocks(len(region))} around the new one re-solved")
 
-    def _component(self, assembly: Assembly, graph: "_Graph", component: set[int]) -> Report | None:
+    def _component(self, assembly: Assembly, graph: ContactGraph, component: set[int]) -> Report | None:
         """The exact verdict from the components holding the new blocks, solved in full; no
         contact joins them to the other components, whose kept forces stay admissible. None
         if the solver failed (the full problem is tried then)."""
@@ -187,7 +183,7 @@ class StepChecker:
                       f" (mu {self.options.solve.mu:.3g})",
                       max_tension, worst, interfaces=merged, model=f"local {size}")
 
-    def _relaxed(self, assembly: Assembly, graph: "_Graph", region: set[int]) -> Report | None:
+    def _relaxed(self, assembly: Assembly, graph: ContactGraph, region: set[int]) -> Report | None:
         """Unstable report if R cannot stand even with every neighbour rigid."""
         rigid = graph.neighbours(region)
         ids = {assembly.blocks[k].id for k in region | rigid}
@@ -201,55 +197,3 @@ class StepChecker:
 
 def _blocks(n: int) -> str:
     return f"{n} block" if n == 1 else f"{n} blocks"
-
-
-class _Graph:
-    """Contacts of an assembly as adjacency sets (block indices)."""
-
-    def __init__(self, assembly: Assembly):
-        self.blocks = assembly.blocks
-        self.adjacent: list[set[int]] = [set() for _ in assembly.blocks]
-        for it in assembly.interfaces:
-            self.adjacent[it.a].add(it.b)
-            self.adjacent[it.b].add(it.a)
-        self.free = [k for k, b in enumerate(assembly.blocks) if not b.support]
-
-    def neighbours(self, region) -> set[int]:
-        return {n for k in region for n in self.adjacent[k]} - set(region)
-
-    def free_neighbours(self, region) -> set[int]:
-        return {n for n in self.neighbours(region) if not self.blocks[n].support}
-
-    def support_neighbours(self, region) -> set[int]:
-        return {n for n in self.neighbours(region) if self.blocks[n].support}
-
-    def component(self, start) -> set[int]:
-        """The free blocks of ``start`` and those joined to them by chains of contacts
-        between free blocks."""
-        found = {k for k in start if not self.blocks[k].support}
-        stack = list(found)
-        while stack:
-            for n in self.adjacent[stack.pop()]:
-                if n not in found and not self.blocks[n].support:
-                    found.add(n)
-                    stack.append(n)
-        return found
-
-    def path_to_support(self, start) -> set[int]:
-        """Free blocks on a shortest chain of contacts from ``start`` to a support."""
-        parent = {k: None for k in start}
-        queue = deque(start)
-        while queue:
-            k = queue.popleft()
-            for n in sorted(self.adjacent[k]):
-                if n in parent:
-                    continue
-                parent[n] = k
-                if self.blocks[n].support:
-                    path, node = set(), k
-                    while node is not None:
-                        path.add(node)
-                        node = parent[node]
-                    return path
-                queue.append(n)
-        return set()

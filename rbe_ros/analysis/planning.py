@@ -34,9 +34,10 @@ import numpy as np
 from ..rbe.result import Report
 from ..scene import Hold, Scene, SceneError, make_scene
 from .assembly import Assembly
-from .check import CheckOptions
-from .holds import StabilityOracle, minimal_holds
-from .sequence import check_sequence
+from .holds import StabilityOracle, minimal_holds, release_unneeded
+from .options import CheckOptions
+from .pipeline import check_sequence
+from .steps import supports_present
 
 #: A contact carries a block when its normal into the block points up by at least this
 #: cosine (87 deg from vertical).
@@ -110,10 +111,7 @@ class _Planner:
 
     def present(self, order, k: int) -> tuple[str, ...]:
         """The supports present at step ``k`` (those with holds while active) and ``order``."""
-        active = {h.block for h in self.base.holds if h.active(k)}
-        timed = {h.block for h in self.base.holds}
-        return tuple([b.id for b in self.base.blocks
-                      if b.support and (b.id not in timed or b.id in active)] + list(order))
+        return supports_present(self.base, k) + tuple(order)
 
     def candidates(self, order: tuple[str, ...]) -> list[str]:
         k = len(order)
@@ -161,10 +159,7 @@ class _Planner:
             named = [oracle.index[b] for b in report.unstable_blocks
                      if b in oracle.index and oracle.index[b] in comp]
             held.append(sorted(named or comp, key=lambda j: (-oracle.height[j], j))[0])
-        for j in list(held):
-            trial = [i for i in held if i != j]
-            if oracle.stands(trial):
-                held = trial
+        held = release_unneeded(oracle, held)
         return tuple(oracle.ids[j] for j in sorted(held))
 
     def run(self) -> Plan:

@@ -19,7 +19,8 @@ import numpy as np
 from ..rbe.model import build_model
 from ..rbe.solver import solve
 from .assembly import Assembly
-from .check import CheckOptions, stands
+from .options import CheckOptions
+from .verdict import feasible_without_tension
 
 DIRECTIONS = {"x": (1, 0, 0), "-x": (-1, 0, 0), "y": (0, 1, 0), "-y": (0, -1, 0)}
 
@@ -61,7 +62,8 @@ def tilt_capacity(assembly: Assembly, options: CheckOptions = CheckOptions(),
         nonlocal trials
         trials += 1
         a = math.radians(alpha_deg)
-        return stands(model, options, model.load(magnitude * (math.cos(a) * down + math.sin(a) * h)))
+        load = model.load(magnitude * (math.cos(a) * down + math.sin(a) * h))
+        return feasible_without_tension(model, options, load)
 
     lo, hi = 0.0, 90.0
     if not stands_at(lo):

@@ -40,6 +40,17 @@ class InterfaceResult:
     friction_exceeded: bool
 
 
+@dataclass(frozen=True)
+class NearContact:
+    """A face pair just beyond the contact tolerance: not an interface, but a contact if the
+    poses were a little off (see rbe_ros.geometry.uncertainty)."""
+
+    block_a: str
+    block_b: str
+    gap: float              # m, between the faces (negative: they overlap)
+    overlap_area: float     # m^2, of the two faces projected on their mid-plane
+
+
 @dataclass
 class Report:
     """Verdict of one check of an assembly or of one step of a sequence."""
@@ -59,6 +70,8 @@ class Report:
     held_blocks: list[str] = field(default_factory=list)      # free blocks held as supports
     suggested_holds: list[str] = field(default_factory=list)  # smallest set to hold, if unstable
     dropped_states: int = 0   # node: states on ~/assembly dropped unchecked so far (overload)
+    near_contacts: list[NearContact] = field(default_factory=list)
+    verdict_sensitive: bool = False     # the verdict depends on the contact tolerance
     #: Smallest horizontal acceleration (share of g) that topples or slides the checked
     #: assembly over the margin's directions, 0 when it does not stand; NaN: not computed.
     margin_g: float = math.nan

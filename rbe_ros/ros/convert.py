@@ -1,6 +1,6 @@
 """rclpy messages <-> message dicts, and the node's conversion of states to scenes.
 
-A *message dict* (see :mod:`rbe_ros.messages`, the one place that knows the rbe_msgs layout)
+A *message dict* (see :mod:`rbe_ros.io.messages`, the one place that knows the rbe_msgs layout)
 is a nested dict/list shaped like the message. The generic converters below work for any
 generated rclpy message type by walking its ``SLOT_TYPES`` (the rosidl type descriptions that
 every generated class carries), like ``rosidl_runtime_py.message_to_ordereddict`` and
@@ -11,10 +11,10 @@ The walk is planned once per message class (per field a getter, a converter and 
 cached) rather than decided per value. Bulk data may be given as numpy arrays: a sequence of
 messages whose fields are all floats (``geometry_msgs/Point``, ``Vector3``, ``Quaternion``,
 ``std_msgs/ColorRGBA``) as an ``(n, k)`` array of their field values in field order
-(``rbe_ros.messages.report_to_dict(..., arrays=True)`` gives that form), and a
+(``rbe_ros.io.messages.report_to_dict(..., arrays=True)`` gives that form), and a
 ``float64[]``/``float32[]`` sequence as a 1-D array, handed to the setter as the
 ``array.array`` rclpy stores anyway. (The node's reports do not come this way: they are
-encoded to CDR directly, :mod:`rbe_ros.cdr`.)
+encoded to CDR directly, :mod:`rbe_ros.io.cdr`.)
 """
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ import numpy as np
 from rosidl_parser.definition import (AbstractGenericString, AbstractNestedType,
                                       AbstractSequence, BasicType, NamespacedType)
 
-from ..messages import scene_from_state_dict
+from ..io.messages import scene_from_state_dict
 from ..scene import Scene, SceneError, ValidationLimits, check_block_count
 
 _FLOATS = {"float", "double", "long double"}
@@ -265,7 +265,7 @@ def scene_from_msg(msg, *, sequence: bool = True, limits: ValidationLimits | Non
             if vertices > limits.max_vertices or triangles > 2 * limits.max_vertices:
                 raise SceneError(f"block {block.id!r}: mesh of {vertices} vertices and "
                                  f"{triangles} triangles, more than the limit of "
-                                 f"{limits.max_vertices} vertices")
+                                 f"{limits.max_vertices} vertices", [block.id])
     values = message_to_dict(msg)
     if not sequence:
         values["sequence"] = []

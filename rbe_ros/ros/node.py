@@ -39,7 +39,6 @@ import time
 from pathlib import Path
 
 import rclpy
-from builtin_interfaces.msg import Time
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType, SetParametersResult)
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
@@ -51,28 +50,36 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.serialization import deserialize_message, serialize_message
 from rclpy.signals import SignalHandlerOptions
 from rbe_msgs.action import CheckSequence
-from rbe_msgs.msg import AssemblyState, StabilityReport
+from rbe_msgs.msg import AssemblyState, BlockPoses, StabilityReport
 from rbe_msgs.srv import CheckAssembly
 from visualization_msgs.msg import MarkerArray
 
-from .. import cdr
-from ..analysis.check import CheckOptions, HoldSearch, check_scene
 from ..analysis.margin import DEFAULT_DIRECTIONS
-from ..analysis.sequence import check_sequence, sequence_steps
-from ..bag import BagWriter, typestore
+from ..analysis.options import CheckOptions, HoldSearch
+from ..analysis.pipeline import StateCheck, check_state
 from ..geometry.contacts import ContactOptions
-from ..messages import report_to_dict
+from ..io import cdr
+from ..io.bag import BagWriter, typestore
+from ..io.inputs import load_design
+from ..io.markers import MARKER_TYPE, run_markers, step_markers
+from ..io.messages import report_header, report_to_dict, state_to_dict
+from ..io.poses import AsBuilt
+from ..io.replay import (DESIGN, OPTIONS_KEY, POSES, asbuilt_check, merge_message,
+                         options_to_json)
 from ..rbe.cones import CONES, FRICTION_MODELS
 from ..rbe.result import Report, Status
 from ..rbe.solver import OBJECTIVES, SolveOptions
 from ..scene import Scene, SceneError, ValidationLimits
-from .convert import message_to_dict, scene_from_msg
-from .markers import report_markers
+from .convert import dict_to_message, message_to_dict, scene_from_msg
 
 NODE_NAME = "rbe_node"
 
 #: Depth 1: under overload only the newest state matters (see the single-slot buffer).
 STATE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                       reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.VOLATILE)
+#: Measured poses: every update counts (the node merges each into the as-built state).
+POSES_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
                        reliability=ReliabilityPolicy.RELIABLE,
                        durability=DurabilityPolicy.VOLATILE)
 #: Reports and markers are latched: a late subscriber gets the last verdict.
@@ -90,7 +97,8 @@ RANGES = {"friction_coefficient": (0.0, 10.0, True), "friction_threshold": (0.0,
           "contact_distance_tolerance": (0.0, 1.0, False),
           "contact_angle_tolerance_deg": (0.0, 90.0, False),
           "contact_min_area": (0.0, 1.0, False), "contact_min_width": (0.0, 1.0, False),
-          "contact_vertex_tolerance": (0.0, 1.0, False)}
+          "contact_vertex_tolerance": (0.0, 1.0, False),
+          "pose_uncertainty_m": (0.0, 1.0, False), "pose_uncertainty_deg": (0.0, 90.0, False)}
 
 
 def _double(value: float, description: str, low: float, high: float) -> tuple:
@@ -134,24 +142,30 @@ PARAMETERS = {
     "tension_tolerance": _double(
         1e-5, "a vertex tension counts above this share of the free blocks' weight, in [0, 1]",
         0.0, 1.0),
+    "design_file": _string("", "design (a scene JSON or a COMPAS Assembly JSON, *.gz too) "
+                           "whose blocks ~/poses places, as if sent on ~/design at start; "
+                           "empty: none until one comes on ~/design", read_only=True),
     "mcap_path": _string("", "directory of a rosbag2 MCAP bag recording every received state "
                          "and every report; empty: no recording. An existing directory gets "
                          "a timestamp suffix", read_only=True),
     "frame_id": _string("world", "frame of reports and markers when a received state has an "
                         "empty header frame_id"),
+    "record_markers": (True, ParameterDescriptor(
+        type=ParameterType.PARAMETER_BOOL, description="with mcap_path: record the markers of "
+        "every report too (false: a lean log of states and reports)")),
     "max_blocks": _integer(ValidationLimits().max_blocks, "largest number of blocks of a state; "
                            "a larger one gets an INVALID_INPUT report", 1, 1_000_000),
     "check_time_limit": _double(0.0, "time limit in s of each solver call of a check (a check "
                                 "makes one to three); over it the report is SOLVER_FAILED "
                                 "(MaxTime). 0: no limit", 0.0, 3600.0),
-    "full_solve": (False, ParameterDescriptor(
-        type=ParameterType.PARAMETER_BOOL, description="sequences: solve every step's whole "
-        "assembly instead of local models (a report's model field says which answered)")),
     "compute_margin": (False, ParameterDescriptor(
         type=ParameterType.PARAMETER_BOOL, description="reports carry margin_g: the smallest "
         "horizontal acceleration (share of g) that topples or slides the checked assembly, over "
-        f"{DEFAULT_DIRECTIONS} directions, and margin_direction (costs about one solve per "
+        f"{DEFAULT_DIRECTIONS} directions, and margin_direction (about one solve per "
         "direction)")),
+    "full_solve": (False, ParameterDescriptor(
+        type=ParameterType.PARAMETER_BOOL, description="sequences: solve every step's whole "
+        "assembly instead of local models (a report's model field says which answered)")),
     "suggest_holds": (HoldSearch().enabled, ParameterDescriptor(
         type=ParameterType.PARAMETER_BOOL, description="an unstable report names the smallest "
         "set of blocks to hold (suggested_holds)")),
@@ -175,6 +189,14 @@ PARAMETERS = {
     "contact_vertex_tolerance": _double(
         _CONTACT.vertex_tol, "contact detection: interface vertices closer than this "
         "to their neighbours' chord are left out, relative to the size", 0.0, 1.0),
+    # as-built poses (README: Checking as-built poses); 0 and 0: design geometry
+    "pose_uncertainty_m": _double(
+        _CONTACT.pose_uncertainty_m, "as-built poses: every block's position is known to "
+        "within this many m (about 3 sigma); contacts and the interpenetration limit follow "
+        "from it. 0 (with pose_uncertainty_deg 0): design geometry", 0.0, 1.0),
+    "pose_uncertainty_deg": _double(
+        _CONTACT.pose_uncertainty_deg, "as-built poses: every block's orientation is known to "
+        "within this many degrees (about 3 sigma)", 0.0, 90.0),
 }
 
 
@@ -188,12 +210,17 @@ class RbeNode(Node):
         self._action = None
         self._bag = None
         self._bag_lock = threading.Lock()
+        self._later_topics: dict[str, tuple[str, bool]] = {}   # bag topics not added yet
         # Overload: the subscription callback only puts the state in this one slot (a newer
         # state replaces a waiting one, counted in _dropped); the worker thread checks it.
-        self._slot: bytes | None = None             # CDR of the newest unchecked state
+        # CDR of the newest unchecked state, or an as-built state: (header, scene or error)
+        self._slot: bytes | tuple | None = None
         self._slot_cond = threading.Condition()
         self._dropped = 0
         self._worker: threading.Thread | None = None
+        # the design and the poses measured so far (~/design, ~/poses): updated in the
+        # callbacks, so that no measurement is lost when its check is dropped under overload
+        self._asbuilt = AsBuilt()
 
         self.add_on_set_parameters_callback(self._validate_parameters)
         for name, (value, descriptor) in PARAMETERS.items():
@@ -206,9 +233,10 @@ class RbeNode(Node):
         self._service_group = MutuallyExclusiveCallbackGroup()
         self._action_group = ReentrantCallbackGroup()
 
-        # reports go out as CDR bytes made from their message dicts (rbe_ros.cdr): ~6x faster
+        # reports go out as CDR bytes made from their message dicts (rbe_ros.io.cdr): ~6x faster
         # than building the rclpy message (an object per Point) and serialising it
         self._encode_report = cdr.encoder(typestore(), "rbe_msgs/msg/StabilityReport")
+        self._encode_markers = cdr.encoder(typestore(), MARKER_TYPE)
         self._report_pub = self.create_publisher(StabilityReport, "~/report", LATCHED_QOS)
         self._marker_pub = self.create_publisher(MarkerArray, "~/markers", LATCHED_QOS)
         # raw: the callback gets the CDR bytes; a state is converted to a message only when
@@ -216,6 +244,13 @@ class RbeNode(Node):
         # at 100 Hz would starve the checks)
         self._state_sub = self.create_subscription(
             AssemblyState, "~/assembly", self._on_state, STATE_QOS,
+            callback_group=self._topic_group, raw=True)
+        self._design_sub = self.create_subscription(
+            AssemblyState, "~/design", self._on_design, LATCHED_QOS,
+            callback_group=self._topic_group, raw=True)
+        # deep: each update carries measurements that later checks build on
+        self._poses_sub = self.create_subscription(
+            BlockPoses, "~/poses", self._on_poses, POSES_QOS,
             callback_group=self._topic_group, raw=True)
         self._service = self.create_service(
             CheckAssembly, "~/check", self._on_check, callback_group=self._service_group)
@@ -227,9 +262,14 @@ class RbeNode(Node):
 
         self.state_topic = self._state_sub.topic_name
         self.report_topic = self._report_pub.topic_name
+        self.design_topic = self._design_sub.topic_name
+        self.poses_topic = self._poses_sub.topic_name
+        self.marker_topic = self._marker_pub.topic_name
         self._open_bag()
         self._worker = threading.Thread(target=self._work, name="rbe_state_worker", daemon=True)
         self._worker.start()
+        if self.get_parameter("design_file").value:
+            self._load_design_file(self.get_parameter("design_file").value)
         self.get_logger().info(
             f"ready: {self.state_topic} -> {self.report_topic}, service "
             f"{self._service.service_name}, mu {self.get_parameter('friction_coefficient').value}")
@@ -271,7 +311,9 @@ class RbeNode(Node):
                                 angle_tol_deg=float(value("contact_angle_tolerance_deg")),
                                 min_area=float(value("contact_min_area")),
                                 min_width=float(value("contact_min_width")),
-                                vertex_tol=float(value("contact_vertex_tolerance"))),
+                                vertex_tol=float(value("contact_vertex_tolerance")),
+                                pose_uncertainty_m=float(value("pose_uncertainty_m")),
+                                pose_uncertainty_deg=float(value("pose_uncertainty_deg"))),
                             holds=HoldSearch(enabled=bool(value("suggest_holds")),
                                              max_size=int(value("hold_search_max_size")),
                                              max_checks=int(value("hold_search_max_checks"))))
@@ -293,13 +335,15 @@ class RbeNode(Node):
             while path.exists():
                 k += 1
                 path = path.with_name(f"{stem}_{k}")
-        from ..replay import OPTIONS_KEY, options_to_json
-
         # the options at the start, so that `rbe-ros replay` re-checks the same way
         self._bag = BagWriter(path, custom_data={OPTIONS_KEY: options_to_json(self.check_options())})
         self._bag.add_topic(self.state_topic, "rbe_msgs/msg/AssemblyState")
         self._bag.add_topic(self.report_topic, "rbe_msgs/msg/StabilityReport",
                             transient_local=True)
+        self._bag.add_topic(self.marker_topic, MARKER_TYPE, transient_local=True)
+        # added with their first message: a bag of states alone has only their topics
+        self._later_topics = {self.design_topic: ("rbe_msgs/msg/AssemblyState", True),
+                              self.poses_topic: ("rbe_msgs/msg/BlockPoses", False)}
         self.bag_path = path
         self.get_logger().info(f"recording states and reports to {path}")
 
@@ -313,6 +357,9 @@ class RbeNode(Node):
             if self._bag is None:
                 return
             try:
+                if topic in self._later_topics:
+                    msgtype, latched = self._later_topics.pop(topic)
+                    self._bag.add_topic(topic, msgtype, transient_local=latched)
                 self._bag.write(topic, data, stamp)
             except Exception as exc:  # a full disk must not stop the checks
                 self.get_logger().error(f"recording to {self.bag_path} failed, stopped: {exc}")
@@ -354,25 +401,32 @@ class RbeNode(Node):
 
     # --- checks -----------------------------------------------------------------------------
 
-    def _received(self, state: AssemblyState, raw: bytes | None = None) -> dict:
-        """Record ``state`` (its CDR bytes ``raw`` if given) and return the header dict its
-        reports carry."""
-        self._record(self.state_topic, state if raw is None else raw)
-        header = message_to_dict(state.header)
-        if not header["frame_id"]:
-            header["frame_id"] = self.get_parameter("frame_id").value
-        return header
+    def _received(self, state, raw: bytes | None = None, topic: str | None = None) -> dict:
+        """Record ``state`` (its CDR bytes ``raw`` if given) on ``topic`` (default: the
+        state topic) and return the header dict its reports carry."""
+        self._record(topic or self.state_topic, state if raw is None else raw)
+        return report_header(message_to_dict(state.header), self.get_parameter("frame_id").value)
 
-    def _publish(self, scene: Scene | None, report: Report, header: dict) -> bytes:
+    def _publish(self, scene: Scene | None, report: Report, header: dict,
+                 state: AssemblyState | None = None) -> bytes:
         """Record, then publish ``report`` and its markers; returns the report's CDR bytes
         (``deserialize_message(data, StabilityReport)`` where a message is needed). Recorded
-        first, so that a report anyone received is in the bag even if the node is killed."""
+        first, so that a report anyone received is in the bag even if the node is killed.
+        ``state``: the state of a check that failed, drawn as it came (the blocks at fault
+        of invalid input highlighted)."""
         report.dropped_states = self._dropped
         data = self._encode_report(report_to_dict(report, header, arrays=True))
         self._record(self.report_topic, data)
         self._report_pub.publish(data)
-        self._marker_pub.publish(report_markers(scene, report, header["frame_id"],
-                                                Time(**header["stamp"])))
+        if state is None:
+            markers = step_markers(scene, report, header)
+        else:
+            [markers] = run_markers(self._drawable(state), [report_to_dict(report, header)],
+                                    self.check_options())
+        markers = self._encode_markers(markers)
+        if self.get_parameter("record_markers").value:
+            self._record(self.marker_topic, markers)
+        self._marker_pub.publish(markers)
         where = f" step {report.step_index} ({report.block_placed})" \
             if report.step_index >= 0 else ""
         text = f"{header['frame_id']}{where}: {report.status.name}: {report.message}"
@@ -384,28 +438,48 @@ class RbeNode(Node):
             self.get_logger().info(text)
         return data
 
-    def _error_report(self, exc: Exception) -> Report:
-        if isinstance(exc, SceneError):
-            return Report(False, Status.INVALID_INPUT, f"invalid input: {exc}")
-        self.get_logger().error(f"check failed: {type(exc).__name__}: {exc}")
-        return Report(False, Status.SOLVER_FAILED,
-                      f"check failed: {type(exc).__name__}: {exc}")
+    def _drawable(self, state: AssemblyState) -> dict:
+        """The message dict of an unchecked ``state`` to draw, if within the block limit."""
+        return message_to_dict(state) if len(state.blocks) <= self.limits().max_blocks else {}
+
+    def check(self, state: AssemblyState, header: dict, sequence: bool, *,
+              cancelled=None, on_step=None) -> tuple[StateCheck, list[bytes]]:
+        """Check ``state`` (every step, or the whole assembly: ``sequence``) through the
+        dispatch replay uses too (:func:`check_state`), publishing each report; never raises.
+        ``on_step(report, data, total)`` gets each step's report and its CDR bytes once
+        published. Returns the check and the CDR bytes of every report published."""
+        sent: list[bytes] = []
+
+        def read(with_sequence: bool) -> Scene:
+            return scene_from_msg(state, sequence=with_sequence, limits=options.limits)
+
+        def publish(report: Report, scene: Scene, total: int) -> None:
+            sent.append(self._publish(scene, report, header))
+            if on_step is not None:
+                on_step(report, sent[-1], total)
+
+        def stop() -> bool:
+            return self._closing or (cancelled is not None and cancelled())
+
+        options = self.check_options()
+        result = check_state(read, sequence, options, on_step=publish, cancelled=stop)
+        if result.error is not None:
+            sent.append(self._publish(result.scene, result.error, header, state))
+        return result, sent
 
     def check_whole(self, state: AssemblyState, header: dict) -> bytes:
         """Check the assembly of ``state`` as it is (sequence ignored); publish the report
         and return its CDR bytes."""
-        scene = None
-        try:
-            options = self.check_options()
-            scene = scene_from_msg(state, sequence=False, limits=options.limits)
-            report = check_scene(scene, options)
-        except Exception as exc:
-            report = self._error_report(exc)
-        return self._publish(scene, report, header)
+        return self.check(state, header, False)[1][-1]
 
     def _on_state(self, data: bytes) -> None:
         """Subscription callback (raw CDR): put the state in the slot for the worker (never
-        blocks on a check); a state still waiting there is dropped and counted."""
+        blocks on a check)."""
+        self._put(data)
+
+    def _put(self, data: bytes | tuple) -> None:
+        """Put a state (CDR) or an as-built state in the slot for the worker; one still
+        waiting there is dropped and counted."""
         with self._slot_cond:
             stale, self._slot = self._slot, data
             if stale is not None:
@@ -413,8 +487,9 @@ class RbeNode(Node):
                 dropped = self._dropped
             self._slot_cond.notify()
         if stale is not None:
+            stamp = _cdr_stamp(stale) if isinstance(stale, bytes) else _stamp(stale[0])
             self.get_logger().warning(
-                f"overload: state of stamp {_cdr_stamp(stale)} dropped unchecked, a newer one"
+                f"overload: state of stamp {stamp} dropped unchecked, a newer one"
                 f" arrived first ({dropped} dropped so far)", throttle_duration_sec=1.0)
 
     def _work(self) -> None:
@@ -427,6 +502,9 @@ class RbeNode(Node):
                     return
                 data, self._slot = self._slot, None
             try:
+                if isinstance(data, tuple):
+                    self._check_asbuilt(*data)
+                    continue
                 try:
                     state = deserialize_message(data, AssemblyState)
                 except Exception as exc:
@@ -441,21 +519,62 @@ class RbeNode(Node):
         """Check a state from the topic (as a whole, or every step of its sequence) and
         publish the reports; never raises. ``raw``: its CDR bytes, recorded as they came."""
         try:
-            header = self._received(state, raw)
-            if not state.sequence:
-                self.check_whole(state, header)
-                return
-            scene = None
-            try:
-                options = self.check_options()
-                scene = scene_from_msg(state, limits=options.limits)
-                check_sequence(scene, options,
-                               on_step=lambda report, _total: self._publish(scene, report, header),
-                               cancelled=lambda: self._closing)
-            except Exception as exc:
-                self._publish(scene, self._error_report(exc), header)
+            self.check(state, self._received(state, raw), bool(state.sequence))
         except Exception as exc:  # publishing itself failed (e.g. during shutdown)
             self.get_logger().error(f"state not handled: {type(exc).__name__}: {exc}")
+
+    # --- design and measured poses (rbe_ros.poses) -------------------------------------------
+
+    def _on_design(self, data: bytes) -> None:
+        """A design (raw CDR): recorded, the poses measured so far forgotten; the supports
+        alone are checked (nothing measured yet)."""
+        self._on_asbuilt(data, AssemblyState, self.design_topic, DESIGN)
+
+    def _on_poses(self, data: bytes) -> None:
+        """Measured poses (raw CDR): recorded, merged into the as-built state (an update
+        that cannot be merged changes nothing and is answered INVALID_INPUT)."""
+        self._on_asbuilt(data, BlockPoses, self.poses_topic, POSES)
+
+    def _on_asbuilt(self, data: bytes, msg_type, topic: str, kind: str) -> None:
+        """Record a design or poses message, merge it into the as-built state
+        (:func:`rbe_ros.replay.merge_message`) and put the result in the slot; never raises."""
+        try:
+            msg = deserialize_message(data, msg_type)
+            header = self._received(msg, data, topic)
+            try:        # the topic callbacks run one at a time (one exclusive group)
+                scene = merge_message(self._asbuilt, kind, message_to_dict(msg))
+            except SceneError as exc:
+                scene = exc
+            self._put((header, scene))
+        except Exception as exc:
+            self.get_logger().error(f"{topic}: message not handled: {type(exc).__name__}: "
+                                    f"{exc}")
+
+    def _check_asbuilt(self, header: dict, scene) -> None:
+        """Check an as-built scene (or report why there is none) as a whole."""
+        result = asbuilt_check(scene, self.check_options())
+        if result.error is None:
+            self._publish(result.scene, result.reports[0], header)
+            return
+        # drawn as a state that failed: what could be merged, the blocks at fault highlighted
+        state = AssemblyState() if result.scene is None else \
+            dict_to_message(state_to_dict(result.scene), AssemblyState)
+        self._publish(None, result.error, header, state)
+
+    def _load_design_file(self, path: str) -> None:
+        """The design of ``design_file``, sent through :meth:`_on_design` as the message a
+        pipeline would send (so that it is recorded, and replayed, like one)."""
+        frame = self.get_parameter("frame_id").value
+        stamp = self.get_clock().now().nanoseconds
+        try:
+            scene, _ = load_design(path)
+            state = dict_to_message(state_to_dict(scene, frame, stamp), AssemblyState)
+        except SceneError as exc:
+            self.get_logger().error(f"design_file {path!r}: {exc}")
+            state = AssemblyState()
+            state.header.frame_id, state.header.stamp = frame, Time(
+                sec=stamp // 1_000_000_000, nanosec=stamp % 1_000_000_000)
+        self._on_design(serialize_message(state))
 
     def _on_check(self, request: CheckAssembly.Request, response: CheckAssembly.Response):
         try:
@@ -471,11 +590,9 @@ class RbeNode(Node):
     def _execute_sequence(self, goal_handle) -> CheckSequence.Result:
         result = CheckSequence.Result(first_failing_step=-1)
         reports: list[StabilityReport] = []
-        header: dict = {}
-        scene = None
 
-        def on_step(report: Report, total: int) -> None:
-            msg = deserialize_message(self._publish(scene, report, header), StabilityReport)
+        def on_step(report: Report, data: bytes, total: int) -> None:
+            msg = deserialize_message(data, StabilityReport)
             reports.append(msg)
             if result.first_failing_step < 0 and not report.stable:
                 result.first_failing_step = report.step_index
@@ -484,32 +601,30 @@ class RbeNode(Node):
 
         try:
             state = goal_handle.request.assembly
-            header = self._received(state)
-            options = self.check_options()
-            scene = scene_from_msg(state, limits=options.limits)
-            steps = check_sequence(
-                scene, options, on_step=on_step,
-                cancelled=lambda: goal_handle.is_cancel_requested or self._closing)
-            total = len(sequence_steps(scene))
-            finished = len(steps) == total
+            check, sent = self.check(state, self._received(state), True, on_step=on_step,
+                                     cancelled=lambda: goal_handle.is_cancel_requested)
+            if check.error is not None:
+                reports.append(deserialize_message(sent[-1], StabilityReport))
         except Exception as exc:
-            try:
-                data = self._publish(scene, self._error_report(exc), header)
-                reports.append(deserialize_message(data, StabilityReport))
-            except Exception as exc2:
-                self.get_logger().error(f"goal not handled: {type(exc2).__name__}: {exc2}")
+            self.get_logger().error(f"goal not handled: {type(exc).__name__}: {exc}")
             result.reports = reports
             goal_handle.abort()
             return result
         result.reports = reports
-        if finished:
+        if check.finished:
             goal_handle.succeed()
-        elif goal_handle.is_cancel_requested:
-            self.get_logger().info(f"sequence check canceled after {len(reports)}/{total} steps")
+        elif check.error is None and goal_handle.is_cancel_requested:
+            self.get_logger().info(f"sequence check canceled after {len(reports)}/"
+                                   f"{check.total} steps")
             goal_handle.canceled()
-        else:  # shutting down
+        else:  # the state could not be checked, or shutting down
             goal_handle.abort()
         return result
+
+
+def _stamp(header: dict) -> str:
+    stamp = header["stamp"]
+    return f"{stamp['sec']}.{stamp['nanosec']:09d}"
 
 
 def _cdr_stamp(data: bytes) -> str:

@@ -15,7 +15,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from visualization_msgs.msg import MarkerArray
 
-from rbe_ros.messages import state_to_dict
+from rbe_ros.io.messages import state_to_dict
 from rbe_ros.ros.convert import dict_to_message, message_to_dict
 from rbe_ros.ros.live import NodeProcess
 from rbe_ros.scene import box_block, make_scene

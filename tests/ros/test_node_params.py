@@ -9,7 +9,7 @@ from rclpy.exceptions import InvalidParameterValueException
 from rclpy.parameter import Parameter
 from scipy.spatial.transform import Rotation
 
-from rbe_ros.analysis.check import check_scene
+from rbe_ros.analysis.pipeline import check_scene
 from rbe_ros.rbe.result import Status
 from rbe_ros.ros.node import RbeNode
 from rbe_ros.scene import box_block, make_scene
@@ -114,15 +114,16 @@ def test_unexpected_errors_become_solver_failed_reports(make_node, tmp_path, mon
     from rbe_msgs.srv import CheckAssembly
 
     from rbe_client import stacked_boxes
-    from rbe_ros import bag, messages
-    from rbe_ros.ros import node as node_module
+    from rbe_ros.analysis import pipeline
+    from rbe_ros.io import bag, messages
     from rbe_ros.ros.convert import dict_to_message
 
     def boom(*_args, **_kwargs):
         raise RuntimeError("boom")
 
-    monkeypatch.setattr(node_module, "check_scene", boom)
-    monkeypatch.setattr(node_module, "check_sequence", boom)
+    # the node's one dispatch (shared with replay) calls these
+    monkeypatch.setattr(pipeline, "check_scene", boom)
+    monkeypatch.setattr(pipeline, "check_sequence", boom)
     node = make_node(mcap_path=str(tmp_path / "bag"), frame_id="site")
     state = dict_to_message(messages.state_to_dict(stacked_boxes(0.45), "", 42), AssemblyState)
     response = node._on_check(CheckAssembly.Request(assembly=state), CheckAssembly.Response())
@@ -135,8 +136,9 @@ def test_unexpected_errors_become_solver_failed_reports(make_node, tmp_path, mon
     node.destroy_node()
     recorded = list(bag.read_bag(tmp_path / "bag"))
     assert [m.topic for m in recorded] == ["/rbe_unit_test/rbe_node/assembly",
-                                           "/rbe_unit_test/rbe_node/report"] * 2
-    assert [m.data["status"] for m in recorded[1::2]] == [StabilityReport.SOLVER_FAILED] * 2
+                                           "/rbe_unit_test/rbe_node/report",
+                                           "/rbe_unit_test/rbe_node/markers"] * 2
+    assert [m.data["status"] for m in recorded[1::3]] == [StabilityReport.SOLVER_FAILED] * 2
 
 
 def test_contact_parameters_reach_the_detection(make_node):

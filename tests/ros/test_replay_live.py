@@ -10,8 +10,9 @@ import pytest
 
 from rbe_client import NodeProcess
 from rbe_ros.cli import main
-from rbe_ros.replay import bag_options, read_runs, write_runs
-from rbe_ros.testing import assert_bag_replays, parametrize_bags
+from rbe_ros.io.replay import bag_options, read_runs, write_runs
+from rbe_ros.io.testing import assert_bag_replays, parametrize_bags
+from rbe_ros.ros.live import live_recheck
 
 REPO = Path(__file__).resolve().parents[2]
 BAGS = REPO / "bags"
@@ -32,7 +33,7 @@ def node(rclpy_context, tmp_path_factory):
 
 @parametrize_bags(BAGS)
 def test_bag_replays_live(node, bag):
-    result = assert_bag_replays(bag, live=True, node_name=node.name, context=node.context)
+    result = assert_bag_replays(bag, recheck=live_recheck(node.name, node.context))
     assert [len(r) for r in result.replayed] == [len(run.reports) for run in result.runs]
     assert node.proc.proc.poll() is None
 
@@ -45,7 +46,7 @@ def test_perturbed_force_fails_the_live_replay(node, tmp_path):
     path = tmp_path / "perturbed"
     write_runs(path, runs, [r.reports for r in runs], bag_options(BAGS / "stack_tips"))
     with pytest.raises(AssertionError) as err:
-        assert_bag_replays(path, live=True, node_name=node.name, context=node.context)
+        assert_bag_replays(path, recheck=live_recheck(node.name, node.context))
     text = str(err.value)
     assert "(live)" in text and "1 field(s)" in text
     assert (f"step 3 (b03) interface {iface['block_a']}|{iface['block_b']}: "

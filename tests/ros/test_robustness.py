@@ -38,10 +38,11 @@ from ruamel.yaml import YAML
 
 from rbe_client import (TIMEOUT, Client, NodeProcess, canonical, stacked_boxes, state_msg,
                         tower, wait_future, wait_until)
-from rbe_ros import bag
-from rbe_ros.analysis.check import CheckOptions, check_scene
+from rbe_ros.io import bag
+from rbe_ros.analysis.options import CheckOptions
+from rbe_ros.analysis.pipeline import check_scene
 from rbe_ros.generators import running_bond_wall
-from rbe_ros.messages import state_to_dict
+from rbe_ros.io.messages import state_to_dict
 from rbe_ros.ros.convert import dict_to_message, scene_from_msg
 from rbe_ros.scene import SceneError, ValidationLimits
 
@@ -227,7 +228,7 @@ def core_answer(msg, limits: ValidationLimits, sequence: bool = False):
     try:
         scene = scene_from_msg(msg, sequence=sequence, limits=limits)
         if sequence:
-            from rbe_ros.analysis.sequence import check_sequence
+            from rbe_ros.analysis.pipeline import check_sequence
             report = check_sequence(scene, CheckOptions(limits=limits))[0]
         else:
             report = check_scene(scene, CheckOptions(limits=limits))

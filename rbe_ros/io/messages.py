@@ -3,7 +3,7 @@
 A message dict is a plain nested dict/list shaped exactly like the ROS message, as
 ``rosidl_runtime_py.message_to_ordereddict`` gives it: field names as keys, nested messages as
 dicts (``geometry_msgs/Point`` as ``{"x", "y", "z"}``), arrays as lists, numbers as Python
-``float``/``int``. :mod:`rbe_ros.cdr` encodes them to CDR bytes (the node's reports, bags);
+``float``/``int``. :mod:`rbe_ros.io.cdr` encodes them to CDR bytes (the node's reports, bags);
 :mod:`rbe_ros.ros.convert` turns them into rclpy messages and back (a ``set_message_fields``
 like rosidl_runtime_py's).
 Nothing here imports rclpy or the generated ``rbe_msgs`` package.
@@ -18,9 +18,9 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from .rbe.result import InterfaceResult, Report, Status
-from .scene import (BOX_FACES, Hold, Scene, SceneError, box_vertices, make_block,
-                    make_scene)
+from ..rbe.result import InterfaceResult, NearContact, Report, Status
+from ..scene import (BOX_FACES, Hold, Scene, SceneError, blame, box_vertices, make_block,
+                     make_scene)
 
 SOLID_PRIMITIVE_BOX = 1  # shape_msgs/SolidPrimitive.BOX
 _XYZ = ("x", "y", "z")
@@ -85,6 +85,14 @@ def header_dict(frame_id: str, stamp_ns: int) -> dict:
     """A std_msgs/Header dict (stamp split into sec and nanosec)."""
     sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
     return {"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": str(frame_id)}
+
+
+def report_header(state_header: Mapping | None, frame_id: str = "world") -> dict:
+    """The header of the reports answering a state with ``state_header``: its stamp, and
+    its frame or ``frame_id`` when that is empty (the node's ``frame_id`` parameter)."""
+    header = {"stamp": dict((state_header or {}).get("stamp") or {"sec": 0, "nanosec": 0}),
+              "frame_id": str((state_header or {}).get("frame_id") or frame_id)}
+    return header
 
 
 def header_stamp_ns(header: Mapping) -> int:
@@ -180,7 +188,10 @@ def scene_from_state_dict(d) -> Scene:
     if not isinstance(d, Mapping):
         raise SceneError("an AssemblyState must be a mapping (message dict), "
                          f"got {type(d).__name__}")
-    blocks = [_block_from_dict(i, b) for i, b in enumerate(_list(d, "blocks", "AssemblyState"))]
+    blocks = []
+    for i, b in enumerate(_list(d, "blocks", "AssemblyState")):
+        with blame(b.get("id") if isinstance(b, Mapping) else ""):
+            blocks.append(_block_from_dict(i, b))
     sequence = _list(d, "sequence", "AssemblyState")
     if not all(isinstance(s, str) for s in sequence):
         raise SceneError("AssemblyState.sequence must be a list of block ids (strings)")
@@ -206,6 +217,35 @@ def _hold_from_dict(index: int, raw) -> Hold:
     if until_step < -1:
         raise SceneError(f"{where}: until_step must be -1 (to the end) or a step, got {until_step}")
     return Hold(block, from_step, None if until_step == -1 else until_step)
+
+
+# --- BlockPoses -------------------------------------------------------------------------------
+
+def poses_to_dict(poses, frame_id: str = "world", stamp_ns: int = 0) -> dict:
+    """An rbe_msgs/BlockPoses dict of ``{id: (position, orientation)}``."""
+    return {"header": header_dict(frame_id, stamp_ns), "ids": [str(i) for i in poses],
+            "poses": [{"position": _vec(p), "orientation": _vec(q, _XYZW)}
+                      for p, q in poses.values()]}
+
+
+def poses_from_dict(d) -> dict:
+    """``{id: (position, orientation)}`` of an rbe_msgs/BlockPoses dict (SceneError; the
+    values are checked by :func:`rbe_ros.poses.scene_at_poses`)."""
+    ids = _list(d, "ids", "BlockPoses")
+    poses = _list(d, "poses", "BlockPoses")
+    if len(ids) != len(poses):
+        raise SceneError(f"BlockPoses has {len(ids)} ids but {len(poses)} poses")
+    out = {}
+    for i, (bid, pose) in enumerate(zip(ids, poses)):
+        if not isinstance(bid, str) or not bid:
+            raise SceneError(f"BlockPoses.ids[{i}] is not a block id (a non-empty string)")
+        if bid in out:
+            raise SceneError(f"BlockPoses names block {bid!r} twice")
+        where = f"BlockPoses: block {bid!r}"
+        out[bid] = (_xyz(_field(pose, "position", {}, where), f"{where}: position"),
+                    _xyz(_field(pose, "orientation", {}, where), f"{where}: orientation",
+                         _XYZW, (0.0, 0.0, 0.0, 1.0)))
+    return out
 
 
 # --- StabilityReport --------------------------------------------------------------------------
@@ -267,7 +307,7 @@ def report_to_dict(report: Report, header: dict, *, arrays: bool = False) -> dic
     """An rbe_msgs/StabilityReport dict of ``report`` (``header``: see :func:`header_dict`).
 
     ``arrays=True``: the same dict, but each sequence of Points/Vector3s as an (n, 3) float
-    array and each float64[] as a 1-D float array: the form that :mod:`rbe_ros.cdr` (the
+    array and each float64[] as a 1-D float array: the form that :mod:`rbe_ros.io.cdr` (the
     node's reports) and :func:`rbe_ros.ros.convert.dict_to_message` take without a dict per
     point. Not for comparisons.
     """
@@ -288,6 +328,10 @@ def report_to_dict(report: Report, header: dict, *, arrays: bool = False) -> dic
         "message": str(report.message),
         "model": str(report.model),
         "dropped_states": int(report.dropped_states),
+        "near_contacts": [{"block_a": str(c.block_a), "block_b": str(c.block_b),
+                           "gap": float(c.gap), "overlap_area": float(c.overlap_area)}
+                          for c in report.near_contacts],
+        "verdict_sensitive": bool(report.verdict_sensitive),
         "margin_g": float(report.margin_g),
         "margin_direction": _vec(report.margin_direction),
     }
@@ -306,11 +350,15 @@ def report_from_dict(d: Mapping) -> Report:
         suggested_holds=[str(b) for b in d.get("suggested_holds", [])],
         model=str(d.get("model", "full")),
         dropped_states=int(d.get("dropped_states", 0)),
+        near_contacts=[NearContact(str(c["block_a"]), str(c["block_b"]), float(c["gap"]),
+                                   float(c["overlap_area"])) for c in d.get("near_contacts", [])],
+        verdict_sensitive=bool(d.get("verdict_sensitive", False)),
         margin_g=float(d.get("margin_g", math.nan)),
         margin_direction=np.array(_xyz(d.get("margin_direction", {}), "margin_direction"),
                                   dtype=float),
     )
 
 
-__all__ = ["SOLID_PRIMITIVE_BOX", "header_dict", "header_stamp_ns", "state_to_dict",
+__all__ = ["SOLID_PRIMITIVE_BOX", "header_dict", "header_stamp_ns", "poses_from_dict",
+           "poses_to_dict", "state_to_dict",
            "scene_from_state_dict", "report_to_dict", "report_from_dict"]

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import math
 
-from .rbe.result import InterfaceResult, Report
+from ..rbe.result import InterfaceResult, Report
 
 
 def json_number(x: float):
@@ -34,6 +34,9 @@ def report_json(report: Report) -> dict:
            "held_blocks": list(report.held_blocks),
            "suggested_holds": list(report.suggested_holds), "model": report.model,
            "dropped_states": report.dropped_states,
+           "near_contacts": [{"block_a": c.block_a, "block_b": c.block_b, "gap": c.gap,
+                              "overlap_area": c.overlap_area} for c in report.near_contacts],
+           "verdict_sensitive": report.verdict_sensitive,
            "margin_g": json_number(report.margin_g),
            "margin_direction": report.margin_direction.tolist(),
            "interfaces": [interface_json(r) for r in report.interfaces]}
@@ -51,8 +54,7 @@ def hold_note(r: Report) -> str:
 
 
 def format_table(reports: list[Report]) -> str:
-    """One row per report: step, block, verdict, max tension, worst |V|/N, time, the margin
-    (when computed) and reason;
+    """One row per report: step, block, verdict, max tension, worst |V|/N, time and reason;
     the reason notes the blocks held at the step and, when unstable, the ones to hold."""
     margin = any(math.isfinite(r.margin_g) for r in reports)
     head = ("step", "block", "verdict", "max tension N", "worst |V|/N", "solve ms") \

@@ -44,20 +44,34 @@ from pathlib import Path
 
 import numpy as np
 
-from .analysis.check import CheckOptions, HoldSearch, check_scene
-from .analysis.sequence import check_sequence, final_state, sequence_steps
-from .geometry.contacts import ContactOptions
-from .messages import header_stamp_ns, report_to_dict, scene_from_state_dict, state_to_dict
-from .rbe.result import Report, Status
-from .rbe.solver import SolveOptions, Weights
-from .scene import Scene, SceneError
+from ..analysis.options import CheckOptions, HoldSearch
+from ..analysis.pipeline import StateCheck, check_state
+from ..analysis.steps import final_state, sequence_steps
+from ..geometry.block import pose_block
+from ..geometry.contacts import ContactOptions
+from ..rbe.result import Report
+from ..rbe.solver import SolveOptions, Weights
+from ..scene import Scene, SceneError
+from .bag import BagWriter, read_bag, read_custom_data
+from .markers import MARKER_TOPIC, MARKER_TYPE, run_markers
+from .messages import (header_stamp_ns, poses_from_dict, report_header, report_to_dict,
+                       scene_from_state_dict, state_to_dict)
+from .poses import AsBuilt
 
 OPTIONS_KEY = "rbe_ros.check_options"
 STATE_TYPE = "rbe_msgs/msg/AssemblyState"
+POSES_TYPE = "rbe_msgs/msg/BlockPoses"
 REPORT_TYPE = "rbe_msgs/msg/StabilityReport"
 #: Topics of bags written here: the names rbe_node uses (node name rbe_node).
 STATE_TOPIC = "/rbe_node/assembly"
 REPORT_TOPIC = "/rbe_node/report"
+DESIGN_TOPIC = "/rbe_node/design"
+POSES_TOPIC = "/rbe_node/poses"
+#: Kinds of run: a state checked as it is, a design (~/design), measured poses (~/poses).
+STATE, DESIGN, POSES = "state", "design", "poses"
+#: Log-time spacing of the reports (and markers) of a recorded sequence: one step a second,
+#: so that a player's timeline (Foxglove) steps through the sequence one step at a time.
+STEP_NS = 1_000_000_000
 #: Report fields that are not compared.
 IGNORED = frozenset({"solve_time", "dropped_states"})
 
@@ -92,8 +106,6 @@ def options_from_json(text: str) -> CheckOptions:
 
 def bag_options(path) -> CheckOptions:
     """The check options recorded in the bag at ``path``, else the defaults."""
-    from .bag import read_custom_data
-
     text = read_custom_data(path).get(OPTIONS_KEY)
     return options_from_json(text) if text else CheckOptions()
 
@@ -110,6 +122,7 @@ class Run:
     reports: list[dict] = field(default_factory=list)
     report_stamps: list[int] = field(default_factory=list)
     report_topic: str = REPORT_TOPIC
+    kind: str = STATE                               # STATE, DESIGN or POSES
 
     @property
     def key(self) -> tuple[int, int]:
@@ -120,21 +133,30 @@ class Run:
         header = self.state.get("header", {})
         seq = self.state.get("sequence") or []
         what = f"{len(seq)}-block sequence" if seq else "whole assembly"
-        return (f"state stamp {header_stamp_ns(header) / 1e9:.9f} s frame "
-                f"{header.get('frame_id', '')!r} ({len(self.state.get('blocks', []))} blocks, "
-                f"{what})")
+        contents = {STATE: f"{len(self.state.get('blocks', []))} blocks, {what}",
+                    DESIGN: f"design of {len(self.state.get('blocks', []))} blocks",
+                    POSES: f"{len(self.state.get('ids', []))} measured poses"}[self.kind]
+        return (f"{'state' if self.kind == STATE else self.kind} stamp "
+                f"{header_stamp_ns(header) / 1e9:.9f} s frame "
+                f"{header.get('frame_id', '')!r} ({contents})")
+
+
+def step_stamps(stamp_ns: int, count: int) -> list[int]:
+    """Log times of the ``count`` reports of a state logged at ``stamp_ns``."""
+    return [stamp_ns + (k + 1) * STEP_NS for k in range(count)]
 
 
 def read_runs(path) -> list[Run]:
     """The runs of a bag: every AssemblyState in log-time order, each with the reports whose
-    header stamp is its stamp (a report goes to the latest such state before it)."""
-    from .bag import read_bag
-
+    header stamp is its stamp (a report goes to the latest such state before it). Other
+    topics (markers) are not read."""
     runs: list[Run] = []
     by_key: dict[tuple[int, int], list[Run]] = {}
-    for m in read_bag(path):
-        if m.msgtype == STATE_TYPE:
-            run = Run(m.data, m.stamp_ns, m.topic)
+    for m in read_bag(path, msgtypes={STATE_TYPE, POSES_TYPE, REPORT_TYPE}):
+        if m.msgtype in (STATE_TYPE, POSES_TYPE):
+            kind = POSES if m.msgtype == POSES_TYPE else \
+                DESIGN if m.topic.endswith("/design") else STATE
+            run = Run(m.data, m.stamp_ns, m.topic, kind=kind)
             runs.append(run)
             by_key.setdefault(run.key, []).append(run)
         elif m.msgtype == REPORT_TYPE:
@@ -151,38 +173,71 @@ def read_runs(path) -> list[Run]:
     return runs
 
 
-def check_state(state: dict, options: CheckOptions = CheckOptions()) -> list[Report]:
-    """The reports ``rbe_node`` makes for ``state`` (a message dict), in order."""
-    try:
-        if state.get("sequence"):
-            return check_sequence(scene_from_state_dict(state), options)
-        return [check_scene(scene_from_state_dict({**state, "sequence": []}), options)]
-    except SceneError as exc:
-        return [Report(False, Status.INVALID_INPUT, f"invalid input: {exc}")]
-    except Exception as exc:        # as the node: a failed check is a report, not a crash
-        return [Report(False, Status.SOLVER_FAILED, f"check failed: {type(exc).__name__}: {exc}")]
+def merge_message(asbuilt: AsBuilt, kind: str, message: dict) -> Scene:
+    """The as-built scene after a design (``kind`` DESIGN, an AssemblyState dict) or
+    measured poses (POSES, a BlockPoses dict): the node's and the replay's one step
+    (SceneError: the message's report is INVALID_INPUT)."""
+    if kind == DESIGN:
+        try:
+            design, error = scene_from_state_dict(message), ""
+        except SceneError as exc:
+            design, error = None, str(exc)
+        return asbuilt.set_design(design, error)
+    return asbuilt.update(poses_from_dict(message))
 
 
-def report_header(state: dict, frame_id: str = "world") -> dict:
-    header = json.loads(json.dumps(state.get("header") or {}))
-    header.setdefault("stamp", {"sec": 0, "nanosec": 0})
-    if not header.get("frame_id"):
-        header["frame_id"] = frame_id
-    return header
+def asbuilt_scenes(runs: list[Run]) -> list[Scene | SceneError | None]:
+    """For each run, the as-built scene after it (or why there is none); None for states.
+    Every design and poses message counts, checked when recorded or not."""
+    asbuilt = AsBuilt()
+    out: list[Scene | SceneError | None] = []
+    for run in runs:
+        if run.kind == STATE:
+            out.append(None)
+            continue
+        try:
+            out.append(merge_message(asbuilt, run.kind, run.state))
+        except SceneError as exc:
+            out.append(exc)
+    return out
+
+
+def asbuilt_check(scene: Scene | SceneError, options: CheckOptions = CheckOptions()
+                  ) -> StateCheck:
+    """The check ``rbe_node`` makes of an as-built scene (as a whole), or the report of why
+    there is none: the node's own dispatch, as for a state."""
+    def read(_sequence: bool) -> Scene:
+        if isinstance(scene, SceneError):
+            raise scene
+        return scene
+
+    return check_state(read, False, options)
+
+
+def state_reports(state: dict, options: CheckOptions = CheckOptions()) -> list[Report]:
+    """The reports ``rbe_node`` makes for ``state`` (a message dict), in order: the node's
+    own dispatch, :func:`rbe_ros.analysis.pipeline.check_state`."""
+    def read(sequence: bool) -> Scene:
+        return scene_from_state_dict(state if sequence else {**state, "sequence": []})
+
+    return check_state(read, bool(state.get("sequence")), options).reports
 
 
 def replay_run(run: Run, options: CheckOptions = CheckOptions()) -> list[dict]:
     """The report dicts of re-checking ``run.state``."""
-    header = report_header(run.state)
-    return [report_to_dict(r, header) for r in check_state(run.state, options)]
+    header = report_header(run.state.get("header"))
+    return [report_to_dict(r, header) for r in state_reports(run.state, options)]
 
 
-def free_weights(state: dict) -> dict[int, float]:
-    """Free weight W (N) by step index (-1: the whole assembly) of a state: the weight of the
-    free blocks present and not held. Empty if the state cannot be read."""
-    from .geometry.block import pose_block
-
+def free_weights(state: dict | Scene | SceneError) -> dict[int, float]:
+    """Free weight W (N) by step index (-1: the whole assembly) of a state (or an as-built
+    scene): the weight of the free blocks present and not held. Empty if the state cannot
+    be read."""
+    if isinstance(state, SceneError):
+        return {}
     try:
+        if isinstance(state, Scene):
+            state = state_to_dict(state)
         scene = scene_from_state_dict(state)
         whole = scene_from_state_dict({**state, "sequence": []})
     except SceneError:
@@ -396,8 +451,9 @@ def compare_runs(runs: list[Run], replayed: list[list[dict]], *,
     """Differences between each run's recorded reports and ``replayed[i]`` (the same
     comparison offline and live)."""
     out: list[Difference] = []
+    asbuilt = asbuilt_scenes(runs)
     for i, (run, new) in enumerate(zip(runs, replayed)):
-        weights = free_weights(run.state)
+        weights = free_weights(run.state if run.kind == STATE else asbuilt[i])
         for rec, rep in zip(run.reports, new):
             w = weights.get(int(rec.get("step_index", -1)), 1.0)
             out += compare_report(rec, rep, run=i, free_weight=w, tolerances=tolerances)
@@ -424,31 +480,44 @@ def format_differences(runs: list[Run], differences: list[Difference], limit: in
 
 # --- writing ---------------------------------------------------------------------------------
 
-def write_runs(path, runs: list[Run], replayed: list[list[dict]], options: CheckOptions) -> None:
+def write_runs(path, runs: list[Run], replayed: list[list[dict]], options: CheckOptions, *,
+               markers: bool = True) -> None:
     """A bag with every run's state and its ``replayed`` reports (at the recorded report
-    times where there are as many, else just after the state); the options in custom_data."""
-    from .bag import BagWriter
-
+    times where there are as many, else a step a second after the state: :data:`STEP_NS`);
+    with ``markers`` each report's MarkerArray on :data:`rbe_ros.io.markers.MARKER_TOPIC` at
+    its time; the options in custom_data."""
+    asbuilt = asbuilt_scenes(runs) if markers else []
     with BagWriter(path, custom_data={OPTIONS_KEY: options_to_json(options)}) as bag:
         topics: set[str] = set()
-        for run, reports in zip(runs, replayed):
-            for topic, kind, latched in ((run.topic, STATE_TYPE, False),
+        for i, (run, reports) in enumerate(zip(runs, replayed)):
+            for topic, kind, latched in ((run.topic, POSES_TYPE if run.kind == POSES else
+                                          STATE_TYPE, run.kind == DESIGN),
                                          (run.report_topic, REPORT_TYPE, True)):
                 if topic not in topics:
                     bag.add_topic(topic, kind, transient_local=latched)
                     topics.add(topic)
+            if markers and MARKER_TOPIC not in topics:
+                bag.add_topic(MARKER_TOPIC, MARKER_TYPE, transient_local=True)
+                topics.add(MARKER_TOPIC)
             bag.write(run.topic, run.state, run.stamp_ns)
             stamps = run.report_stamps if len(run.report_stamps) == len(reports) else \
-                [run.stamp_ns + k + 1 for k in range(len(reports))]
+                step_stamps(run.stamp_ns, len(reports))
             for report, stamp in zip(reports, stamps):
                 bag.write(run.report_topic, report, stamp)
+            if markers:
+                # an as-built run is drawn as the state checked: its scene, as a whole
+                drawn = run.state if run.kind == STATE else {} if isinstance(
+                    asbuilt[i], SceneError) else {**state_to_dict(asbuilt[i]), "sequence": []}
+                for array, stamp in zip(run_markers(drawn, reports, options), stamps):
+                    bag.write(MARKER_TOPIC, array, stamp)
 
 
 def record_bag(path, scenes: list[tuple[Scene, str, int]], options: CheckOptions = CheckOptions(),
-               *, zero_times: bool = False) -> list[Run]:
-    """Check ``(scene, frame_id, stamp_ns)`` states as the node would and record states and
-    reports in a new bag at ``path`` (reports 1 ns apart after their state). ``zero_times``:
-    solve_time 0 in every report, so that reruns write identical files."""
+               *, zero_times: bool = False, markers: bool = True) -> list[Run]:
+    """Check ``(scene, frame_id, stamp_ns)`` states as the node would and record states,
+    reports and (``markers``) their markers in a new bag at ``path`` (a step a second after
+    their state). ``zero_times``: solve_time 0 in every report, so that reruns write
+    identical files."""
     runs = []
     for scene, frame, stamp in scenes:
         run = Run(state_to_dict(scene, frame, stamp), stamp)
@@ -456,9 +525,9 @@ def record_bag(path, scenes: list[tuple[Scene, str, int]], options: CheckOptions
         if zero_times:
             for r in run.reports:
                 r["solve_time"] = 0.0
-        run.report_stamps = [stamp + k + 1 for k in range(len(run.reports))]
+        run.report_stamps = step_stamps(stamp, len(run.reports))
         runs.append(run)
-    write_runs(path, runs, [r.reports for r in runs], options)
+    write_runs(path, runs, [r.reports for r in runs], options, markers=markers)
     return runs
 
 
@@ -485,15 +554,37 @@ def default_output(path) -> Path:
     return path.with_name(path.name + "_replay")
 
 
+#: Re-checks runs: ``recheck(runs, options, on_run)`` -> the report dicts of each run.
+Recheck = Callable[[list[Run], CheckOptions, Callable[[int, Run], None] | None], list[list[dict]]]
+
+
+def offline_reports(runs: list[Run], options: CheckOptions,
+                    on_run: Callable[[int, Run], None] | None = None) -> list[list[dict]]:
+    """The report dicts of re-checking every run here, as the node would."""
+    replayed = []
+    asbuilt = asbuilt_scenes(runs)
+    for i, run in enumerate(runs):
+        if run.kind == STATE:
+            replayed.append(replay_run(run, options))
+        else:   # a design or poses message the node dropped unchecked is not checked
+            header = report_header(run.state.get("header"))
+            replayed.append([report_to_dict(r, header) for r in asbuilt_check(
+                asbuilt[i], options).reports] if run.reports else [])
+        if on_run is not None:
+            on_run(i, run)
+    return replayed
+
+
 def replay_bag(path, output=None, *, options: CheckOptions | None = None, compare: bool = True,
-               live: bool = False, node_name: str | None = None,
-               tolerances: Tolerances = Tolerances(), write: bool = True,
-               context=None, timeout: float = 120.0,
+               recheck: Recheck = offline_reports, tolerances: Tolerances = Tolerances(),
+               write: bool = True, markers: bool = True,
                on_run: Callable[[int, Run], None] | None = None) -> ReplayResult:
-    """Re-check every state of the bag at ``path`` (offline, or ``live`` through an rbe_node:
-    started here, or the running one named ``node_name``), write the states and the new
+    """Re-check every state of the bag at ``path`` with ``recheck`` (offline; or through a
+    live rbe_node: :func:`rbe_ros.ros.live.live_recheck`), write the states and the new
     reports to ``output`` (default: path + "_replay"; never overwritten; ``write=False``:
-    no bag), and with ``compare`` list the differences from the recorded reports."""
+    no bag; ``markers``: with the reports' markers), and with ``compare`` list the
+    differences from the recorded reports (markers are drawings of the reports: not
+    compared)."""
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"no bag at {str(path)!r}")
@@ -502,24 +593,15 @@ def replay_bag(path, output=None, *, options: CheckOptions | None = None, compar
         raise FileExistsError(f"{str(out)!r} exists already, not overwriting it")
     options = options or bag_options(path)
     runs = read_runs(path)
-    if live:
-        from .ros.live import live_reports
-
-        replayed = live_reports(runs, options, node_name=node_name, context=context,
-                                timeout=timeout, on_run=on_run)
-    else:
-        replayed = []
-        for i, run in enumerate(runs):
-            replayed.append(replay_run(run, options))
-            if on_run is not None:
-                on_run(i, run)
+    replayed = recheck(runs, options, on_run)
     if write:
-        write_runs(out, runs, replayed, options)
+        write_runs(out, runs, replayed, options, markers=markers)
     differences = compare_runs(runs, replayed, tolerances=tolerances) if compare else []
     return ReplayResult(runs, replayed, differences, out if write else None, options)
 
 
-__all__ = ["Difference", "OPTIONS_KEY", "ReplayResult", "Run", "Tolerances", "bag_options",
-           "check_state", "compare_report", "compare_runs", "default_output", "free_weights",
+__all__ = ["DESIGN", "Difference", "OPTIONS_KEY", "POSES", "ReplayResult", "Run", "STATE",
+           "Tolerances", "asbuilt_check", "asbuilt_scenes", "bag_options", "compare_report",
+           "compare_runs", "default_output", "free_weights", "merge_message", "offline_reports",
            "options_from_json", "options_to_json", "read_runs", "record_bag", "replay_bag",
-           "replay_run", "write_runs"]
+           "replay_run", "state_reports", "step_stamps", "write_runs"]

@@ -4,10 +4,10 @@ A bag is what ``ros2 bag record -s mcap`` makes: a directory ``<name>/`` holding
 ``<name>_0.mcap`` (profile ``ros2``; one schema per type, encoding ``ros2msg`` with the complete
 concatenated .msg text; channels with message encoding ``cdr`` and metadata
 ``offered_qos_profiles``/``topic_type_hash``; a ``rosbag2`` metadata record) and a version-9
-``metadata.yaml``. CDR is written by :mod:`rbe_ros.cdr` (the bytes rclpy gives) and read by
+``metadata.yaml``. CDR is written by :mod:`rbe_ros.io.cdr` (the bytes rclpy gives) and read by
 rosbags' deserializer; the container is written with the ``mcap`` library (rosbags' own
 writer keeps up to 1 MiB of messages in memory and writes nothing recoverable before close).
-Messages go in and come out as *message dicts* (:mod:`rbe_ros.messages`); raw CDR bytes
+Messages go in and come out as *message dicts* (:mod:`rbe_ros.io.messages`); raw CDR bytes
 (``rclpy.serialization.serialize_message``) are accepted as well. Never imports rclpy.
 """
 from __future__ import annotations
@@ -16,7 +16,7 @@ import functools
 import io
 import os
 import sys
-from collections.abc import Iterator, Mapping
+from collections.abc import Collection, Iterator, Mapping
 from importlib.metadata import version
 from pathlib import Path
 from typing import NamedTuple
@@ -132,7 +132,7 @@ def _scalar(typ: str, value):
 
 
 def to_dict(store: Typestore, msgtype: str, obj) -> dict:
-    """The message dict of a rosbags message object (what :func:`rbe_ros.cdr.encode` takes)."""
+    """The message dict of a rosbags message object (what :func:`rbe_ros.io.cdr.encode` takes)."""
     return {name: _value_to_dict(store, desc, getattr(obj, name))
             for name, desc in store.fielddefs[msgtype][1]}
 
@@ -314,8 +314,9 @@ def _finished(mcap_path: Path) -> bool:
         return f.read() == MCAP_MAGIC
 
 
-def read_bag(path) -> Iterator[BagMessage]:
-    """The messages of a bag directory (or a single .mcap file) as message dicts.
+def read_bag(path, msgtypes: Collection[str] | None = None) -> Iterator[BagMessage]:
+    """The messages of a bag directory (or a single .mcap file) as message dicts (only
+    those of ``msgtypes``, e.g. ``{"rbe_msgs/msg/StabilityReport"}``, if given).
 
     A finished bag is read with rosbags' AnyReader (types from the definitions stored in the
     bag, in time order). An MCAP file without footer (a recording that was killed) is scanned
@@ -324,16 +325,18 @@ def read_bag(path) -> Iterator[BagMessage]:
     path = Path(path)
     if all(_finished(f) for f in _mcap_files(path)):
         with AnyReader([path]) as reader:
-            for conn, stamp, raw in reader.messages():
+            connections = [c for c in reader.connections
+                           if msgtypes is None or c.msgtype in msgtypes]
+            for conn, stamp, raw in reader.messages(connections=connections):
                 obj = reader.deserialize(raw, conn.msgtype)
                 yield BagMessage(conn.topic, conn.msgtype, stamp,
                                  to_dict(reader.typestore, conn.msgtype, obj))
         return
     for f in _mcap_files(path):
-        yield from _scan_mcap(f)
+        yield from _scan_mcap(f, msgtypes)
 
 
-def _scan_mcap(path: Path) -> Iterator[BagMessage]:
+def _scan_mcap(path: Path, msgtypes: Collection[str] | None = None) -> Iterator[BagMessage]:
     store = get_typestore(Stores.EMPTY)
     schemas: dict[int, Schema] = {}
     channels: dict[int, Channel] = {}
@@ -352,6 +355,8 @@ def _scan_mcap(path: Path) -> Iterator[BagMessage]:
             elif isinstance(rec, Message) and rec.channel_id in channels:
                 ch = channels[rec.channel_id]
                 msgtype = schemas[ch.schema_id].name
+                if msgtypes is not None and msgtype not in msgtypes:
+                    continue
                 obj = store.deserialize_cdr(rec.data, msgtype)
                 yield BagMessage(ch.topic, msgtype, rec.log_time, to_dict(store, msgtype, obj))
 

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .analysis.assembly import Assembly
-from .rbe.result import Report
+from ..analysis.assembly import Assembly
+from ..rbe.result import Report
 
 
 def draw_report(assembly: Assembly, report: Report, path, *, title: str = "",

@@ -2,7 +2,7 @@
 
 Why: an rclpy message costs a Python object per field value (~1 us per Point) before it is
 serialised at all, and a report of a 1000-block wall holds ~50k Points. Here a message dict
-(:mod:`rbe_ros.messages`) becomes bytes directly, and a sequence of Points given as an
+(:mod:`rbe_ros.io.messages`) becomes bytes directly, and a sequence of Points given as an
 ``(n, 3)`` numpy array is one ``tobytes``: ~17 ms for that report, against ~230 ms for
 ``serialize_message`` of the rclpy message and ~300 ms through rosbags objects.
 
@@ -67,7 +67,7 @@ class _Incomplete(Exception):
 def encoder(store: Typestore, msgtype: str) -> Callable[[Mapping | None], bytes]:
     """The CDR encoder of ``msgtype`` (e.g. ``rbe_msgs/msg/StabilityReport``) with the layout
     of ``store``: message dict -> bytes. Made once per store and type, then cached (for the
-    life of the process: in practice one store, :func:`rbe_ros.bag.typestore`); thread-safe."""
+    life of the process: in practice one store, :func:`rbe_ros.io.bag.typestore`); thread-safe."""
     with _LOCK:
         codecs = _CODECS.get(store)
         if codecs is None:

@@ -1,34 +1,38 @@
 """A recorded bag as a pytest regression test, in one line.
 
-    from rbe_ros.testing import assert_bag_replays, parametrize_bags
+    from rbe_ros.io.testing import assert_bag_replays, parametrize_bags
 
     def test_my_bag():
-        assert_bag_replays("bags/mine")            # offline; live=True: through rbe_node
+        assert_bag_replays("bags/mine")            # offline; through rbe_node:
+                                                   # recheck=rbe_ros.ros.live.live_recheck()
 
     @parametrize_bags("bags")                      # one test per bag directory in bags/
     def test_every_bag(bag):
         assert_bag_replays(bag)
 
 A bag replays when every recorded state, re-checked, gives the recorded reports within the
-tolerances of :mod:`rbe_ros.replay`; the assertion message is the readable diff.
+tolerances of :mod:`rbe_ros.io.replay`; the assertion message is the readable diff.
 """
 from __future__ import annotations
 
 from pathlib import Path
 
-from .replay import ReplayResult, Tolerances, replay_bag
+import pytest
+
+from .replay import STATE, Recheck, ReplayResult, Tolerances, offline_reports, replay_bag
 
 
-def assert_bag_replays(path, *, live: bool = False, node_name: str | None = None,
-                       tolerances: Tolerances = Tolerances(), options=None,
-                       context=None) -> ReplayResult:
+def assert_bag_replays(path, *, recheck: Recheck = offline_reports,
+                       tolerances: Tolerances = Tolerances(), options=None) -> ReplayResult:
     """Re-check every state of the bag at ``path`` (see :func:`replay_bag`, nothing is
     written) and fail with the diff unless all recorded reports are reproduced."""
-    result = replay_bag(path, write=False, live=live, node_name=node_name,
-                        tolerances=tolerances, options=options, context=context)
+    live = recheck is not offline_reports
+    result = replay_bag(path, write=False, recheck=recheck, tolerances=tolerances,
+                        options=options)
     if not result.runs:
-        raise AssertionError(f"{path}: the bag holds no rbe_msgs/AssemblyState")
-    silent = [i for i, run in enumerate(result.runs) if not run.reports]
+        raise AssertionError(f"{path}: the bag holds no rbe_msgs/AssemblyState or BlockPoses")
+    # a design or poses message the node dropped unchecked under overload has no report
+    silent = [i for i, run in enumerate(result.runs) if not run.reports and run.kind == STATE]
     if silent:
         raise AssertionError(f"{path}: no recorded report for run(s) {silent}: nothing to "
                              "compare")
@@ -46,8 +50,6 @@ def bag_paths(folder) -> list[Path]:
 
 def parametrize_bags(folder, argname: str = "bag"):
     """``pytest.mark.parametrize`` over the bags of ``folder`` (ids: directory names)."""
-    import pytest
-
     paths = bag_paths(folder)
     return pytest.mark.parametrize(argname, paths, ids=[p.name for p in paths])
 

@@ -19,7 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .scene import Block, Scene, SceneError, make_block, make_scene
+from ..analysis.assembly import Assembly
+from ..scene import Block, Scene, SceneError, make_block, make_scene
+from .scene_json import read_json
 
 DEFAULT_DENSITY = 2500.0
 SAMPLES_ENV = "RBE_COMPAS_SAMPLES"
@@ -40,6 +42,7 @@ class CompasInterface:
     origin: np.ndarray | None        # frame point
     normal: np.ndarray | None        # xaxis x yaxis (unit)
     forces: np.ndarray | None        # (k, 4): c_np, c_nn, c_u, c_v
+    xaxis: np.ndarray | None = None  # frame xaxis (unit)
 
 
 def _modern(obj):
@@ -58,19 +61,30 @@ def _unwrap(obj):
     return obj
 
 
-def _read(path) -> tuple[dict, str]:
-    path = Path(path)
-    try:
-        doc = json.loads(path.read_text())
-    except OSError as exc:
-        raise SceneError(f"cannot read {str(path)!r}: {exc.strerror}") from None
-    except json.JSONDecodeError as exc:
-        raise SceneError(f"{path.name}: invalid JSON at line {exc.lineno}: {exc.msg}") from None
+def is_compas_assembly(doc) -> bool:
+    """Whether a JSON document is a COMPAS Assembly (by its ``dtype``)."""
+    return isinstance(doc, dict) and str(doc.get("dtype", "")).endswith("Assembly")
+
+
+def _stem(name: str) -> str:
+    for suffix in (".gz", ".json"):
+        name = name[:-len(suffix)] if name.endswith(suffix) else name
+    return name
+
+
+def compas_document(doc, name: str) -> tuple[dict, str]:
+    """A parsed COMPAS Assembly document with compas 1 key names mapped, and the name of its
+    file without suffixes (SceneError if it is not an Assembly): the input of
+    :func:`compas_scene`, :func:`interfaces_of` and :func:`node_keys`."""
     doc = _modern(doc)
-    dtype = str(doc.get("dtype", "")) if isinstance(doc, dict) else ""
-    if not dtype.endswith("Assembly"):
-        raise SceneError(f"{path.name}: not a COMPAS Assembly (dtype {dtype or 'missing'!r})")
-    return doc, path.stem
+    if not is_compas_assembly(doc):
+        dtype = str(doc.get("dtype", "")) if isinstance(doc, dict) else ""
+        raise SceneError(f"{name}: not a COMPAS Assembly (dtype {dtype or 'missing'!r})")
+    return doc, _stem(name)
+
+
+def _read(path) -> tuple[dict, str]:
+    return compas_document(*read_json(path, "COMPAS assembly"))
 
 
 def _graph(doc: dict, where: str) -> dict:
@@ -130,16 +144,22 @@ def _mesh(block: dict, where: str) -> tuple[np.ndarray, list[list[int]]]:
     return np.asarray(coords, dtype=float).reshape(-1, 3), faces
 
 
-def load_compas_assembly(path, supports=None, density: float | None = None) -> Scene:
-    """A scene from a COMPAS Assembly JSON file.
+def load_compas_assembly(path, supports=None, density: float | None = None,
+                         default_density: float = DEFAULT_DENSITY) -> Scene:
+    """A scene from a COMPAS Assembly JSON file (gzipped if its name ends in ``.gz``).
 
     Blocks keep their world coordinates (identity pose). Ids are the node keys, or a node's
     ``name`` attribute when it has one (files written by :func:`save_compas_assembly`).
     Supports are the nodes flagged ``is_support`` unless ``supports`` (node keys) is given,
     which replaces the flags. Density: ``density`` if given, else a node's ``density``
-    attribute, else 2500 kg/m^3.
+    attribute, else ``default_density`` (2500 kg/m^3).
     """
-    doc, stem = _read(path)
+    return compas_scene(*_read(path), supports, density, default_density)
+
+
+def compas_scene(doc: dict, stem: str, supports=None, density: float | None = None,
+                 default_density: float = DEFAULT_DENSITY) -> Scene:
+    """The scene of a document of :func:`compas_document` (see :func:`load_compas_assembly`)."""
     graph = _graph(doc, stem)
     nodes = _nodes(graph)
     keys = {k for k, _ in nodes}
@@ -154,7 +174,7 @@ def load_compas_assembly(path, supports=None, density: float | None = None) -> S
         if not attr.get("block"):
             raise SceneError(f"{stem}: node {key} has no block")
         vertices, faces = _mesh(attr["block"], f"{stem}: node {key}")
-        rho = density or attr.get("density") or DEFAULT_DENSITY
+        rho = density or attr.get("density") or default_density
         support = bool(attr.get("is_support")) if wanted is None else key in wanted
         blocks.append(make_block(bid, vertices, faces, density=float(rho), support=support))
     attributes = _unwrap(doc).get("attributes") or {}
@@ -164,7 +184,12 @@ def load_compas_assembly(path, supports=None, density: float | None = None) -> S
 
 def compas_interfaces(path) -> list[CompasInterface]:
     """The interfaces stored in a COMPAS Assembly JSON file (edges u -> v, in file order)."""
-    doc, stem = _read(path)
+    return interfaces_of(*_read(path))
+
+
+def interfaces_of(doc: dict, stem: str) -> list[CompasInterface]:
+    """The interfaces stored in a document of :func:`compas_document` (edges u -> v, in file
+    order)."""
     graph = _graph(doc, stem)
     defaults = graph.get("default_edge_attributes") or {}
     out = []
@@ -179,19 +204,25 @@ def compas_interfaces(path) -> list[CompasInterface]:
     return out
 
 
+def node_keys(doc: dict, stem: str) -> list[str]:
+    """The node keys in the order of the scene's blocks (:func:`compas_scene`)."""
+    return [k for k, _ in _nodes(_graph(doc, stem))]
+
+
 def _interface(u: str, v: str, data: dict) -> CompasInterface:
     points = np.asarray([_unwrap(p)[:3] for p in data.get("points") or []],
                         dtype=float).reshape(-1, 3)
     frame = _unwrap(data.get("frame"))
-    origin = normal = None
+    axes = None
     if isinstance(frame, dict) and frame.get("xaxis") is not None:
-        origin = np.asarray(_unwrap(frame.get("point")), dtype=float)
-        n = np.cross(np.asarray(_unwrap(frame["xaxis"]), float), np.asarray(_unwrap(frame["yaxis"]), float))
-        normal = n / np.linalg.norm(n)
+        axes = frame.get("point"), frame["xaxis"], frame["yaxis"]
     elif isinstance(frame, (list, tuple)) and len(frame) == 3:      # [point, xaxis, yaxis]
-        origin = np.asarray(_unwrap(frame[0]), dtype=float)
-        n = np.cross(np.asarray(_unwrap(frame[1]), float), np.asarray(_unwrap(frame[2]), float))
-        normal = n / np.linalg.norm(n)
+        axes = frame
+    origin = normal = xaxis = None
+    if axes is not None:
+        origin, x, y = (np.asarray(_unwrap(a), dtype=float) for a in axes)
+        n = np.cross(x, y)
+        normal, xaxis = n / np.linalg.norm(n), x / np.linalg.norm(x)
     forces = data.get("forces")
     if forces:
         forces = np.array([[f.get(k, 0.0) for k in ("c_np", "c_nn", "c_u", "c_v")]
@@ -200,7 +231,7 @@ def _interface(u: str, v: str, data: dict) -> CompasInterface:
         forces = None
     size = data.get("size")
     return CompasInterface(u, v, points, float(size) if size is not None else float("nan"),
-                           origin, normal, forces)
+                           origin, normal, forces, xaxis)
 
 
 def save_compas_assembly(scene: Scene, path, *, interfaces: bool = True) -> None:
@@ -210,8 +241,6 @@ def save_compas_assembly(scene: Scene, path, *, interfaces: bool = True) -> None
     ``is_support``; a node ``density`` or ``mass`` keeps the block's. With ``interfaces``,
     the detected interfaces go on the edges (``forces`` null).
     """
-    from .analysis.assembly import Assembly      # deferred: the geometry stage is heavier
-
     assembly = Assembly.from_scene(scene)
     nodes, edges = {}, {str(i): {} for i in range(len(scene.blocks))}
     for i, (block, posed) in enumerate(zip(scene.blocks, assembly.blocks)):

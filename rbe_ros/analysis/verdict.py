@@ -1,4 +1,4 @@
-"""The stability check of one assembly: solve, and when it fails, say why.
+"""The verdict of one assembly: solve, and when it fails, say why; and the named predicates.
 
 The verdict follows RBE_NOTES: friction-net decides (a vertex can carry no net tension
 under it, so an assembly that needs glue makes it infeasible). When it is infeasible, up to two
@@ -11,82 +11,16 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
-from ..geometry.contacts import ContactOptions
 from ..rbe.cones import cone_capacity
-from ..rbe.model import build_model
+from ..rbe.model import EquilibriumModel, build_model
 from ..rbe.result import InterfaceResult, Report, Status
 from ..rbe.resultants import interface_results
-from ..rbe.solver import SolveOptions, solve
-from ..scene import Scene, ValidationLimits
+from ..rbe.solver import Solution, solve
 from .assembly import Assembly
-from .margin import annotate_margin
-from .validate import validated_assembly
-
-
-@dataclass(frozen=True)
-class HoldSearch:
-    """How an unstable check looks for the smallest set of blocks to hold (suggested_holds;
-    :mod:`rbe_ros.analysis.holds`): exact by increasing size up to ``max_size`` blocks while
-    at most ``max_checks`` sub-assembly checks are spent, then a greedy heuristic that
-    evaluates up to ``greedy_width`` candidates per added block. Counted in checks, not
-    seconds, so that a replay suggests the same holds on any machine. Each trial checks the
-    whole assembly, so assemblies of more than ``max_free_blocks`` free blocks are not searched
-    (a 399-block vault would take minutes)."""
-
-    enabled: bool = True
-    max_size: int = 3
-    max_checks: int = 40
-    greedy_width: int = 4
-    max_free_blocks: int = 60
-
-    def __post_init__(self):
-        for name in ("max_size", "max_checks", "greedy_width", "max_free_blocks"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-                raise ValueError(f"hold search {name} must be an integer >= 0, not {value!r}")
-
-
-@dataclass(frozen=True)
-class CheckOptions:
-    solve: SolveOptions = field(default_factory=SolveOptions)
-    mu_threshold: float | None = None   # post-check |V| <= mu_threshold N; None: the solve's mu
-    tension_tol: float = 1e-5           # tension counts above this share of the free weight
-    contact: ContactOptions = field(default_factory=ContactOptions)
-    full_solve: bool = False            # sequences: always solve the whole partial assembly
-    holds: HoldSearch = field(default_factory=HoldSearch)   # suggested holds of unstable checks
-    #: Horizontal directions of the stability margin (margin.py); 0: no margin computed.
-    margin_directions: int = 0
-    #: Sane ranges checked before the geometry stage (None: no validation); see validate.py.
-    limits: ValidationLimits | None = field(default_factory=ValidationLimits)
-
-    @property
-    def threshold(self) -> float:
-        return self.solve.mu if self.mu_threshold is None else self.mu_threshold
-
-
-def check_scene(scene: Scene, options: CheckOptions = CheckOptions()) -> Report:
-    """Check ``scene`` as a whole (contact detection included in the reported time).
-
-    With holds, the assembly is the state after the last step: supports whose hold ends are
-    taken away, free blocks held to the end are supports (``held_blocks``). An unstable
-    report names the smallest set of blocks to hold (``suggested_holds``, see
-    :class:`HoldSearch`)."""
-    from .holds import annotate_holds            # deferred: holds imports this module
-    from .sequence import final_state
-
-    start = time.perf_counter()
-    assembly = validated_assembly(scene, options.limits, options.contact)
-    held: tuple[str, ...] = ()
-    if scene.holds:
-        present, held = final_state(scene)
-        assembly = assembly.subset(present, held)
-    report = check(assembly, options)
-    annotate_holds(report, assembly, held, options)
-    annotate_margin(report, assembly, options.solve, options.margin_directions)
-    report.solve_time = time.perf_counter() - start
-    return report
+from .graph import ContactGraph
+from .options import CheckOptions
 
 
 def check(assembly: Assembly, options: CheckOptions = CheckOptions()) -> Report:
@@ -98,25 +32,44 @@ def check(assembly: Assembly, options: CheckOptions = CheckOptions()) -> Report:
     return report
 
 
-def infeasible_report(assembly: Assembly, options: CheckOptions = CheckOptions()) -> Report | None:
-    """The report of ``assembly`` if its deciding problem is infeasible (it cannot stand,
-    whatever else is checked), None if that problem has a solution."""
-    return _verdict(assembly, options, only_infeasible=True)
-
-
-def _verdict(assembly: Assembly, options: CheckOptions, only_infeasible: bool = False
-             ) -> Report | None:
-    floating = assembly.floating_blocks()
+def _deciding(assembly: Assembly, options: CheckOptions):
+    """The report of floating blocks, else (model, solution of the deciding problem)."""
+    floating = ContactGraph(assembly).floating_blocks()
     if floating:
         return Report(False, Status.INFEASIBLE,
                       f"no equilibrium: {_names(floating)} not connected to a support by any"
                       f" contact", unstable_blocks=floating)
     model = build_model(assembly.blocks, assembly.interfaces, assembly.gravity)
-    primary = solve(model, options.solve)
+    return model, solve(model, options.solve)
+
+
+def _verdict(assembly: Assembly, options: CheckOptions) -> Report:
+    deciding = _deciding(assembly, options)
+    if isinstance(deciding, Report):
+        return deciding
+    model, primary = deciding
     if primary.solved:
-        return None if only_infeasible else _report(model, primary, options)
+        return _report(model, primary, options)
     if primary.status == "failed":
-        return None if only_infeasible else _failed(primary)
+        return _failed(primary)
+    return _explain(model, options)
+
+
+def infeasible_report(assembly: Assembly, options: CheckOptions = CheckOptions()) -> Report | None:
+    """The report of ``assembly`` if its deciding problem is infeasible (it cannot stand,
+    whatever else is checked), None if that problem has a solution or the solver failed."""
+    deciding = _deciding(assembly, options)
+    if isinstance(deciding, Report):
+        return deciding
+    model, primary = deciding
+    if primary.solved or primary.status == "failed":
+        return None
+    return _explain(model, options)
+
+
+def _explain(model: EquilibriumModel, options: CheckOptions) -> Report:
+    """Why the deciding problem is infeasible: sliding (it stands with unlimited friction),
+    or where tension is needed (friction+)."""
     if options.solve.friction == "plus":
         return Report(False, Status.INFEASIBLE, "no equilibrium even with tension")
     unlimited = solve(model, replace(options.solve, mu=math.inf, allow_tension=False))
@@ -129,10 +82,36 @@ def _verdict(assembly: Assembly, options: CheckOptions, only_infeasible: bool = 
     return _report(model, glued, options)
 
 
-def stands(model, options: CheckOptions, load=None) -> bool:
+def is_stable(assembly: Assembly, options: CheckOptions = CheckOptions()) -> bool:
+    """The verdict of :func:`check` (stable or not) without the explanation solves: the
+    deciding problem is solved, no interface needs tension and every one is within the
+    friction threshold."""
+    if ContactGraph(assembly).floating_blocks():
+        return False
+    model = build_model(assembly.blocks, assembly.interfaces, assembly.gravity)
+    return stable_forces(model, options) is not None
+
+
+def stable_forces(model: EquilibriumModel, options: CheckOptions, load=None
+                  ) -> tuple[Solution, list[InterfaceResult]] | None:
+    """The solution and interface results of the deciding problem under ``load`` (scaled p;
+    default the dead load) when they pass the criterion of :func:`check`: solved, no
+    tension, every interface within the friction threshold. None otherwise."""
+    solution = solve(model, options.solve, load=load)
+    if not solution.solved:
+        return None
+    results = interface_results(model, solution, mu_threshold=options.threshold,
+                                tension_tol=options.tension_tol, mu=options.solve.mu)
+    if any(r.tension or (r.friction_exceeded and counts)
+           for r, counts in zip(results, _loaded(model, results, options))):
+        return None
+    return solution, results
+
+
+def feasible_without_tension(model: EquilibriumModel, options: CheckOptions, load=None) -> bool:
     """Whether the solve of ``options`` is feasible without tension under ``load`` (scaled p;
-    default the dead load). The criterion of the tilting test and of the minimum friction;
-    the friction threshold post-check is not part of it."""
+    default the dead load); the friction threshold post-check is not applied. The criterion
+    of the tilting test and of the minimum friction, whose subject is the cone itself."""
     solution = solve(model, options.solve, load=load)
     if not solution.solved:
         return False
@@ -146,12 +125,16 @@ def _report(model, solution, options: CheckOptions, *, sliding: bool = False) ->
     mu = options.solve.mu
     results = interface_results(model, solution, mu_threshold=options.threshold,
                                 tension_tol=options.tension_tol, mu=mu)
+    loaded = _loaded(model, results, options)
     if sliding:
         results = _flag_sliding(results, mu * cone_capacity(options.solve.cone))
+    elif not all(loaded):
+        results = [r if keep or not r.friction_exceeded else replace(r, friction_exceeded=False)
+                   for r, keep in zip(results, loaded)]
     tension = [r for r in results if r.tension]
     friction = [r for r in results if r.friction_exceeded]
     max_tension = float(max(solution.forces[1].max(initial=0.0), 0.0))
-    worst = max((r.friction_ratio for r in results), default=0.0)
+    worst = max((r.friction_ratio for r, keep in zip(results, loaded) if keep), default=0.0)
     unstable = sorted({_moving_block(model, r) for r in tension + friction})
     if tension:
         worst_it = max(tension, key=lambda r: -r.normal_forces.min())
@@ -171,6 +154,22 @@ def _report(model, solution, options: CheckOptions, *, sliding: bool = False) ->
                    f" worst |V|/N {worst:.3f} (mu {mu:.3g})")
     return Report(status == Status.STABLE, status, message, max_tension, worst, 0.0,
                   len(model.blocks), results, unstable)
+
+
+#: With a declared pose uncertainty, the friction ratio counts (worst_friction_ratio, the
+#: threshold post-check) on interfaces carrying at least this share of the mean free block's
+#: weight: the uncertainty makes and breaks contacts that carry next to nothing, and the
+#: |V|/N of a nearly unloaded one is the solver's rounding, up to the cone's limit.
+LOADED_SHARE = 0.01
+
+
+def _loaded(model, results: list[InterfaceResult], options: CheckOptions) -> list[bool]:
+    """Whether each interface's |V|/N counts: all of them on design geometry; with a
+    declared pose uncertainty those with N >= LOADED_SHARE of the mean free block's weight."""
+    if not options.contact.uncertain or not len(model.free):
+        return [True] * len(results)
+    least = LOADED_SHARE * model.force_scale / len(model.free)
+    return [r.normal_resultant >= least for r in results]
 
 
 def _flag_sliding(results: list[InterfaceResult], capacity: float) -> list[InterfaceResult]:

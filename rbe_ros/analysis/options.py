@@ -1,0 +1,56 @@
+"""The one options object of a check: solve, contact detection, validation, hold search.
+
+Every entry point (CLI, node parameters, options stored in a bag) builds a
+:class:`CheckOptions`; the analyses read it and nothing else.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from ..geometry.contacts import ContactOptions
+from ..rbe.solver import SolveOptions
+from ..scene import ValidationLimits
+
+
+@dataclass(frozen=True)
+class HoldSearch:
+    """How an unstable check looks for the smallest set of blocks to hold (suggested_holds;
+    :mod:`rbe_ros.analysis.holds`): exact by increasing size up to ``max_size`` blocks while
+    at most ``max_checks`` sub-assembly checks are spent, then a greedy heuristic that
+    evaluates up to ``greedy_width`` candidates per added block. Counted in checks, not
+    seconds, so that a replay suggests the same holds on any machine. Each trial checks the
+    whole assembly, so assemblies of more than ``max_free_blocks`` free blocks are not
+    searched (the cost grows with the number of components times their size)."""
+
+    enabled: bool = True
+    max_size: int = 3
+    max_checks: int = 40
+    greedy_width: int = 4
+    max_free_blocks: int = 60
+
+    def __post_init__(self):
+        for name in ("max_size", "max_checks", "greedy_width", "max_free_blocks"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise ValueError(f"hold search {name} must be an integer >= 0, not {value!r}")
+
+
+@dataclass(frozen=True)
+class CheckOptions:
+    """Everything that decides a check's result."""
+
+    solve: SolveOptions = field(default_factory=SolveOptions)
+    mu_threshold: float | None = None   # post-check |V| <= mu_threshold N; None: the solve's mu
+    tension_tol: float = 1e-5           # tension counts above this share of the free weight
+    contact: ContactOptions = field(default_factory=ContactOptions)
+    full_solve: bool = False            # sequences: always solve the whole partial assembly
+    holds: HoldSearch = field(default_factory=HoldSearch)   # suggested holds of unstable checks
+    #: Horizontal directions of the stability margin (margin.py); 0: no margin computed.
+    margin_directions: int = 0
+    #: Sane ranges checked before the geometry stage (None: no validation); see validate.py.
+    limits: ValidationLimits | None = field(default_factory=ValidationLimits)
+
+    @property
+    def threshold(self) -> float:
+        """The friction threshold of the post-check: ``mu_threshold``, else the solve's mu."""
+        return self.solve.mu if self.mu_threshold is None else self.mu_threshold

@@ -1,0 +1,59 @@
+"""The steps of an insertion sequence: step k holds the supports, the blocks present before
+the sequence starts, and the first k+1 blocks of the sequence; the scene's holds make blocks
+supports (held) or take temporary supports away at given steps. The one place that says
+which blocks are present at a step."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..scene import Scene
+
+
+@dataclass(frozen=True)
+class Step:
+    index: int
+    block: str                      # "" at the release step after the last placement
+    present: tuple[str, ...]
+    held: tuple[str, ...] = ()      # free blocks checked as supports at this step
+
+
+def step_state(scene: Scene, order, k: int) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """(present, held) at step ``k`` when the free blocks are placed in ``order`` (those not
+    in it are present from the start): supports without a hold always, supports with a hold
+    while it is active, and the free blocks placed by step k, of which those with an active
+    hold are held (in scene order)."""
+    order = list(order)
+    placed = set(order)
+    active = {h.block for h in scene.holds if h.active(k)}
+    supports = set(supports_present(scene, k))
+    base = [b.id for b in scene.blocks
+            if b.id in supports or (not b.support and b.id not in placed)]
+    present = tuple(base + order[:k + 1])
+    here = set(present)
+    held = tuple(b.id for b in scene.blocks if not b.support and b.id in active and b.id in here)
+    return present, held
+
+
+def supports_present(scene: Scene, k: int) -> tuple[str, ...]:
+    """The support blocks present at step ``k``: those without a hold always, those with a
+    hold while it is active (scene order)."""
+    active = {h.block for h in scene.holds if h.active(k)}
+    with_hold = {h.block for h in scene.holds}
+    return tuple(b.id for b in scene.blocks
+                 if b.support and (b.id not in with_hold or b.id in active))
+
+
+def final_state(scene: Scene) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """(present, held) after the last step: every block placed, holds to the end active."""
+    order = [b.id for b in scene.blocks if not b.support]
+    return step_state(scene, order, len(order) + 1)
+
+
+def sequence_steps(scene: Scene) -> list[Step]:
+    """The steps of ``scene.sequence`` (all free blocks in scene order when it is empty),
+    and a release step (nothing placed) when a hold ends after the last placement."""
+    free = [b.id for b in scene.blocks if not b.support]
+    order = list(scene.sequence) or free
+    release = any(h.until_step == len(order) for h in scene.holds)
+    return [Step(k, order[k] if k < len(order) else "", *step_state(scene, order, k))
+            for k in range(len(order) + release)]

@@ -114,4 +114,4 @@ def test_cli_margin_per_step_in_json_and_message_dicts(tmp_path, capsys):
     out = json.loads(capsys.readouterr().out)
     assert out["status"] == "TENSION_REQUIRED" and out["margin_g"] == 0.0
     assert main(["check", str(tipping), "--json"]) == 0
-    assert json.loads(capsys.readouterr().out)["margin_g"] is None      # not computed
+    assert json.loads(capsys.readouterr().out)["margin_g"] is None      # not computed (-1)

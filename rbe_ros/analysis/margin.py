@@ -82,7 +82,7 @@ def _multiplier(model, options: SolveOptions, live: np.ndarray) -> float:
 def annotate_margin(report: Report, assembly: Assembly, options: SolveOptions,
                     directions: int) -> None:
     """Set ``report``'s margin_g and margin_direction over ``directions`` directions (0: leave
-    them unset, NaN); an assembly that does not stand has margin 0."""
+    them unset, margin_g NOT_COMPUTED); an assembly that does not stand has margin 0."""
     if directions <= 0:
         return
     margin = (stability_margin(assembly, options, directions) if report.stable

@@ -13,12 +13,11 @@ identity quaternion), exactly as ``set_message_fields`` would leave it.
 """
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 
 import numpy as np
 
-from ..rbe.result import InterfaceResult, NearContact, Report, Status
+from ..rbe.result import NOT_COMPUTED, InterfaceResult, NearContact, Report, Status
 from ..scene import (BOX_FACES, Hold, Scene, SceneError, blame, box_vertices, make_block,
                      make_scene)
 
@@ -353,7 +352,7 @@ def report_from_dict(d: Mapping) -> Report:
         near_contacts=[NearContact(str(c["block_a"]), str(c["block_b"]), float(c["gap"]),
                                    float(c["overlap_area"])) for c in d.get("near_contacts", [])],
         verdict_sensitive=bool(d.get("verdict_sensitive", False)),
-        margin_g=float(d.get("margin_g", math.nan)),
+        margin_g=float(d.get("margin_g", NOT_COMPUTED)),
         margin_direction=np.array(_xyz(d.get("margin_direction", {}), "margin_direction"),
                                   dtype=float),
     )

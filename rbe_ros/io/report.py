@@ -37,7 +37,7 @@ def report_json(report: Report) -> dict:
            "near_contacts": [{"block_a": c.block_a, "block_b": c.block_b, "gap": c.gap,
                               "overlap_area": c.overlap_area} for c in report.near_contacts],
            "verdict_sensitive": report.verdict_sensitive,
-           "margin_g": json_number(report.margin_g),
+           "margin_g": report.margin_g if report.margin_g >= 0 else None,
            "margin_direction": report.margin_direction.tolist(),
            "interfaces": [interface_json(r) for r in report.interfaces]}
     if report.step_index >= 0:
@@ -56,7 +56,7 @@ def hold_note(r: Report) -> str:
 def format_table(reports: list[Report]) -> str:
     """One row per report: step, block, verdict, max tension, worst |V|/N, time and reason;
     the reason notes the blocks held at the step and, when unstable, the ones to hold."""
-    margin = any(math.isfinite(r.margin_g) for r in reports)
+    margin = any(r.margin_g >= 0 for r in reports)
     head = ("step", "block", "verdict", "max tension N", "worst |V|/N", "solve ms") \
         + ("margin g",) * margin + ("reason",)
     rows = [head]

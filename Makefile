@@ -73,6 +73,12 @@ bags: setup
 scaling: setup
 	$(PY) benchmarks/scaling.py
 
+# Cost of the shape analysis of large meshes and the check time limit: docs/BOUNDED_CHECKS.md
+# (about a minute).
+.PHONY: bounded
+bounded: setup
+	$(PY) benchmarks/bounded_checks.py
+
 # Regenerate requirements/ros.txt and requirements/py.txt from the .in files
 # (resolves with pip, installs nothing; needs CPython 3.11 as python3).
 lock:

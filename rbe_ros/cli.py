@@ -76,8 +76,9 @@ def _solver_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--tension-tol", type=float, default=1e-5,
                    help="tension counts above this share of the free weight")
     g.add_argument("--time-limit", type=float, default=0.0, metavar="S",
-                   help="time limit of each solver call in s (check: a check makes one to "
-                   "three); over it the verdict is SOLVER_FAILED (default 0: none)")
+                   help="time limit in s of each check (a sequence: of each step), geometry "
+                   "included; over it the verdict is SOLVER_FAILED naming the stage (default "
+                   "0: none)")
     g.add_argument("--margin", action="store_true",
                    help="report margin_g: the smallest horizontal acceleration (share of g) "
                    f"that topples or slides each checked assembly, over {DEFAULT_DIRECTIONS} "

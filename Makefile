@@ -15,8 +15,10 @@ setup:
 
 demo: setup
 	$(VENV)/bin/rbe-ros check examples/build_sequence.json --sequence --bag out/demo --force
+	$(VENV)/bin/rbe-ros view out/demo -o out/demo/report.html
+	@echo "[demo] open out/demo/report.html in a browser (3D view, step slider, table of steps)"
 
-test: setup
+test: setup browser
 	@echo "[test] ROS_DOMAIN_ID=$(ROS_DOMAIN_ID) ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST"
 	ROS_DOMAIN_ID=$(ROS_DOMAIN_ID) ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST \
 		$(PY) -m pytest tests -q
@@ -35,13 +37,26 @@ paper: setup
 # Speed against accuracy against compas_cra, PyBullet and MuJoCo: docs/BENCHMARKS.md and
 # docs/bench/ (20-30 minutes). The physics engines go into .venv (requirements/bench.txt,
 # checked with pip check); compas-cra into a scratch venv (RBE_COMPAS_VENV, default
-# /tmp/rbe-compas-venv). make bench BENCH_ARGS=--quick: a subset in under 3 minutes,
+# .venv-compas, made by make setup). make bench BENCH_ARGS=--quick: a subset in under 3 minutes,
 # written to out/bench-quick/.
 .PHONY: bench
 bench: setup
 	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements/bench.txt
 	$(PY) -m pip check --disable-pip-version-check
 	$(PY) benchmarks/bench.py $(BENCH_ARGS)
+
+# Mutation score of the core (rbe/, geometry/, the verdict) with a fast test selection:
+# docs/MUTATION.md (scripts/mutation.py; mutmut into .venv from requirements/mutation.txt,
+# checked with pip check; 1-2 hours on 2 busy cores, niced; reruns test only what changed).
+# make planted-bugs: the planted bugs of issue 17, each with the tests that catch it.
+.PHONY: mutation planted-bugs
+mutation: setup
+	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements/mutation.txt
+	$(PY) -m pip check --disable-pip-version-check
+	nice -n 10 $(PY) scripts/mutation.py $(MUTATION_ARGS)
+
+planted-bugs: setup
+	nice -n 10 $(PY) scripts/planted_bugs.py
 
 # Re-record the regression bags of bags/ (deterministic: same code, same files; ~30 s).
 bags: setup
@@ -51,10 +66,26 @@ bags: setup
 scaling: setup
 	$(PY) benchmarks/scaling.py
 
+# Cost of the shape analysis of large meshes and the check time limit: docs/BOUNDED_CHECKS.md
+# (about a minute).
+.PHONY: bounded
+bounded: setup
+	$(PY) benchmarks/bounded_checks.py
+
 # Regenerate requirements/ros.txt and requirements/py.txt from the .in files
 # (resolves with pip, installs nothing; needs CPython 3.11 as python3).
 lock:
 	python3 scripts/lock.py
 
+# Headless Chromium for the HTML view's browser test (Debian's chromium, chromium-driver;
+# apt-get as root or with sudo; seconds when already installed).
+.PHONY: browser screenshot
+browser:
+	bash scripts/setup_browser.sh
+
+# The README's screenshot of the HTML view, docs/view.png, taken in headless Chromium.
+screenshot: setup browser
+	$(PY) scripts/view_screenshot.py
+
 clean:
-	rm -rf build $(VENV)
+	rm -rf build $(VENV) .venv-compas

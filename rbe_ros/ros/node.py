@@ -19,7 +19,7 @@ Interfaces (relative to the node, e.g. ``/rbe_node/report``):
 Bad input never stops the node: a state that cannot be checked (outside the limits of
 :class:`rbe_ros.scene.ValidationLimits`, ``max_blocks`` among them) gives a report with status
 INVALID_INPUT and the reason, a solver failure or a solve over ``check_time_limit`` gives
-SOLVER_FAILED with the solver's status, and any other error in a callback is logged and gives
+SOLVER_FAILED naming the solver's status or the stage, and any other error in a callback is logged and gives
 SOLVER_FAILED with the exception text. With ``mcap_path`` set, every checked state and every
 report is recorded (CDR, receive/publish time) in a rosbag2 MCAP bag, each message flushed
 before the report is published (a report seen on DDS is on disk, even after SIGKILL); the bag
@@ -154,9 +154,9 @@ PARAMETERS = {
         "every report too (false: a lean log of states and reports)")),
     "max_blocks": _integer(ValidationLimits().max_blocks, "largest number of blocks of a state; "
                            "a larger one gets an INVALID_INPUT report", 1, 1_000_000),
-    "check_time_limit": _double(0.0, "time limit in s of each solver call of a check (a check "
-                                "makes one to three); over it the report is SOLVER_FAILED "
-                                "(MaxTime). 0: no limit", 0.0, 3600.0),
+    "check_time_limit": _double(0.0, "time limit in s of each check (of each step of a "
+                                "sequence), geometry included; over it the report is "
+                                "SOLVER_FAILED naming the stage. 0: no limit", 0.0, 3600.0),
     "full_solve": (False, ParameterDescriptor(
         type=ParameterType.PARAMETER_BOOL, description="sequences: solve every step's whole "
         "assembly instead of local models (a report's model field says which answered)")),

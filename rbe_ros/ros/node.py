@@ -54,6 +54,7 @@ from rbe_msgs.msg import AssemblyState, BlockPoses, StabilityReport
 from rbe_msgs.srv import CheckAssembly
 from visualization_msgs.msg import MarkerArray
 
+from ..analysis.margin import DEFAULT_DIRECTIONS
 from ..analysis.options import CheckOptions, HoldSearch
 from ..analysis.pipeline import StateCheck, check_state
 from ..geometry.contacts import ContactOptions
@@ -157,6 +158,11 @@ PARAMETERS = {
     "check_time_limit": _double(0.0, "time limit in s of each check (of each step of a "
                                 "sequence), geometry included; over it the report is "
                                 "SOLVER_FAILED naming the stage. 0: no limit", 0.0, 3600.0),
+    "compute_margin": (False, ParameterDescriptor(
+        type=ParameterType.PARAMETER_BOOL, description="reports carry margin_g: the smallest "
+        "horizontal acceleration (share of g) that topples or slides the checked assembly, over "
+        f"{DEFAULT_DIRECTIONS} directions, and margin_direction (about one solve per "
+        "direction)")),
     "full_solve": (False, ParameterDescriptor(
         type=ParameterType.PARAMETER_BOOL, description="sequences: solve every step's whole "
         "assembly instead of local models (a report's model field says which answered)")),
@@ -299,6 +305,7 @@ class RbeNode(Node):
         return CheckOptions(solve=solve, mu_threshold=threshold if threshold > 0 else None,
                             tension_tol=float(value("tension_tolerance")),
                             limits=self.limits(), full_solve=bool(value("full_solve")),
+                            margin_directions=DEFAULT_DIRECTIONS if value("compute_margin") else 0,
                             contact=ContactOptions(
                                 distance_tol=float(value("contact_distance_tolerance")),
                                 angle_tol_deg=float(value("contact_angle_tolerance_deg")),

@@ -7,12 +7,14 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from ..deadline import CheckTimeout, stage, time_budget
 from ..rbe.result import Report, Status
 from ..scene import Scene, SceneError
 from .asbuilt import annotate_sensitivity, declared
 from .assembly import Assembly
 from .holds import annotate_holds
 from .incremental import StepChecker
+from .margin import annotate_margin
 from .options import CheckOptions
 from .steps import final_state, sequence_steps
 from .validate import validated_assembly
@@ -27,17 +29,28 @@ def check_scene(scene: Scene, options: CheckOptions = CheckOptions(),
     With holds, the assembly is the state after the last step: supports whose hold ends are
     taken away, free blocks held to the end are supports (``held_blocks``). An unstable
     report names the smallest set of blocks to hold (``suggested_holds``, see
-    :class:`~rbe_ros.analysis.options.HoldSearch`)."""
+    :class:`~rbe_ros.analysis.options.HoldSearch`). The whole check, geometry included, is
+    bounded by the solve options' ``time_limit``: over it, the report is SOLVER_FAILED
+    naming the stage (:func:`timeout_report`)."""
     start = time.perf_counter()
     options = declared(options, scene)
-    assembly = validated_assembly(scene, options.limits, options.contact, assembly)
-    held: tuple[str, ...] = ()
-    if scene.holds:
-        present, held = final_state(scene)
-        assembly = assembly.subset(present, held)
-    report = check(assembly, options)
-    annotate_sensitivity(report, assembly, options)
-    annotate_holds(report, assembly, held, options)
+    try:
+        with time_budget(options.solve.time_limit):
+            assembly = validated_assembly(scene, options.limits, options.contact, assembly)
+            held: tuple[str, ...] = ()
+            if scene.holds:
+                present, held = final_state(scene)
+                assembly = assembly.subset(present, held)
+            with stage("solve"):
+                report = check(assembly, options)
+            with stage("sensitivity"):
+                annotate_sensitivity(report, assembly, options)
+            with stage("hold search"):
+                annotate_holds(report, assembly, held, options)
+            with stage("margin"):
+                annotate_margin(report, assembly, options.solve, options.margin_directions)
+    except CheckTimeout as exc:
+        report = timeout_report(exc)
     report.solve_time = time.perf_counter() - start
     return report
 
@@ -48,23 +61,44 @@ def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
     """One report per step, in order. Contacts are detected once on the whole scene.
 
     ``on_step(report, total)`` is called after each step; when ``cancelled()`` turns true
-    the reports so far are returned.
+    the reports so far are returned. The solve options' ``time_limit`` bounds each step, and
+    the contact detection on the whole scene: a step over it is SOLVER_FAILED naming the
+    stage, and the sequence goes on; contacts over it make every step's report SOLVER_FAILED.
     """
     start = time.perf_counter()
     options = declared(options, scene)
-    full = validated_assembly(scene, options.limits, options.contact)
-    contact_time = time.perf_counter() - start
     steps = sequence_steps(scene)
+    limit = options.solve.time_limit
+    try:
+        with time_budget(limit):
+            full = validated_assembly(scene, options.limits, options.contact)
+    except CheckTimeout as exc:
+        full, geometry_timeout = None, exc
+    contact_time = time.perf_counter() - start
     checker = StepChecker(options, local=not options.full_solve)
     reports = []
     for step in steps:
         if cancelled is not None and cancelled():
             break
-        assembly = full.subset(step.present, step.held)
-        report = checker.check(assembly)
+        step_start = time.perf_counter()
+        try:
+            if full is None:
+                raise geometry_timeout
+            assembly = full.subset(step.present, step.held)
+            with time_budget(limit):
+                with stage("solve"):
+                    report = checker.check(assembly)
+                with stage("sensitivity"):
+                    annotate_sensitivity(report, assembly, options)
+                with stage("hold search"):
+                    annotate_holds(report, assembly, step.held, options)
+                with stage("margin"):
+                    annotate_margin(report, assembly, options.solve, options.margin_directions)
+        except CheckTimeout as exc:
+            report = timeout_report(exc)
+            report.num_blocks = len(step.present)
+            report.solve_time = time.perf_counter() - step_start
         report.step_index, report.block_placed = step.index, step.block
-        annotate_sensitivity(report, assembly, options)
-        annotate_holds(report, assembly, step.held, options)
         report.solve_time += contact_time / len(steps)
         reports.append(report)
         if on_step is not None:
@@ -74,6 +108,11 @@ def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
 
 def first_failing_step(reports: list[Report]) -> int:
     return next((r.step_index for r in reports if not r.stable), -1)
+
+
+def timeout_report(exc: CheckTimeout) -> Report:
+    """The report of a check stopped at its time limit."""
+    return Report(False, Status.SOLVER_FAILED, f"solver failed: {exc}")
 
 
 def error_report(exc: Exception) -> Report:

@@ -19,7 +19,7 @@ Interfaces (relative to the node, e.g. ``/rbe_node/report``):
 Bad input never stops the node: a state that cannot be checked (outside the limits of
 :class:`rbe_ros.scene.ValidationLimits`, ``max_blocks`` among them) gives a report with status
 INVALID_INPUT and the reason, a solver failure or a solve over ``check_time_limit`` gives
-SOLVER_FAILED with the solver's status, and any other error in a callback is logged and gives
+SOLVER_FAILED naming the solver's status or the stage, and any other error in a callback is logged and gives
 SOLVER_FAILED with the exception text. With ``mcap_path`` set, every checked state and every
 report is recorded (CDR, receive/publish time) in a rosbag2 MCAP bag, each message flushed
 before the report is published (a report seen on DDS is on disk, even after SIGKILL); the bag
@@ -54,12 +54,14 @@ from rbe_msgs.msg import AssemblyState, BlockPoses, StabilityReport
 from rbe_msgs.srv import CheckAssembly
 from visualization_msgs.msg import MarkerArray
 
+from ..analysis.margin import DEFAULT_DIRECTIONS
 from ..analysis.options import CheckOptions, HoldSearch
 from ..analysis.pipeline import StateCheck, check_state
 from ..geometry.contacts import ContactOptions
 from ..io import cdr
 from ..io.bag import BagWriter, typestore
 from ..io.inputs import load_design
+from ..io.foxglove_scene import SceneServer
 from ..io.markers import MARKER_TYPE, run_markers, step_markers
 from ..io.messages import report_header, report_to_dict, state_to_dict
 from ..io.poses import AsBuilt
@@ -149,14 +151,26 @@ PARAMETERS = {
                          "a timestamp suffix", read_only=True),
     "frame_id": _string("world", "frame of reports and markers when a received state has an "
                         "empty header frame_id"),
+    "foxglove_port": (0, ParameterDescriptor(
+        type=ParameterType.PARAMETER_INTEGER, read_only=True,
+        description="TCP port of a Foxglove WebSocket server sending the markers of every "
+        "report as SceneUpdates on /rbe_node/scene (foxglove-sdk); 0: no server",
+        integer_range=[IntegerRange(from_value=0, to_value=65535, step=1)])),
+    "foxglove_host": _string("127.0.0.1", "address the Foxglove WebSocket server listens on "
+                             "(0.0.0.0: every interface)", read_only=True),
     "record_markers": (True, ParameterDescriptor(
         type=ParameterType.PARAMETER_BOOL, description="with mcap_path: record the markers of "
         "every report too (false: a lean log of states and reports)")),
     "max_blocks": _integer(ValidationLimits().max_blocks, "largest number of blocks of a state; "
                            "a larger one gets an INVALID_INPUT report", 1, 1_000_000),
-    "check_time_limit": _double(0.0, "time limit in s of each solver call of a check (a check "
-                                "makes one to three); over it the report is SOLVER_FAILED "
-                                "(MaxTime). 0: no limit", 0.0, 3600.0),
+    "check_time_limit": _double(0.0, "time limit in s of each check (of each step of a "
+                                "sequence), geometry included; over it the report is "
+                                "SOLVER_FAILED naming the stage. 0: no limit", 0.0, 3600.0),
+    "compute_margin": (False, ParameterDescriptor(
+        type=ParameterType.PARAMETER_BOOL, description="reports carry margin_g: the smallest "
+        "horizontal acceleration (share of g) that topples or slides the checked assembly, over "
+        f"{DEFAULT_DIRECTIONS} directions, and margin_direction (about one solve per "
+        "direction)")),
     "full_solve": (False, ParameterDescriptor(
         type=ParameterType.PARAMETER_BOOL, description="sequences: solve every step's whole "
         "assembly instead of local models (a report's model field says which answered)")),
@@ -260,6 +274,11 @@ class RbeNode(Node):
         self.poses_topic = self._poses_sub.topic_name
         self.marker_topic = self._marker_pub.topic_name
         self._open_bag()
+        self.foxglove = None
+        if self.get_parameter("foxglove_port").value:
+            self.foxglove = SceneServer(self.get_parameter("foxglove_port").value,
+                                        self.get_parameter("foxglove_host").value, NODE_NAME)
+            self.get_logger().info(f"Foxglove WebSocket server on port {self.foxglove.port}")
         self._worker = threading.Thread(target=self._work, name="rbe_state_worker", daemon=True)
         self._worker.start()
         if self.get_parameter("design_file").value:
@@ -299,6 +318,7 @@ class RbeNode(Node):
         return CheckOptions(solve=solve, mu_threshold=threshold if threshold > 0 else None,
                             tension_tol=float(value("tension_tolerance")),
                             limits=self.limits(), full_solve=bool(value("full_solve")),
+                            margin_directions=DEFAULT_DIRECTIONS if value("compute_margin") else 0,
                             contact=ContactOptions(
                                 distance_tol=float(value("contact_distance_tolerance")),
                                 angle_tol_deg=float(value("contact_angle_tolerance_deg")),
@@ -384,6 +404,9 @@ class RbeNode(Node):
                 self.get_logger().warning("the state worker is still checking; closing anyway")
         with self._bag_lock:
             self._close_bag_locked()
+        server, self.foxglove = self.foxglove, None
+        if server is not None:
+            server.stop()
         if self._destroyed:
             return
         self._destroyed = True
@@ -416,6 +439,8 @@ class RbeNode(Node):
         else:
             [markers] = run_markers(self._drawable(state), [report_to_dict(report, header)],
                                     self.check_options())
+        if self.foxglove is not None:
+            self.foxglove.publish(markers)
         markers = self._encode_markers(markers)
         if self.get_parameter("record_markers").value:
             self._record(self.marker_topic, markers)

@@ -111,9 +111,9 @@ def run(modules: list[str], children: int, sample: float = 1.0) -> None:
     env = {**os.environ, "HYPOTHESIS_PROFILE": "mutation", "OPENBLAS_NUM_THREADS": "1",
            "OMP_NUM_THREADS": "1"}
     mutmut = [str(MUTMUT), "run", "--max-children", str(children)]
-    names = _module_names(modules[-1])
-    if sample < 1.0 and not names:        # the mutants are made by a first run
-        subprocess.run(mutmut + [names_pattern(modules[-1])], cwd=WORK, env=env, check=False,
+    smallest = min(modules, key=lambda m: (ROOT / m).stat().st_size)
+    if sample < 1.0 and not _module_names(smallest):   # the mutants are made by a first run
+        subprocess.run(mutmut + [names_pattern(smallest)], cwd=WORK, env=env, check=False,
                        stdout=subprocess.DEVNULL)
     for module in modules:
         print(f"[mutation] {module}", flush=True)

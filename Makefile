@@ -45,6 +45,13 @@ bench: setup
 	$(PY) -m pip check --disable-pip-version-check
 	$(PY) benchmarks/bench.py $(BENCH_ARGS)
 
+# As-built noise suite: perturbed poses under the declared uncertainty, the design rule with
+# raised tolerances and today's defaults; docs/ASBUILT.md and docs/figures/asbuilt.png
+# (about 15 minutes; make asbuilt ASBUILT_ARGS=--quick: 10 samples, out/asbuilt-quick/).
+.PHONY: asbuilt
+asbuilt: setup
+	$(PY) benchmarks/asbuilt.py $(ASBUILT_ARGS)
+
 # Mutation score of the core (rbe/, geometry/, the verdict) with a fast test selection:
 # docs/MUTATION.md (scripts/mutation.py; mutmut into .venv from requirements/mutation.txt,
 # checked with pip check; 1-2 hours on 2 busy cores, niced; reruns test only what changed).

@@ -29,7 +29,6 @@ from .analysis.validate import validated_assembly
 from .analysis.verdict import check
 from .analysis.virtual import ANALYSES, virtual_assembly
 from .generators import GENERATORS
-from .geometry.contacts import ContactOptions
 from .io.figures import draw_report
 from .io.messages import header_dict, report_to_dict, state_to_dict
 from .io.replay import (REPORT_TOPIC, STATE_TOPIC, Run, bag_options, default_output,
@@ -37,12 +36,10 @@ from .io.replay import (REPORT_TOPIC, STATE_TOPIC, Run, bag_options, default_out
 from .io.report import format_table, json_number, report_json
 from .io.view import ViewRun, checked_runs, write_html
 from .io.scene_json import scene_to_dict
-from .rbe.cones import CONES
-from .rbe.solver import SolveOptions
 from .io.inputs import load_design
 from .io.poses import load_poses, scene_at_poses
 from .io.stored_interfaces import compare_interfaces
-from .scene import Scene, SceneError, ValidationLimits
+from .scene import Scene, SceneError
 
 
 def _input_arguments(parser: argparse.ArgumentParser) -> None:

@@ -21,6 +21,7 @@ from functools import reduce
 from ..rbe.cones import CONES, FRICTION_MODELS
 from ..rbe.solver import OBJECTIVES
 from ..scene import ValidationLimits
+from .margin import DEFAULT_DIRECTIONS
 from .options import CheckOptions
 
 NONE, INFINITE = "none", "inf"
@@ -38,6 +39,7 @@ class Option:
     low_open: bool = False      # low itself excluded
     choices: tuple[str, ...] = ()
     zero: str | None = None     # NONE or INFINITE: the core value that an outer 0 stands for
+    true_as: int | None = None  # a bool outside for an integer inside: true is this, false 0
     stored: bool = True         # in the options stored in bags (a replay checks with them)
     metavar: str | None = None
 
@@ -51,12 +53,16 @@ class Option:
         value = self.get(options)
         if self.zero is not None and (value is None or value == math.inf):
             return self.kind(0)
+        if self.true_as is not None:
+            return value != 0
         return value
 
     def inner(self, value):
         """The core value of an outer ``value``."""
         if self.zero is not None and value == 0:
             return None if self.zero == NONE else math.inf
+        if self.true_as is not None:
+            return self.true_as if value else 0
         return self.kind(value)
 
     def get(self, options: CheckOptions):
@@ -121,6 +127,10 @@ OPTIONS: tuple[Option, ...] = (
            "sequence), geometry included; over it the report is SOLVER_FAILED naming the "
            "stage; 0: none", "--time-limit", "check_time_limit", 0.0, 3600.0, zero=INFINITE,
            stored=False, metavar="S"),
+    Option("margin_directions", bool, "reports carry margin_g: the smallest horizontal "
+           "acceleration (share of g) that topples or slides the checked assembly, over "
+           f"{DEFAULT_DIRECTIONS} directions, and margin_direction (about one solve per "
+           "direction)", "--margin", "compute_margin", true_as=DEFAULT_DIRECTIONS),
     Option("full_solve", bool, "sequences: solve every step's whole assembly instead of local "
            "models (a report's model field says which answered)", "--full-solve",
            "full_solve"),
@@ -207,8 +217,10 @@ def from_json(text: str, base: CheckOptions = CheckOptions()) -> CheckOptions:
 
 def node_parameters(options: CheckOptions) -> dict[str, object]:
     """rbe_node parameters for ``options`` (ValueError naming what the node cannot be set to:
-    options without a parameter that differ from the default)."""
-    bad = [o.path for o in OPTIONS if o.param is None and o.get(options) != o.get(CheckOptions())]
+    options without a parameter that differ from the default, values a parameter cannot
+    express)."""
+    bad = [o.path for o in OPTIONS if o.get(options) != (
+        o.get(CheckOptions()) if o.param is None else o.inner(o.outer(options)))]
     if bad:
         raise ValueError(f"rbe_node has no parameters for {', '.join(bad)}: replay offline")
     return {o.param: o.outer(options) for o in OPTIONS if o.param}

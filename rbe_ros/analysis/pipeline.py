@@ -14,6 +14,7 @@ from .asbuilt import annotate_sensitivity, declared
 from .assembly import Assembly
 from .holds import annotate_holds
 from .incremental import StepChecker
+from .margin import annotate_margin
 from .options import CheckOptions
 from .steps import final_state, sequence_steps
 from .validate import validated_assembly
@@ -46,6 +47,8 @@ def check_scene(scene: Scene, options: CheckOptions = CheckOptions(),
                 annotate_sensitivity(report, assembly, options)
             with stage("hold search"):
                 annotate_holds(report, assembly, held, options)
+            with stage("margin"):
+                annotate_margin(report, assembly, options.solve, options.margin_directions)
     except CheckTimeout as exc:
         report = timeout_report(exc)
     report.solve_time = time.perf_counter() - start
@@ -89,6 +92,8 @@ def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
                     annotate_sensitivity(report, assembly, options)
                 with stage("hold search"):
                     annotate_holds(report, assembly, step.held, options)
+                with stage("margin"):
+                    annotate_margin(report, assembly, options.solve, options.margin_directions)
         except CheckTimeout as exc:
             report = timeout_report(exc)
             report.num_blocks = len(step.present)

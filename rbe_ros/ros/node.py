@@ -350,7 +350,8 @@ class RbeNode(Node):
 
     def _drawable(self, state: AssemblyState) -> dict:
         """The message dict of an unchecked ``state`` to draw, if within the block limit."""
-        return message_to_dict(state) if len(state.blocks) <= self.check_options().limits.max_blocks else {}
+        within = len(state.blocks) <= self.get_parameter("max_blocks").value
+        return message_to_dict(state) if within else {}
 
     def check(self, state: AssemblyState, header: dict, sequence: bool, *,
               cancelled=None, on_step=None) -> tuple[StateCheck, list[bytes]]:

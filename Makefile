@@ -18,7 +18,7 @@ demo: setup
 	$(VENV)/bin/rbe-ros view out/demo -o out/demo/report.html
 	@echo "[demo] open out/demo/report.html in a browser (3D view, step slider, table of steps)"
 
-test: setup browser
+test: setup browser ray
 	@echo "[test] ROS_DOMAIN_ID=$(ROS_DOMAIN_ID) ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST"
 	ROS_DOMAIN_ID=$(ROS_DOMAIN_ID) ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST \
 		$(PY) -m pytest tests -q
@@ -86,6 +86,13 @@ lock:
 
 # Headless Chromium for the HTML view's browser test (Debian's chromium, chromium-driver;
 # apt-get as root or with sudo; seconds when already installed).
+# Ray for `rbe-ros robust --ray` and its test (tests/test_robust.py): the optional
+# requirements/ray.txt, installed into .venv and checked beside the ROS wheels.
+.PHONY: ray
+ray: setup
+	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements/ray.txt
+	$(PY) -m pip check --disable-pip-version-check
+
 .PHONY: browser screenshot
 browser:
 	bash scripts/setup_browser.sh

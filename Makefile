@@ -44,6 +44,7 @@ bench: setup
 	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements/bench.txt
 	$(PY) -m pip check --disable-pip-version-check
 	$(PY) benchmarks/bench.py $(BENCH_ARGS)
+	$(MAKE) bench-margin
 
 # As-built noise suite: perturbed poses under the declared uncertainty, the design rule with
 # raised tolerances and today's defaults; docs/ASBUILT.md and docs/figures/asbuilt.png
@@ -86,6 +87,12 @@ lock:
 
 # Headless Chromium for the HTML view's browser test (Debian's chromium, chromium-driver;
 # apt-get as root or with sudo; seconds when already installed).
+# Cost of margin_g against a check, Monte Carlo throughput of 2 workers and of a local
+# 2-CPU Ray against one process: docs/MARGIN.md (a few minutes; also run by make bench).
+.PHONY: bench-margin
+bench-margin: ray
+	$(PY) benchmarks/margin.py
+
 # Ray for `rbe-ros robust --ray` and its test (tests/test_robust.py): the optional
 # requirements/ray.txt, installed into .venv and checked beside the ROS wheels.
 .PHONY: ray

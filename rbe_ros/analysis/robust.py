@@ -15,7 +15,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..scene import Scene
+from ..scene import Scene, SceneError
 from .options import CheckOptions, HoldSearch
 from .perturb import PoseNoise, perturb_scene
 from .pipeline import check_scene, check_sequence
@@ -62,7 +62,7 @@ def wilson_interval(successes: int, n: int, z: float = Z95) -> tuple[float, floa
     p = successes / n
     centre = (p + z * z / (2 * n)) / (1 + z * z / n)
     half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return (max(0.0, centre - half), min(1.0, centre + half))
+    return (0.0 if successes == 0 else centre - half, 1.0 if successes == n else centre + half)
 
 
 def sample_options(job: RobustJob) -> CheckOptions:
@@ -98,14 +98,20 @@ def _distance(design: Scene, sample: Scene, noise: PoseNoise) -> float:
 def run_batch(job: RobustJob, indices: Iterable[int]) -> list[SampleResult]:
     """Check the samples ``indices`` (the unit of work an executor runs)."""
     options = sample_options(job)
+    count = len(sequence_steps(job.scene)) if job.sequence else 0
     out = []
     for k in indices:
         scene = sample_scene(job, k)
-        if job.sequence:
-            steps = tuple(r.stable for r in check_sequence(scene, options))
-            stands = all(steps)
-        else:
-            steps, stands = (), check_scene(scene, options).stable
+        try:
+            if job.sequence:
+                steps = tuple(r.stable for r in check_sequence(scene, options))
+                stands = all(steps)
+            else:
+                steps, stands = (), check_scene(scene, options).stable
+        except SceneError:
+            # blocks that interpenetrate beyond the declared uncertainty: a placement the
+            # robot could not have made, counted as failing at every step
+            steps, stands = (False,) * count, False
         out.append(SampleResult(k, stands, steps, _distance(job.scene, scene, job.noise)))
     return out
 

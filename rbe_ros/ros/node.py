@@ -61,6 +61,7 @@ from ..geometry.contacts import ContactOptions
 from ..io import cdr
 from ..io.bag import BagWriter, typestore
 from ..io.inputs import load_design
+from ..io.foxglove_scene import SceneServer
 from ..io.markers import MARKER_TYPE, run_markers, step_markers
 from ..io.messages import report_header, report_to_dict, state_to_dict
 from ..io.poses import AsBuilt
@@ -150,6 +151,13 @@ PARAMETERS = {
                          "a timestamp suffix", read_only=True),
     "frame_id": _string("world", "frame of reports and markers when a received state has an "
                         "empty header frame_id"),
+    "foxglove_port": (0, ParameterDescriptor(
+        type=ParameterType.PARAMETER_INTEGER, read_only=True,
+        description="TCP port of a Foxglove WebSocket server sending the markers of every "
+        "report as SceneUpdates on /rbe_node/scene (foxglove-sdk); 0: no server",
+        integer_range=[IntegerRange(from_value=0, to_value=65535, step=1)])),
+    "foxglove_host": _string("127.0.0.1", "address the Foxglove WebSocket server listens on "
+                             "(0.0.0.0: every interface)", read_only=True),
     "record_markers": (True, ParameterDescriptor(
         type=ParameterType.PARAMETER_BOOL, description="with mcap_path: record the markers of "
         "every report too (false: a lean log of states and reports)")),
@@ -266,6 +274,11 @@ class RbeNode(Node):
         self.poses_topic = self._poses_sub.topic_name
         self.marker_topic = self._marker_pub.topic_name
         self._open_bag()
+        self.foxglove = None
+        if self.get_parameter("foxglove_port").value:
+            self.foxglove = SceneServer(self.get_parameter("foxglove_port").value,
+                                        self.get_parameter("foxglove_host").value, NODE_NAME)
+            self.get_logger().info(f"Foxglove WebSocket server on port {self.foxglove.port}")
         self._worker = threading.Thread(target=self._work, name="rbe_state_worker", daemon=True)
         self._worker.start()
         if self.get_parameter("design_file").value:
@@ -391,6 +404,9 @@ class RbeNode(Node):
                 self.get_logger().warning("the state worker is still checking; closing anyway")
         with self._bag_lock:
             self._close_bag_locked()
+        server, self.foxglove = self.foxglove, None
+        if server is not None:
+            server.stop()
         if self._destroyed:
             return
         self._destroyed = True
@@ -423,6 +439,8 @@ class RbeNode(Node):
         else:
             [markers] = run_markers(self._drawable(state), [report_to_dict(report, header)],
                                     self.check_options())
+        if self.foxglove is not None:
+            self.foxglove.publish(markers)
         markers = self._encode_markers(markers)
         if self.get_parameter("record_markers").value:
             self._record(self.marker_topic, markers)

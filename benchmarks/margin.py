@@ -16,10 +16,11 @@ import argparse
 import time
 from pathlib import Path
 
+import ray
 from machine import machine_summary
 
 from rbe_ros import generators as gen
-from rbe_ros.analysis.executors import process_pool, ray_cluster
+from rbe_ros.analysis.executors import ProcessPool, ray_cluster
 from rbe_ros.analysis.margin import stability_margin
 from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.analysis.perturb import PoseNoise
@@ -57,19 +58,20 @@ def throughput_rows(samples: int, repeats: int) -> list[str]:
     job = RobustJob(gen.two_blocks(shift=0.45), PoseNoise(0.02, 1.0), 1, CheckOptions())
     job_seq = RobustJob(gen.stack(6, height=0.3), PoseNoise(0.01, 1.0), 1, CheckOptions(), True)
     rows = []
+    pool, on_ray = ProcessPool(2), ray_cluster(None, num_cpus=2)
+    for j in (job, job_seq):                         # start the workers first
+        for executor in (pool, on_ray):
+            estimate(j, 8, executor, 4)
     for label, j in (("two blocks, whole", job), ("tower of 6, per step", job_seq)):
         t_one = best(lambda: estimate(j, samples, serial, 16), repeats)
-        t_pool = best(lambda: estimate(j, samples, process_pool(2), 16), repeats)
-        executor = ray_cluster(None, num_cpus=2)
-        estimate(j, 8, executor, 4)                  # start Ray and its workers first
-        t_ray = best(lambda: estimate(j, samples, executor, 16), repeats)
-        results = {estimate(j, samples, e, 16).p_stable
-                   for e in (serial, process_pool(2), executor)}
-        import ray
-        ray.shutdown()
+        t_pool = best(lambda: estimate(j, samples, pool, 16), repeats)
+        t_ray = best(lambda: estimate(j, samples, on_ray, 16), repeats)
+        results = {estimate(j, samples, e, 16).p_stable for e in (serial, pool, on_ray)}
         rows.append(f"| {label} | {samples} | {samples / t_one:.0f} | {samples / t_pool:.0f} | "
                     f"{t_one / t_pool:.2f}x | {samples / t_ray:.0f} | {t_pool / t_ray:.2f} | "
                     f"{'yes' if len(results) == 1 else 'NO'} |")
+    pool.close()
+    ray.shutdown()
     return rows
 
 
@@ -98,7 +100,7 @@ def main() -> None:
         "planes for the exact cone on that LP (they wander over degenerate faces).", "",
         "## Monte Carlo throughput (samples per second)", "",
         "In-process against a spawned pool of 2 worker processes and Ray tasks on a local "
-        "2-CPU Ray instance (started before timing), batches of 16 samples; the p_stable of "
+        "2-CPU Ray instance (both started and warmed up before timing), batches of 16 samples; the p_stable of "
         "the three must be equal (seed per sample).", "",
         "| study | samples | 1 process /s | 2 workers /s | pool / one | Ray /s | Ray / pool | "
         "same p_stable |", "|---|---|---|---|---|---|---|---|", *throughput, "",

@@ -23,7 +23,7 @@ from .analysis.friction import minimum_friction
 from .analysis.margin import DEFAULT_DIRECTIONS
 from .analysis.options import CheckOptions, HoldSearch
 from .analysis.pipeline import check_scene, check_sequence, first_failing_step
-from .analysis.executors import process_pool, ray_cluster
+from .analysis.executors import ProcessPool, ray_cluster
 from .analysis.perturb import PoseNoise
 from .analysis.planning import plan_sequence
 from .analysis.robust import RobustJob, estimate, sample_scene, serial
@@ -433,18 +433,18 @@ def _run_robust(args) -> int:
         raise ValueError("--samples and --batch must be at least 1")
     scene = load_scene(args.scene)
     job = RobustJob(scene, PoseNoise(*args.pose_sigma), args.seed, _options(args), args.sequence)
-    if args.ray:
-        executor = ray_cluster(args.ray)
-    elif args.workers > 1:
-        executor = process_pool(args.workers)
-    else:
-        executor = serial
+    pool = ProcessPool(args.workers) if args.workers > 1 and not args.ray else None
+    executor = ray_cluster(args.ray) if args.ray else pool or serial
 
     def progress(done: int, total: int) -> None:
         if not args.json:
             print(f"  {done}/{total} samples", file=sys.stderr)
 
-    result = estimate(job, args.samples, executor, args.batch, progress)
+    try:
+        result = estimate(job, args.samples, executor, args.batch, progress)
+    finally:
+        if pool is not None:
+            pool.close()
     out = {"scene": scene.name, "pose_sigma": list(args.pose_sigma), "seed": args.seed,
            "p_stable": result.p_stable, "interval": list(result.interval),
            "samples": result.samples, "closest_failing_sample": result.closest_failure}

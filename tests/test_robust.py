@@ -8,7 +8,7 @@ import math
 import pytest
 
 from rbe_ros import generators as gen
-from rbe_ros.analysis.executors import process_pool, ray_cluster
+from rbe_ros.analysis.executors import ProcessPool, ray_cluster
 from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.analysis.perturb import PoseNoise
 from rbe_ros.analysis.pipeline import check_scene
@@ -58,7 +58,8 @@ def test_process_pool_and_ray_give_the_serial_numbers():
     job = _overhang_job(0.0, 5)
     job = RobustJob(job.scene, PoseNoise(SIGMA, 0.5), 5, job.options)
     serial = estimate(job, 24, batch_size=5)
-    pooled = estimate(job, 24, process_pool(2), batch_size=3)
+    with ProcessPool(2) as pool:
+        pooled = estimate(job, 24, pool, batch_size=3)
     assert (pooled.p_stable, pooled.closest_failure) == (serial.p_stable, serial.closest_failure)
     assert 0.0 < serial.p_stable < 1.0
     import ray

@@ -35,19 +35,31 @@ def _one_thread_env():
                 os.environ[k] = v
 
 
-def process_pool(workers: int):
+class ProcessPool:
     """An executor of ``workers`` spawned processes (spawn: no state forked from the caller,
-    which may be a ROS node with threads)."""
-    if workers < 1:
-        raise ValueError(f"workers must be at least 1, not {workers}")
+    which may be a ROS node with threads), kept for later studies until :meth:`close`: a
+    spawned worker spends a second or more importing the core before its first sample."""
 
-    def run(job: RobustJob, parts: list[range]) -> Iterator[list[SampleResult]]:
-        with _one_thread_env(), ProcessPoolExecutor(
-                max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-            futures = [pool.submit(run_batch, job, part) for part in parts]
-            for f in futures:
-                yield f.result()
-    return run
+    def __init__(self, workers: int):
+        if workers < 1:
+            raise ValueError(f"workers must be at least 1, not {workers}")
+        self.pool = ProcessPoolExecutor(max_workers=workers,
+                                        mp_context=multiprocessing.get_context("spawn"))
+
+    def __call__(self, job: RobustJob, parts: list[range]) -> Iterator[list[SampleResult]]:
+        with _one_thread_env():                 # workers are spawned on submission
+            futures = [self.pool.submit(run_batch, job, part) for part in parts]
+        for f in futures:
+            yield f.result()
+
+    def close(self) -> None:
+        self.pool.shutdown(cancel_futures=True)
+
+    def __enter__(self) -> ProcessPool:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
 
 def ray_cluster(address: str | None, **init):

@@ -13,6 +13,7 @@ each time is the best of several repeats):
 from __future__ import annotations
 
 import argparse
+import os
 import time
 from pathlib import Path
 
@@ -80,6 +81,7 @@ def main() -> None:
     parser.add_argument("--samples", type=int, default=400)
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
+    load = os.getloadavg()[0]
     margin = margin_rows(args.repeats)
     throughput = throughput_rows(args.samples, args.repeats)
     text = "\n".join([
@@ -87,7 +89,8 @@ def main() -> None:
         "Made by `make bench-margin` (`benchmarks/margin.py`; also run by `make bench`). "
         "Ratios measured in one run, each time the best of "
         f"{args.repeats}, on a shared machine.", "",
-        "Machine: " + machine_summary(), "",
+        "Machine: " + machine_summary() + f"; load average {load:.1f} at the start (the "
+        "worker processes compete with it: on a busy 2-core machine the pool cannot gain).", "",
         "## margin_g over 8 directions against one check", "",
         "One check: `check_scene` (validation, contacts, solve, resultants). The margin: 8 "
         "load-multiplier solves (Clarabel) on the assembly's model, contacts already detected.",

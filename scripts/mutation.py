@@ -187,7 +187,7 @@ def report(modules: list[str]) -> tuple[int, int]:
     equiv = equivalents()
     counts: dict[str, Counter] = {}
     for name, s in status.items():
-        kind = "equivalent" if name in equiv and s != "killed" else s
+        kind = "equivalent" if name in equiv and s not in ("killed", "not checked") else s
         counts.setdefault(module_of(name), Counter())[kind] += 1
     total = Counter()
     for c in counts.values():
@@ -206,8 +206,8 @@ def report(modules: list[str]) -> tuple[int, int]:
         "",
         f"**Killed: {killed} of {scored} non-equivalent mutants ({100 * killed / max(scored, 1):.1f} %)**;"
         f" {total['equivalent']} equivalent"
-        + (f"; {total['not checked']} not run yet (the run was cut short; left out)."
-           if total["not checked"] else "."),
+        + (f"; {total['not checked']} not run (a fixed-seed sample, `--sample`, or a run cut"
+           " short): the score is over the mutants run." if total["not checked"] else "."),
         "",
         "| module | mutants | killed | survived | no tests | timeout | equivalent | not run | score |",
         "|---|---|---|---|---|---|---|---|---|",
@@ -216,16 +216,17 @@ def report(modules: list[str]) -> tuple[int, int]:
         c = counts[mod]
         n = sum(c.values())
         s = n - c["equivalent"] - c["not checked"]
+        score = f"{100 * c['killed'] / s:.1f} %" if s else "-"
         lines.append(f"| {mod} | {n} | {c['killed']} | {c['survived']} | {c['no tests']}"
-                     f" | {c['timeout']} | {c['equivalent']} | {c['not checked']}"
-                     f" | {100 * c['killed'] / max(s, 1):.1f} % |")
+                     f" | {c['timeout']} | {c['equivalent']} | {c['not checked']} | {score} |")
     open_ = sorted(k for k, v in status.items()
                    if v not in ("killed", "not checked") and k not in equiv)
     lines += ["", "## Not killed", "",
               "Each with its mutated line (`mutmut show NAME` in out/mutation/ gives the diff).", ""]
     lines += [f"- `{k}` ({status[k]}): `{diff_line(k)}`" for k in open_] or ["none"]
     lines += ["", "## Equivalent", ""]
-    lines += [f"- `{k}`: {equiv[k]}" for k in sorted(equiv) if k in status and status[k] != "killed"] \
+    lines += [f"- `{k}`: {equiv[k]}" for k in sorted(equiv)
+              if status.get(k, "killed") not in ("killed", "not checked")] \
         or ["none"]
     planted = _section(DOC.read_text(), "planted-bugs") if DOC.exists() else None
     if planted:

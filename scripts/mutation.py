@@ -78,8 +78,8 @@ def targets() -> list[str]:
     pkg = ROOT / "rbe_ros"
     verdict = pkg / "analysis" / "verdict.py"
     found = [verdict if verdict.exists() else pkg / "analysis" / "check.py"]
-    found += sorted(p for d in ("rbe", "geometry") for p in (pkg / d).glob("*.py")
-                    if p.name != "__init__.py")
+    for d in ("rbe", "geometry"):
+        found += sorted(p for p in (pkg / d).glob("*.py") if p.name != "__init__.py")
     return [str(p.relative_to(ROOT)) for p in found]
 
 
@@ -91,6 +91,11 @@ def prepare(modules: list[str]) -> None:
                         ignore=shutil.ignore_patterns("__pycache__", "ros"))
     with open(WORK / "tests" / "conftest.py", "a") as f:
         f.write(CLEAR_CACHES)
+    configure(modules)
+
+
+def configure(modules: list[str]) -> None:
+    """mutmut's settings in the scratch copy: which modules, which tests."""
     tests = [f"tests/{t}" for t in FAST_TESTS if (ROOT / "tests" / t).exists()]
     (WORK / "pyproject.toml").write_text(
         "[tool.mutmut]\n"
@@ -157,7 +162,7 @@ def diff_line(name: str) -> str:
     """The mutated line of a mutant (its diff's + line)."""
     out = subprocess.run([str(MUTMUT), "show", name], cwd=WORK, text=True, capture_output=True).stdout
     plus = [ln[1:].strip() for ln in out.splitlines() if ln.startswith("+") and not ln.startswith("+++")]
-    return plus[0] if plus else "?"
+    return plus[0] if plus else "(mutmut show NAME)"
 
 
 def _section(text: str, name: str) -> str | None:
@@ -246,6 +251,7 @@ def main() -> int:
     modules = args.module or targets()
     if not args.report:
         run(modules, args.children, args.sample)
+    configure(targets())          # results of every target module, not only of this run's
     killed, scored = report(targets())
     print(f"[mutation] killed {killed} of {scored} non-equivalent mutants"
           f" ({100 * killed / max(scored, 1):.1f} %): {DOC.relative_to(ROOT)}")

@@ -16,7 +16,7 @@ from .holds import annotate_holds
 from .incremental import StepChecker
 from .margin import annotate_margin
 from .options import CheckOptions
-from .steps import final_state, sequence_steps
+from .steps import final_state, sequence_step, step_count
 from .validate import validated_assembly
 from .verdict import check
 
@@ -67,7 +67,7 @@ def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
     """
     start = time.perf_counter()
     options = declared(options, scene)
-    steps = sequence_steps(scene)
+    total = step_count(scene)
     limit = options.solve.time_limit
     try:
         with time_budget(limit):
@@ -77,9 +77,10 @@ def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
     contact_time = time.perf_counter() - start
     checker = StepChecker(options, local=not options.full_solve)
     reports = []
-    for step in steps:
+    for k in range(total):      # one step at a time: making them all costs the size squared
         if cancelled is not None and cancelled():
             break
+        step = sequence_step(scene, k)
         step_start = time.perf_counter()
         try:
             if full is None:
@@ -99,10 +100,10 @@ def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
             report.num_blocks = len(step.present)
             report.solve_time = time.perf_counter() - step_start
         report.step_index, report.block_placed = step.index, step.block
-        report.solve_time += contact_time / len(steps)
+        report.solve_time += contact_time / total
         reports.append(report)
         if on_step is not None:
-            on_step(report, len(steps))
+            on_step(report, total)
     return reports
 
 
@@ -160,7 +161,7 @@ def check_state(read_scene: Callable[[bool], Scene], sequence: bool,
 
     try:
         scene = read_scene(sequence)
-        total = len(sequence_steps(scene)) if sequence else 1
+        total = step_count(scene) if sequence else 1
         if sequence:
             check_sequence(scene, options, on_step=step, cancelled=cancelled)
         else:

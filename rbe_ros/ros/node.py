@@ -56,6 +56,7 @@ from visualization_msgs.msg import MarkerArray
 from ..analysis.option_spec import BY_PARAM, OPTIONS, Option, from_outer
 from ..analysis.options import CheckOptions
 from ..analysis.pipeline import StateCheck, check_state
+from ..analysis.steps import sequence_step
 from ..io import cdr
 from ..io.bag import BagWriter, typestore
 from ..io.inputs import load_design
@@ -428,11 +429,21 @@ class RbeNode(Node):
 
     def check_state(self, state: AssemblyState, raw: bytes | None = None) -> None:
         """Check a state from the topic (as a whole, or every step of its sequence) and
-        publish the reports; never raises. ``raw``: its CDR bytes, recorded as they came."""
+        publish the reports; never raises. ``raw``: its CDR bytes, recorded as they came.
+        A newer state waiting in the slot supersedes a sequence between two steps: its last
+        report says so (:func:`superseded_report`), and the newer state is checked next."""
         try:
-            self.check(state, self._received(state, raw), bool(state.sequence))
+            header = self._received(state, raw)
+            result, _ = self.check(state, header, bool(state.sequence),
+                                   cancelled=self._superseded)
+            if result.error is None and not result.finished and self._superseded():
+                self._publish(result.scene, superseded_report(result), header)
         except Exception as exc:  # publishing itself failed (e.g. during shutdown)
             self.get_logger().error(f"state not handled: {type(exc).__name__}: {exc}")
+
+    def _superseded(self) -> bool:
+        """Whether a newer state (or as-built update) waits for the worker."""
+        return self._slot is not None
 
     # --- design and measured poses (rbe_ros.poses) -------------------------------------------
 
@@ -536,6 +547,18 @@ class RbeNode(Node):
 def _stamp(header: dict) -> str:
     stamp = header["stamp"]
     return f"{stamp['sec']}.{stamp['nanosec']:09d}"
+
+
+def superseded_report(result: StateCheck) -> Report:
+    """The last report of a topic sequence a newer state superseded: the first step not
+    checked, no verdict (SOLVER_FAILED), and why."""
+    done = len(result.reports)
+    report = Report(False, Status.SOLVER_FAILED,
+                    f"superseded: a newer state arrived after {done} of {result.total} steps; "
+                    "the remaining steps were not checked")
+    step = sequence_step(result.scene, done)
+    report.step_index, report.block_placed = step.index, step.block
+    return report
 
 
 def _cdr_stamp(data: bytes) -> str:

@@ -187,7 +187,8 @@ def make_block(block_id, vertices, faces, position=(0, 0, 0), orientation=(0, 0,
     quat = finite_array(orientation, (4,), f"{where}: orientation")
     norm = float(np.linalg.norm(quat))
     if abs(norm - 1.0) > 1e-3:
-        raise SceneError(f"{where}: orientation quaternion (x, y, z, w) must have unit norm, has {norm:.6g}")
+        raise SceneError(f"{where}: orientation quaternion (x, y, z, w) must have unit norm, "
+                         f"has {norm:.6g}")
     density, mass = float(density or 0.0), float(mass or 0.0)
     if not (math.isfinite(density) and math.isfinite(mass)) or density < 0 or mass < 0:
         raise SceneError(f"{where}: density and mass must be finite and non-negative")
@@ -197,6 +198,8 @@ def make_block(block_id, vertices, faces, position=(0, 0, 0), orientation=(0, 0,
 
 
 def finite_array(value, shape, what: str) -> np.ndarray:
+    """``value`` as a float array of ``shape`` (-1: any length) with finite entries, else a
+    SceneError naming ``what``."""
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):

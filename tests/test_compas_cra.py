@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-import compas_compare as cc  # noqa: E402
+import compas_compare as cc
 
 CRA_PYTHON = cc.cra_python_from_env()
 pytestmark = pytest.mark.skipif(

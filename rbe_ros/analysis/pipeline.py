@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from ..rbe.result import Report, Status
 from ..scene import Scene, SceneError
 from .assembly import Assembly
-from .holds import annotate_holds
+from .holds import suggested_holds
 from .incremental import StepChecker
 from .options import CheckOptions
 from .steps import final_state, sequence_steps
@@ -33,10 +33,7 @@ def check_scene(scene: Scene, options: CheckOptions = CheckOptions(),
     if scene.holds:
         present, held = final_state(scene)
         assembly = assembly.subset(present, held)
-    report = check(assembly, options)
-    annotate_holds(report, assembly, held, options)
-    report.solve_time = time.perf_counter() - start
-    return report
+    return _finished(check(assembly, options), assembly, held, options, start)
 
 
 def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
@@ -56,18 +53,28 @@ def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
     for step in steps:
         if cancelled is not None and cancelled():
             break
+        step_start = time.perf_counter() - contact_time / len(steps)
         assembly = full.subset(step.present, step.held)
-        report = checker.check(assembly)
-        report.step_index, report.block_placed = step.index, step.block
-        annotate_holds(report, assembly, step.held, options)
-        report.solve_time += contact_time / len(steps)
+        report = _finished(checker.check(assembly), assembly, step.held, options, step_start,
+                           step_index=step.index, block_placed=step.block)
         reports.append(report)
         if on_step is not None:
             on_step(report, len(steps))
     return reports
 
 
+def _finished(report: Report, assembly: Assembly, held, options: CheckOptions, start: float,
+              **step) -> Report:
+    """The report as the pipeline gives it: the blocks held, the suggested holds, the step
+    (``step_index``, ``block_placed``) and the time since ``start``, the one place where a
+    check's time is taken."""
+    suggested = suggested_holds(report, assembly, options)
+    return replace(report, held_blocks=tuple(held), suggested_holds=suggested,
+                   solve_time=time.perf_counter() - start, **step)
+
+
 def first_failing_step(reports: list[Report]) -> int:
+    """The step index of the first report that is not stable; -1 when all are."""
     return next((r.step_index for r in reports if not r.stable), -1)
 
 
@@ -75,8 +82,8 @@ def error_report(exc: Exception) -> Report:
     """The report of a state that could not be checked: INVALID_INPUT naming the problem
     for bad input, SOLVER_FAILED with the exception for anything else."""
     if isinstance(exc, SceneError):
-        return Report(False, Status.INVALID_INPUT, f"invalid input: {exc}")
-    return Report(False, Status.SOLVER_FAILED, f"check failed: {type(exc).__name__}: {exc}")
+        return Report(Status.INVALID_INPUT, f"invalid input: {exc}")
+    return Report(Status.SOLVER_FAILED, f"check failed: {type(exc).__name__}: {exc}")
 
 
 @dataclass(frozen=True)

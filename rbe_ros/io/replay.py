@@ -191,6 +191,8 @@ def free_weights(state: dict) -> dict[int, float]:
 
 @dataclass(frozen=True)
 class Tolerances:
+    """How far a replayed report may be from the recorded one (module docstring)."""
+
     force: float = 1e-6          # share of the step's free weight
     position: float = 1e-6       # m
     ratio: float = 1e-6          # |V|/N, absolute (plus the force tolerance's share)
@@ -450,6 +452,8 @@ def record_bag(path, scenes: list[tuple[Scene, str, int]], options: CheckOptions
 
 @dataclass
 class ReplayResult:
+    """The runs of a bag, their replayed reports and how they differ from the recorded."""
+
     runs: list[Run]
     replayed: list[list[dict]]
     differences: list[Difference]
@@ -465,6 +469,7 @@ class ReplayResult:
 
 
 def default_output(path) -> Path:
+    """Where a replay of the bag at ``path`` is written unless told: beside it, + "_replay"."""
     path = Path(path)
     return path.with_name(path.name + "_replay")
 
@@ -509,5 +514,5 @@ def replay_bag(path, output=None, *, options: CheckOptions | None = None, compar
 
 __all__ = ["Difference", "OPTIONS_KEY", "ReplayResult", "Run", "Tolerances", "bag_options",
            "compare_report", "compare_runs", "default_output", "free_weights",
-           "offline_reports", "options_from_json", "options_to_json", "read_runs", "record_bag", "replay_bag",
-           "replay_run", "state_reports", "write_runs"]
+           "offline_reports", "options_from_json", "options_to_json", "read_runs", "record_bag",
+           "replay_bag", "replay_run", "state_reports", "write_runs"]

@@ -36,6 +36,7 @@ import signal
 import struct
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import rclpy
@@ -201,14 +202,14 @@ class RbeNode(Node):
         self._service_group = MutuallyExclusiveCallbackGroup()
         self._action_group = ReentrantCallbackGroup()
 
-        # reports go out as CDR bytes made from their message dicts (rbe_ros.io.cdr): ~6x faster
-        # than building the rclpy message (an object per Point) and serialising it
+        # reports go out as CDR bytes made from their message dicts (rbe_ros.io.cdr), without
+        # building the rclpy message (an object per Point) and serialising it
         self._encode_report = cdr.encoder(typestore(), "rbe_msgs/msg/StabilityReport")
         self._report_pub = self.create_publisher(StabilityReport, "~/report", LATCHED_QOS)
         self._marker_pub = self.create_publisher(MarkerArray, "~/markers", LATCHED_QOS)
         # raw: the callback gets the CDR bytes; a state is converted to a message only when
-        # the worker checks it (converting a 100-block state costs ~15 ms of the GIL, which
-        # at 100 Hz would starve the checks)
+        # the worker checks it (converting every state that arrives would hold the GIL and
+        # starve the checks at high rates)
         self._state_sub = self.create_subscription(
             AssemblyState, "~/assembly", self._on_state, STATE_QOS,
             callback_group=self._topic_group, raw=True)
@@ -288,7 +289,8 @@ class RbeNode(Node):
                 k += 1
                 path = path.with_name(f"{stem}_{k}")
         # the options at the start, so that `rbe-ros replay` re-checks the same way
-        self._bag = BagWriter(path, custom_data={OPTIONS_KEY: options_to_json(self.check_options())})
+        self._bag = BagWriter(path,
+                              custom_data={OPTIONS_KEY: options_to_json(self.check_options())})
         self._bag.add_topic(self.state_topic, "rbe_msgs/msg/AssemblyState")
         self._bag.add_topic(self.report_topic, "rbe_msgs/msg/StabilityReport",
                             transient_local=True)
@@ -356,7 +358,7 @@ class RbeNode(Node):
         """Record, then publish ``report`` and its markers; returns the report's CDR bytes
         (``deserialize_message(data, StabilityReport)`` where a message is needed). Recorded
         first, so that a report anyone received is in the bag even if the node is killed."""
-        report.dropped_states = self._dropped
+        report = replace(report, dropped_states=self._dropped)
         data = self._encode_report(report_to_dict(report, header, arrays=True))
         self._record(self.report_topic, data)
         self._report_pub.publish(data)

@@ -225,7 +225,7 @@ def test_markers_of_degenerate_polygons_and_default_length():
     """A 2-vertex contact is one edge, a point contact none; the default max_length is half
     the largest polygon extent; tension within tension_tol of the largest force is green."""
     triangle = [[0, 0, 0], [2, 0, 0], [0, 1, 0]]
-    report = Report(True, Status.STABLE, "ok", interfaces=[
+    report = Report(Status.STABLE, "ok", interfaces=[
         _interface(triangle, [100.0, 50.0, -1e-4], friction=True,
                    kern=[[0.2, 0.2, 0], [0.4, 0.2, 0]]),
         _interface([[5, 0, 1], [5, 1, 1]], [10.0, -20.0], tension=True),
@@ -245,7 +245,7 @@ def test_markers_of_degenerate_polygons_and_default_length():
     assert _segment_colours(interfaces_marker) == [INTERFACE_FRICTION] * 3 + [INTERFACE_TENSION]
     assert np.array_equal(_segments(kerns_marker), [[[0.2, 0.2, 0], [0.4, 0.2, 0]]])
 
-    still = Report(True, Status.STABLE, "ok", interfaces=[_interface(triangle, [0.0] * 3)])
+    still = Report(Status.STABLE, "ok", interfaces=[_interface(triangle, [0.0] * 3)])
     forces_marker = report_markers(None, still, "w", Time(), max_length=0.3).markers[1]
     segments = _segments(forces_marker)     # no force at all: zero-length segments
     assert np.array_equal(segments[:, 0], segments[:, 1]) and len(segments) == 3
@@ -255,7 +255,7 @@ def test_unstable_block_mesh_is_posed():
     q = Rotation.from_euler("z", 0.3).as_quat()
     scene = make_scene("s", [box_block("g", (3, 3, 0.2), (0, 0, -0.1), support=True, mass=1),
                              box_block("x", (1, 0.5, 0.2), (0.2, 0.1, 0.1), q, density=1000)])
-    report = Report(False, Status.TENSION_REQUIRED, "test", unstable_blocks=["x", "missing"])
+    report = Report(Status.TENSION_REQUIRED, "test", unstable_blocks=["x", "missing"])
     markers = report_markers(scene, report, "w", Time()).markers
     unstable = [m for m in markers if m.ns == "unstable"]
     assert len(unstable) == 1 and unstable[0].type == Marker.TRIANGLE_LIST
@@ -267,6 +267,6 @@ def test_unstable_block_mesh_is_posed():
 
 
 def test_markers_of_an_invalid_input_report():
-    report = Report(False, Status.INVALID_INPUT, "invalid input: x")
+    report = Report(Status.INVALID_INPUT, "invalid input: x")
     markers = report_markers(None, report, "w", Time()).markers
     assert [m.action for m in markers] == [Marker.DELETEALL]

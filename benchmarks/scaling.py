@@ -57,10 +57,10 @@ def best_of(repeats: int, fn):
 
 def walls(sizes, repeats):
     """Per wall: (blocks, interfaces, verdict, check s, solver s, message s, markers s)."""
-    from builtin_interfaces.msg import Time
-    from rbe_ros.ros.markers import report_markers
+    from rbe_ros.io.markers import MARKER_TYPE, step_markers
 
     encode = cdr.encoder(typestore(), "rbe_msgs/msg/StabilityReport")    # as the node does
+    encode_markers = cdr.encoder(typestore(), MARKER_TYPE)
     rows = []
     for courses, bricks in sizes:
         scene = gen.running_bond_wall(courses=courses, bricks_per_course=bricks)
@@ -68,8 +68,8 @@ def walls(sizes, repeats):
         header = header_dict("world", 0)
         _, message, _ = best_of(repeats,
                                 lambda: encode(report_to_dict(report, header, arrays=True)))
-        stamp = Time(**header["stamp"])
-        _, markers, _ = best_of(repeats, lambda: report_markers(scene, report, "world", stamp))
+        _, markers, _ = best_of(repeats, lambda: encode_markers(step_markers(scene, report,
+                                                                             header)))
         rows.append((len(scene.blocks), len(report.interfaces), report.status.name, total, solver,
                      message, markers))
         print(f"wall {len(scene.blocks)} blocks: {total:.3f} s, solver {solver:.3f} s, message"

@@ -17,6 +17,7 @@ from pathlib import Path
 
 from dataclasses import replace
 
+from .analysis.asbuilt import declared
 from .analysis.assembly import Assembly
 from .analysis.friction import minimum_friction
 from .analysis.options import CheckOptions, HoldSearch
@@ -31,7 +32,7 @@ from .geometry.contacts import ContactOptions
 from .io.figures import draw_report
 from .io.messages import header_dict, json_safe, report_json, report_to_dict, state_to_dict
 from .io.replay import (REPORT_TOPIC, STATE_TOPIC, Run, default_output, offline_reports,
-                        replay_bag, write_runs)
+                        replay_bag, step_stamps, write_runs)
 from .io.table import format_table
 from .io.scene_json import scene_to_dict
 from .rbe.cones import CONES
@@ -98,6 +99,11 @@ def _solver_arguments(parser: argparse.ArgumentParser) -> None:
     c.add_argument("--vertex-tol", type=float, default=defaults.vertex_tol, metavar="R",
                    help="vertices this close to their neighbours' chord are left out "
                    f"(default {defaults.vertex_tol:g}; 0 keeps all)")
+    c.add_argument("--pose-uncertainty", type=uncertainty, default=None,
+                   metavar="POS_M[,ANGLE_DEG]", help="as-built poses: every pose is known to "
+                   "within POS_M metres and ANGLE_DEG degrees (about 3 sigma); contacts and the "
+                   "interpenetration limit then follow from it (README: Checking as-built "
+                   "poses; default: the scene's \"pose_uncertainty\", else design geometry)")
     h = parser.add_argument_group("suggested holds (unstable checks)")
     h.add_argument("--no-suggest-holds", action="store_true",
                    help="do not search the smallest set of blocks to hold")
@@ -107,6 +113,14 @@ def _solver_arguments(parser: argparse.ArgumentParser) -> None:
     h.add_argument("--hold-max-checks", type=int, default=HoldSearch().max_checks, metavar="N",
                    help="sub-assembly checks the exact search may spend "
                    f"(default {HoldSearch().max_checks})")
+
+
+def uncertainty(text: str) -> tuple[float, float]:
+    """POS_M[,ANGLE_DEG] (argparse type: ValueError for anything else)."""
+    parts = [float(x) for x in text.split(",")]
+    if not 1 <= len(parts) <= 2 or not all(math.isfinite(x) and x >= 0 for x in parts):
+        raise ValueError(text)
+    return parts[0], parts[1] if len(parts) > 1 else 0.0
 
 
 def _options(args) -> CheckOptions:
@@ -122,7 +136,9 @@ def _options(args) -> CheckOptions:
                        max_checks=args.hold_max_checks)
     contact = ContactOptions(distance_tol=args.distance_tol, angle_tol_deg=args.angle_tol,
                              min_area=args.min_area, min_width=args.min_width,
-                             vertex_tol=args.vertex_tol)
+                             vertex_tol=args.vertex_tol,
+                             **dict(zip(("pose_uncertainty_m", "pose_uncertainty_deg"),
+                                        args.pose_uncertainty or ())))
     return CheckOptions(solve=solve, mu_threshold=args.mu_threshold, tension_tol=args.tension_tol,
                         limits=ValidationLimits(max_blocks=args.max_blocks), holds=holds,
                         full_solve=args.full_solve, contact=contact)
@@ -139,7 +155,8 @@ def _scene(args) -> tuple[Scene, Assembly | None]:
     if args.poses:
         scene = scene_at_poses(scene, load_poses(args.poses))
     if args.interfaces == "compare":
-        diff = compare_interfaces(Assembly.from_scene(scene, _options(args).contact), stored)
+        diff = compare_interfaces(Assembly.from_scene(
+            scene, declared(_options(args), scene).contact), stored)
         args.interfaces_compare = diff
         as_json = getattr(args, "json", False)
         if not (as_json and args.command == "check"):
@@ -150,8 +167,8 @@ def _scene(args) -> tuple[Scene, Assembly | None]:
 
 def _assembly(args) -> Assembly:
     """The validated assembly of ``args.scene`` (the limits of the options; SceneError)."""
-    options = _options(args)
     scene, stored = _scene(args)
+    options = declared(_options(args), scene)
     return validated_assembly(scene, options.limits, options.contact, stored)
 
 
@@ -167,6 +184,8 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("--bag", metavar="DIR",
                        help="record states and reports as a rosbag2 MCAP bag in DIR")
     check.add_argument("--force", action="store_true", help="replace an existing --bag DIR")
+    check.add_argument("--no-markers", action="store_true",
+                       help="--bag without the markers of the reports (a lean log)")
     check.add_argument("--strict", action="store_true",
                        help="exit 1 when an assembly or step is not stable")
     _solver_arguments(check)
@@ -243,6 +262,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help="with --live: use the running node NAME (e.g. rbe_node)")
     replay.add_argument("-o", "--output", metavar="DIR",
                         help="bag to write (default: BAG_replay; never overwritten)")
+    replay.add_argument("--no-markers", action="store_true",
+                        help="write the new bag without the markers of the reports")
     replay.add_argument("--timeout", type=float, default=120.0, metavar="S",
                         help="--live: seconds to wait for each answer (default 120)")
     replay.set_defaults(run=_run_replay)
@@ -250,8 +271,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _run_check(args) -> int:
-    options = _options(args)
     scene, stored = _scene(args)
+    options = declared(_options(args), scene)      # recorded in the bag as checked
     if args.bag:
         _prepare_bag_dir(Path(args.bag), args.force)
     if stored is not None and (args.sequence or args.bag):
@@ -273,7 +294,7 @@ def _run_check(args) -> int:
     if args.interfaces == "compare":
         out["interfaces_compare"] = args.interfaces_compare.to_json()
     if args.bag:
-        _record(Path(args.bag), scene, reports, options, args.sequence)
+        _record(Path(args.bag), scene, reports, options, args.sequence, not args.no_markers)
     if args.json:
         print(json.dumps(out, indent=1))
     else:
@@ -374,18 +395,20 @@ def _prepare_bag_dir(path: Path, force: bool) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
 
 
-def _record(path: Path, scene: Scene, reports, options: CheckOptions, sequence: bool) -> None:
-    """Write the scene's state and every report, as the node would have published them, and
-    the options (so that ``rbe-ros replay`` re-checks the same way). The state holds the
-    order checked (``sequence``) or no sequence (a check as a whole)."""
+def _record(path: Path, scene: Scene, reports, options: CheckOptions, sequence: bool,
+            markers: bool) -> None:
+    """Write the scene's state and every report (and with ``markers`` its markers), as the
+    node would have published them, a step a second, and the options (so that ``rbe-ros
+    replay`` re-checks the same way). The state holds the order checked (``sequence``) or no
+    sequence (a check as a whole)."""
     order = (scene.sequence or tuple(b.id for b in scene.blocks if not b.support)) \
         if sequence else ()
     stamp = time.time_ns()
     header = header_dict("world", stamp)
     run = Run(state_to_dict(replace(scene, sequence=order), "world", stamp), stamp,
               STATE_TOPIC, [report_to_dict(r, header) for r in reports],
-              [stamp + k + 1 for k in range(len(reports))], REPORT_TOPIC)
-    write_runs(path, [run], [run.reports], options)
+              step_stamps(stamp, len(reports)), REPORT_TOPIC)
+    write_runs(path, [run], [run.reports], options, markers=markers)
 
 
 def _run_plan(args) -> int:
@@ -440,7 +463,7 @@ def _run_replay(args) -> int:
         recheck = live_recheck(args.node_name, timeout=args.timeout)
     try:
         result = replay_bag(args.bag, out, compare=args.compare, recheck=recheck,
-                            on_run=progress)
+                            markers=not args.no_markers, on_run=progress)
     except RuntimeError as exc:     # the live node failed or exited
         raise ValueError(str(exc)) from None
     reports = sum(len(r) for r in result.replayed)

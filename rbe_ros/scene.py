@@ -7,6 +7,8 @@ everything a later stage would otherwise trip over, so that bad input gives one 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -15,7 +17,24 @@ DEFAULT_GRAVITY = (0.0, 0.0, -9.81)
 
 
 class SceneError(ValueError):
-    """The scene cannot be analysed; the message names the block and the problem."""
+    """The scene cannot be analysed; the message names the block and the problem, and
+    ``blocks`` the ids of the blocks at fault (empty when no block is), so that a view can
+    highlight them."""
+
+    def __init__(self, message: str, blocks: Sequence[str] = ()):
+        super().__init__(message)
+        self.blocks = tuple(str(b) for b in blocks)
+
+
+@contextmanager
+def blame(*block_ids: str) -> Iterator[None]:
+    """A :class:`SceneError` raised inside, naming no block at fault, names ``block_ids``."""
+    try:
+        yield
+    except SceneError as exc:
+        if not exc.blocks:
+            exc.blocks = tuple(str(b) for b in block_ids if b)
+        raise
 
 
 @dataclass(frozen=True)
@@ -75,16 +94,16 @@ def validate_scene(scene: "Scene", limits: ValidationLimits = ValidationLimits()
     where = f"block {b.id!r}"
     if len(b.vertices) > limits.max_vertices:
         raise SceneError(f"{where}: {len(b.vertices)} vertices, more than the limit of "
-                         f"{limits.max_vertices}")
+                         f"{limits.max_vertices}", [b.id])
     if extent.min() < limits.min_size or extent.max() > limits.max_size:
         raise SceneError(f"{where}: size {' x '.join(f'{e:.6g}' for e in extent)} m is "
                          f"outside the sane range [{limits.min_size:g}, {limits.max_size:g}]"
-                         " m per edge")
+                         " m per edge", [b.id])
     if distance > limits.max_distance:
         raise SceneError(f"{where}: position {distance:.6g} m from the origin, farther "
-                         f"than the limit of {limits.max_distance:g} m")
+                         f"than the limit of {limits.max_distance:g} m", [b.id])
     raise SceneError(f"{where}: density {b.density:.6g} kg/m^3 is outside the sane "
-                     f"range [{limits.min_density:g}, {limits.max_density:g}] kg/m^3")
+                     f"range [{limits.min_density:g}, {limits.max_density:g}] kg/m^3", [b.id])
 
 
 @dataclass(frozen=True)
@@ -128,13 +147,15 @@ class Hold:
 @dataclass(frozen=True)
 class Scene:
     """An assembly of blocks under gravity, with an optional insertion sequence of block ids
-    and temporary supports (holds) by step."""
+    and temporary supports (holds) by step. ``pose_uncertainty`` (m, deg): how well the
+    poses are known (measured, as built; about 3 sigma), None for design geometry."""
 
     name: str
     blocks: tuple[Block, ...]
     gravity: np.ndarray = field(default_factory=lambda: np.array(DEFAULT_GRAVITY))
     sequence: tuple[str, ...] = ()
     holds: tuple[Hold, ...] = ()
+    pose_uncertainty: tuple[float, float] | None = None
 
     def block(self, block_id: str) -> Block:
         for b in self.blocks:
@@ -169,32 +190,36 @@ def box_block(block_id: str, size, position=(0, 0, 0), orientation=(0, 0, 0, 1),
 def make_block(block_id, vertices, faces, position=(0, 0, 0), orientation=(0, 0, 0, 1), *,
                density: float = 0.0, mass: float = 0.0, support: bool = False) -> Block:
     """A validated block (raises :class:`SceneError`)."""
-    name = str(block_id)
-    where = f"block {name!r}"
-    verts = finite_array(vertices, (-1, 3), f"{where}: vertices")
-    if len(verts) < 4:
-        raise SceneError(f"{where}: a block needs at least 4 vertices, got {len(verts)}")
-    try:
-        face_tuple = tuple(tuple(int(i) for i in f) for f in faces)
-    except (TypeError, ValueError):
-        raise SceneError(f"{where}: faces must be lists of vertex indices") from None
-    if len(face_tuple) < 4:
-        raise SceneError(f"{where}: a closed block needs at least 4 faces, got {len(face_tuple)}")
-    for f in face_tuple:
-        if len(f) < 3 or min(f) < 0 or max(f) >= len(verts):
-            raise SceneError(f"{where}: face {list(f)} is not a polygon of existing vertices")
-    pos = finite_array(position, (3,), f"{where}: position")
-    quat = finite_array(orientation, (4,), f"{where}: orientation")
-    norm = float(np.linalg.norm(quat))
-    if abs(norm - 1.0) > 1e-3:
-        raise SceneError(f"{where}: orientation quaternion (x, y, z, w) must have unit norm, "
-                         f"has {norm:.6g}")
-    density, mass = float(density or 0.0), float(mass or 0.0)
-    if not (math.isfinite(density) and math.isfinite(mass)) or density < 0 or mass < 0:
-        raise SceneError(f"{where}: density and mass must be finite and non-negative")
-    if (density > 0) == (mass > 0):
-        raise SceneError(f"{where}: give exactly one of a positive density (kg/m^3) or mass (kg)")
-    return Block(name, verts, face_tuple, pos, quat / norm, density, mass, bool(support))
+    with blame(block_id):
+        name = str(block_id)
+        where = f"block {name!r}"
+        verts = finite_array(vertices, (-1, 3), f"{where}: vertices")
+        if len(verts) < 4:
+            raise SceneError(f"{where}: a block needs at least 4 vertices, got {len(verts)}")
+        try:
+            face_tuple = tuple(tuple(int(i) for i in f) for f in faces)
+        except (TypeError, ValueError):
+            raise SceneError(f"{where}: faces must be lists of vertex indices") from None
+        if len(face_tuple) < 4:
+            raise SceneError(f"{where}: a closed block needs at least 4 faces, "
+                             f"got {len(face_tuple)}")
+        for f in face_tuple:
+            if len(f) < 3 or min(f) < 0 or max(f) >= len(verts):
+                raise SceneError(f"{where}: face {list(f)} is not a polygon of existing "
+                                 "vertices")
+        pos = finite_array(position, (3,), f"{where}: position")
+        quat = finite_array(orientation, (4,), f"{where}: orientation")
+        norm = float(np.linalg.norm(quat))
+        if abs(norm - 1.0) > 1e-3:
+            raise SceneError(f"{where}: orientation quaternion (x, y, z, w) must have unit "
+                             f"norm, has {norm:.6g}")
+        density, mass = float(density or 0.0), float(mass or 0.0)
+        if not (math.isfinite(density) and math.isfinite(mass)) or density < 0 or mass < 0:
+            raise SceneError(f"{where}: density and mass must be finite and non-negative")
+        if (density > 0) == (mass > 0):
+            raise SceneError(f"{where}: give exactly one of a positive density (kg/m^3) or "
+                             "mass (kg)")
+        return Block(name, verts, face_tuple, pos, quat / norm, density, mass, bool(support))
 
 
 def finite_array(value, shape, what: str) -> np.ndarray:
@@ -216,9 +241,10 @@ def finite_array(value, shape, what: str) -> np.ndarray:
     return arr
 
 
-def make_scene(name: str, blocks, gravity=DEFAULT_GRAVITY, sequence=(), holds=()) -> Scene:
+def make_scene(name: str, blocks, gravity=DEFAULT_GRAVITY, sequence=(), holds=(),
+               pose_uncertainty=None) -> Scene:
     """A validated scene: unique ids, a support, a sequence of existing free blocks, holds of
-    existing blocks within the steps."""
+    existing blocks within the steps, a pose uncertainty of two numbers >= 0 (or None)."""
     blocks = tuple(blocks)
     if not blocks:
         raise SceneError("the scene has no blocks")
@@ -245,7 +271,21 @@ def make_scene(name: str, blocks, gravity=DEFAULT_GRAVITY, sequence=(), holds=()
             raise SceneError(f"sequence names block {s!r} twice")
         seq_seen.add(s)
     steps = len(seq) or sum(not b.support for b in blocks)
-    return Scene(str(name), blocks, g, seq, _check_holds(holds, seen, steps))
+    return Scene(str(name), blocks, g, seq, _check_holds(holds, seen, steps),
+                 _check_uncertainty(pose_uncertainty))
+
+
+def _check_uncertainty(value) -> tuple[float, float] | None:
+    """A declared pose uncertainty: [position m] or [position m, angle deg], finite, >= 0."""
+    if value is None:
+        return None
+    what = '"pose_uncertainty" must be [position m, angle deg]'
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or not 1 <= len(value) <= 2:
+        raise SceneError(f"{what}, got {value!r}")
+    arr = finite_array(list(value) + [0.0] * (2 - len(value)), (2,), what.split(" must")[0])
+    if np.any(arr < 0):
+        raise SceneError(f"{what}, both >= 0, got {list(value)}")
+    return float(arr[0]), float(arr[1])
 
 
 def _check_holds(holds, ids: set[str], steps: int) -> tuple[Hold, ...]:

@@ -2,8 +2,9 @@
 """Record the regression bags of bags/ (``make bags``): deterministic scenes, fixed stamps,
 solve times zeroed, so a rerun on the same code writes byte-identical files.
 
-Each bag holds AssemblyState messages on /rbe_node/assembly and the StabilityReports the
-checker made for them on /rbe_node/report (exactly what ``rbe_node`` would publish; replay
+Each bag holds AssemblyState messages on /rbe_node/assembly, the StabilityReports the
+checker made for them on /rbe_node/report and their MarkerArrays on /rbe_node/markers, a
+step a second (exactly what ``rbe_node`` would publish; replay
 with ``rbe-ros replay BAG --compare`` or ``rbe_ros.io.testing.assert_bag_replays``). The check
 options (the defaults) are in metadata.yaml, custom_data ``rbe_ros.check_options``.
 
@@ -53,8 +54,9 @@ from rbe_ros import generators  # noqa: E402
 from rbe_ros.analysis.options import CheckOptions  # noqa: E402
 from rbe_ros.analysis.planning import plan_sequence  # noqa: E402
 from rbe_ros.analysis.pipeline import check_sequence  # noqa: E402
+from rbe_ros.analysis.steps import sequence_steps  # noqa: E402
 from rbe_ros.generators import _prism  # noqa: E402
-from rbe_ros.io.replay import record_bag  # noqa: E402
+from rbe_ros.io.replay import STEP_NS, record_bag  # noqa: E402
 from rbe_ros.scene import Hold, make_scene  # noqa: E402
 
 #: Stamps of the recorded states: 2024-01-01T00:00:00Z plus one second per run.
@@ -64,7 +66,15 @@ OPTIONS = CheckOptions()
 
 
 def stamps(scenes):
-    return [(scene, FRAME, STAMP0 + k * 1_000_000_000) for k, scene in enumerate(scenes)]
+    """Each run's state a second after the last report of the run before (reports a second
+    apart, :data:`rbe_ros.replay.STEP_NS`), so that Foxglove's timeline shows one step at a
+    time and the runs one after the other."""
+    out, stamp = [], STAMP0
+    for scene in scenes:
+        out.append((scene, FRAME, stamp))
+        steps = len(sequence_steps(scene)) if scene.sequence else 1
+        stamp += (steps + 1) * STEP_NS
+    return out
 
 
 # --- scenes ------------------------------------------------------------------------------------

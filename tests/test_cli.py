@@ -49,11 +49,20 @@ def test_check_records_a_bag_that_reads_back(tmp_path, capsys):
     bag = tmp_path / "run"
     assert main(["check", str(EXAMPLE), "--sequence", "--bag", str(bag)]) == 0
     messages = list(read_bag(bag))
-    assert [m.topic for m in messages] == ["/rbe_node/assembly"] + ["/rbe_node/report"] * 6
+    assert [m.topic for m in messages] == ["/rbe_node/assembly"] + [
+        "/rbe_node/report", "/rbe_node/markers"] * 6
     assert len(messages[0].data["blocks"]) == 7
-    assert messages[-1].data["status"] == 1 and messages[-1].data["block_placed"] == "cap"
+    assert messages[-2].data["status"] == 1 and messages[-2].data["block_placed"] == "cap"
+    # a step a second after the state, the markers at their report's time
+    assert [m.stamp_ns - messages[0].stamp_ns for m in messages[1:]] == [
+        k * 10**9 for k in range(1, 7) for _ in range(2)]
+    assert [m["text"] for m in messages[-1].data["markers"] if m["ns"] == "blocks"] == [
+        "ground", "pillar_left", "pillar_right", "lintel", "block_left", "wedge", "cap"]
     assert main(["check", str(EXAMPLE), "--bag", str(bag)]) == 2      # exists: refuses
     assert "exists" in capsys.readouterr().err
+    lean = tmp_path / "lean"
+    assert main(["check", str(EXAMPLE), "--sequence", "--bag", str(lean), "--no-markers"]) == 0
+    assert {m.topic for m in read_bag(lean)} == {"/rbe_node/assembly", "/rbe_node/report"}
 
 
 def test_tilt_and_min_friction_json(tmp_path, capsys):

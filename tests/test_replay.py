@@ -46,7 +46,7 @@ def test_bag_reads_with_rosbags_and_has_metadata(name):
     meta = YAML(typ="safe").load((path / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     assert meta["storage_identifier"] == "mcap" and meta["relative_file_paths"] == [f"{name}_0.mcap"]
     topics = {t["topic_metadata"]["name"]: t for t in meta["topics_with_message_count"]}
-    assert set(topics) == {"/rbe_node/assembly", "/rbe_node/report"}
+    assert set(topics) == {"/rbe_node/assembly", "/rbe_node/report", "/rbe_node/markers"}
     for t in topics.values():
         (qos,) = t["topic_metadata"]["offered_qos_profiles"]
         assert qos["reliability"] == "reliable"
@@ -54,8 +54,9 @@ def test_bag_reads_with_rosbags_and_has_metadata(name):
     with AnyReader([path], default_typestore=bag.typestore()) as reader:
         assert {c.topic: c.msgtype for c in reader.connections} == {
             "/rbe_node/assembly": "rbe_msgs/msg/AssemblyState",
-            "/rbe_node/report": "rbe_msgs/msg/StabilityReport"}
-        counts = {"/rbe_node/assembly": 0, "/rbe_node/report": 0}
+            "/rbe_node/report": "rbe_msgs/msg/StabilityReport",
+            "/rbe_node/markers": "visualization_msgs/msg/MarkerArray"}
+        counts = {"/rbe_node/assembly": 0, "/rbe_node/report": 0, "/rbe_node/markers": 0}
         for conn, _stamp, raw in reader.messages():
             msg = reader.deserialize(raw, conn.msgtype)
             counts[conn.topic] += 1
@@ -206,8 +207,9 @@ def test_cli_replay_writes_a_bag_and_refuses_to_overwrite(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "all recorded reports reproduced" in out
     replayed = list(bag.read_bag(tmp_path / "stack_replay"))
-    assert [m.topic for m in replayed] == (["/rbe_node/assembly"] + ["/rbe_node/report"] * 5
-                                           + ["/rbe_node/assembly", "/rbe_node/report"])
+    step = ["/rbe_node/report", "/rbe_node/markers"]
+    assert [m.topic for m in replayed] == (["/rbe_node/assembly"] + step * 5
+                                           + ["/rbe_node/assembly"] + step)
     assert [m.data["step_index"] for m in replayed if m.msgtype.endswith("Report")] == \
         [0, 1, 2, 3, 4, -1]
     assert bag.read_custom_data(tmp_path / "stack_replay")[OPTIONS_KEY] == options_to_json(

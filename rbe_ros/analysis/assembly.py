@@ -6,25 +6,29 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..geometry.block import PosedBlock, pose_blocks
-from ..geometry.contacts import ContactOptions, Interface, detect_interfaces
+from ..geometry.contacts import ContactOptions, Interface, detect_contacts
 from ..scene import Scene
 
 
 @dataclass(frozen=True)
 class Assembly:
-    """Posed blocks, the interfaces between them (not between two supports), and gravity."""
+    """Posed blocks, the interfaces between them (not between two supports), gravity, and
+    the near contacts (face pairs just beyond the contact tolerance, not between two
+    supports; see :mod:`rbe_ros.geometry.uncertainty`)."""
 
     blocks: tuple[PosedBlock, ...]
     interfaces: tuple[Interface, ...]
     gravity: np.ndarray
+    near: tuple[Interface, ...] = ()
 
     @classmethod
     def from_scene(cls, scene: Scene, contact: ContactOptions = ContactOptions()) -> "Assembly":
         blocks = tuple(pose_blocks(scene.blocks))
-        interfaces = tuple(it for it in detect_interfaces(list(blocks), contact)
-                           if not (blocks[it.a].support and blocks[it.b].support))
+        interfaces, near = (tuple(it for it in found
+                                  if not (blocks[it.a].support and blocks[it.b].support))
+                            for found in detect_contacts(list(blocks), contact))
         Interface.compute_kerns(interfaces)
-        return cls(blocks, interfaces, np.asarray(scene.gravity, dtype=float))
+        return cls(blocks, interfaces, np.asarray(scene.gravity, dtype=float), near)
 
     def subset(self, ids, held=()) -> "Assembly":
         """The assembly of the blocks named in ``ids``, with the interfaces among them; the
@@ -37,7 +41,9 @@ class Assembly:
                 index[old] = len(index)
         blocks = tuple(replace(self.blocks[i], support=True) if self.blocks[i].id in held
                        else self.blocks[i] for i in index)
-        interfaces = tuple(it.between(index[it.a], index[it.b])
-                           for it in self.interfaces if it.a in index and it.b in index
-                           and not (blocks[index[it.a]].support and blocks[index[it.b]].support))
-        return Assembly(blocks, interfaces, self.gravity)
+        interfaces, near = (tuple(it.between(index[it.a], index[it.b])
+                                  for it in found if it.a in index and it.b in index
+                                  and not (blocks[index[it.a]].support
+                                           and blocks[index[it.b]].support))
+                            for found in (self.interfaces, self.near))
+        return Assembly(blocks, interfaces, self.gravity, near)

@@ -6,7 +6,8 @@ noise per axis, and its orientation a rotation about a uniformly random axis thr
 block's position by a Gaussian angle. Supports stay where they are (the ground, a scaffold
 are the reference the poses are measured in). Draws come from the caller's numpy Generator
 in a fixed order (all positions, then all axes, then all angles), so a seed gives the same
-scene on every machine.
+scene on every machine. The forces of a perturbed check compare with the design's by block
+pair (:func:`resultant_error`).
 """
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from ..rbe.result import Report
 from ..scene import Scene
 
 
@@ -61,3 +63,23 @@ def perturb_scene(scene: Scene, noise: PoseNoise, rng: np.random.Generator) -> S
     for k, p, q in zip(free, pos, quat):
         blocks[k] = replace(blocks[k], position=p, orientation=q)
     return replace(scene, blocks=tuple(blocks))
+
+
+def pair_resultants(report: Report) -> dict[tuple[str, str], np.ndarray]:
+    """The total force (N) each block pair's interfaces carry, keyed by the sorted pair and
+    pointing from the first block into the second: the forces of a check on perturbed poses
+    match those of the design by pair, whichever faces and polygons the noise made."""
+    out: dict[tuple[str, str], np.ndarray] = {}
+    for r in report.interfaces:
+        key, sign = ((r.block_a, r.block_b), 1.0) if r.block_a <= r.block_b else \
+            ((r.block_b, r.block_a), -1.0)
+        out[key] = out.get(key, 0.0) + sign * np.asarray(r.resultant, dtype=float)
+    return out
+
+
+def resultant_error(report: Report, reference: Report) -> float:
+    """The largest difference (N) of a pair's resultant between two checks of one assembly
+    (a pair in one only: against zero)."""
+    a, b = pair_resultants(report), pair_resultants(reference)
+    return max((float(np.linalg.norm(a.get(k, 0.0) - b.get(k, 0.0))) for k in a.keys() | b.keys()),
+               default=0.0)

@@ -9,6 +9,7 @@ from dataclasses import dataclass, replace
 
 from ..rbe.result import Report, Status
 from ..scene import Scene, SceneError
+from .asbuilt import declared, sensitivity
 from .assembly import Assembly
 from .holds import suggested_holds
 from .incremental import StepChecker
@@ -28,6 +29,7 @@ def check_scene(scene: Scene, options: CheckOptions = CheckOptions(),
     report names the smallest set of blocks to hold (``suggested_holds``, see
     :class:`~rbe_ros.analysis.options.HoldSearch`)."""
     start = time.perf_counter()
+    options = declared(options, scene)
     assembly = validated_assembly(scene, options.limits, options.contact, assembly)
     held: tuple[str, ...] = ()
     if scene.holds:
@@ -45,6 +47,7 @@ def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
     the reports so far are returned.
     """
     start = time.perf_counter()
+    options = declared(options, scene)
     full = validated_assembly(scene, options.limits, options.contact)
     contact_time = time.perf_counter() - start
     steps = sequence_steps(scene)
@@ -65,12 +68,16 @@ def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
 
 def _finished(report: Report, assembly: Assembly, held, options: CheckOptions, start: float,
               **step) -> Report:
-    """The report as the pipeline gives it: the blocks held, the suggested holds, the step
-    (``step_index``, ``block_placed``) and the time since ``start``, the one place where a
-    check's time is taken."""
+    """The report as the pipeline gives it: the near contacts and whether the verdict is
+    sensitive to the contact tolerance (why, in the message), the blocks held, the
+    suggested holds, the step (``step_index``, ``block_placed``) and the time since
+    ``start``, the one place where a check's time is taken."""
+    near, sensitive = sensitivity(report, assembly, options)
+    message = report.message + (f" | sensitive: {sensitive}" if sensitive else "")
     suggested = suggested_holds(report, assembly, options)
-    return replace(report, held_blocks=tuple(held), suggested_holds=suggested,
-                   solve_time=time.perf_counter() - start, **step)
+    return replace(report, message=message, near_contacts=near,
+                   verdict_sensitive=bool(sensitive), held_blocks=tuple(held),
+                   suggested_holds=suggested, solve_time=time.perf_counter() - start, **step)
 
 
 def first_failing_step(reports: list[Report]) -> int:

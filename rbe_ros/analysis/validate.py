@@ -3,13 +3,15 @@
 :func:`validated_assembly` is the geometry stage of every check with validation on: the
 scene's limits (:func:`rbe_ros.scene.validate_scene`), then the posed blocks (closed,
 positive-volume meshes), the densities implied by given masses, and no two blocks overlapping
-beyond the penetration tolerance. Each problem raises one :class:`SceneError` naming it.
-A block that touches nothing is not invalid: the check's verdict says so (INFEASIBLE).
+beyond the penetration tolerance plus what a declared pose uncertainty explains. Each
+problem raises one :class:`SceneError` naming it. A block that touches nothing is not
+invalid: the check's verdict says so (INFEASIBLE).
 """
 from __future__ import annotations
 
 from ..geometry.contacts import ContactOptions
 from ..geometry.overlap import find_penetration
+from ..geometry.uncertainty import allowances
 from ..scene import Scene, SceneError, ValidationLimits, validate_scene
 from .assembly import Assembly
 
@@ -23,12 +25,18 @@ def validate_assembly(assembly: Assembly, limits: ValidationLimits = ValidationL
             raise SceneError(
                 f"block {b.id!r}: mass {b.mass:.6g} kg in {b.volume:.6g} m^3 is a density of "
                 f"{density:.6g} kg/m^3, outside the sane range [{limits.min_density:g}, "
-                f"{limits.max_density:g}] kg/m^3")
-    hit = find_penetration(list(assembly.blocks), max(limits.penetration_tol, contact.distance_tol))
+                f"{limits.max_density:g}] kg/m^3", [b.id])
+    blocks = list(assembly.blocks)
+    hit = find_penetration(blocks, max(limits.penetration_tol, contact.distance_tol),
+                           allowances(blocks, contact.pose_uncertainty_m,
+                                      contact.pose_uncertainty_deg) if contact.uncertain
+                           else None)
     if hit is not None:
         a, b = assembly.blocks[hit.a], assembly.blocks[hit.b]
         raise SceneError(f"blocks {a.id!r} and {b.id!r} interpenetrate: they overlap by "
-                         f"{hit.depth:.4g} m, more than the tolerance {hit.tol:.4g} m")
+                         f"{hit.depth:.4g} m, more than the tolerance {hit.tol:.4g} m"
+                         + (" (with the declared pose uncertainty)" if contact.uncertain else ""),
+                         [a.id, b.id])
 
 
 def validated_assembly(scene: Scene, limits: ValidationLimits | None = ValidationLimits(),

@@ -54,6 +54,7 @@ class PosedBlock:
     face_vs: np.ndarray         # (F, 3)
     face_outlines: np.ndarray   # (F,) shapely outlines in face frame coordinates (shared,
                                 #      read-only: they do not depend on the pose)
+    position: np.ndarray        # (3,) origin of the block frame: pose errors turn about it
 
     @cached_property
     def faces(self) -> tuple[Face, ...]:
@@ -98,7 +99,7 @@ def pose_blocks(blocks) -> list[PosedBlock]:
         try:
             shapes.append(_shape(rounded[s:s + n].tobytes(), n, block.faces))
         except ValueError as exc:
-            raise SceneError(f"block {block.id!r}: {exc}") from None
+            raise SceneError(f"block {block.id!r}: {exc}", [block.id]) from None
     rot = Rotation.from_quat(np.array([b.orientation for b in blocks])).as_matrix()  # x, y, z, w
     pos = np.array([b.position for b in blocks], dtype=float)
     n_face = np.array([len(s.offsets) for s in shapes])
@@ -124,7 +125,7 @@ def pose_blocks(blocks) -> list[PosedBlock]:
         out.append(PosedBlock(block.id, block.support, world[vb:ve], centroids[k], shape.volume,
                               float(mass), shape.volume ** (1.0 / 3.0), aabb[k], normals[fb:fe],
                               offsets[fb:fe], origins[fb:fe], us[fb:fe], vs[fb:fe],
-                              shape.outlines))
+                              shape.outlines, pos[k]))
     return out
 
 

@@ -22,6 +22,7 @@ from .clip import clip_convex, padded_rings
 from .kern import kern, kerns_ragged
 from .polygon import (PlaneFrame, cross, drop_collinear_rings, first_argmin, ring_neighbours,
                       ring_widths)
+from .uncertainty import NEAR_FACTOR, allowances, gaps, mid_frames
 
 
 @dataclass(frozen=True)
@@ -55,14 +56,26 @@ class ContactOptions:
     min_area: float = 1e-6          # smallest interface area, relative to size^2
     min_width: float = 1e-3         # thinnest interface polygon kept (edge contacts go)
     vertex_tol: float = 1e-3        # vertices this close to their neighbours' chord go
+    #: Declared pose uncertainty (about 3 sigma of the measured poses): position in m, angle
+    #: in deg. 0 and 0: design geometry (the rule above, one face's plane). Otherwise the
+    #: rules of :mod:`rbe_ros.geometry.uncertainty` (tolerances grown by what the
+    #: uncertainty explains, symmetric interfaces on the mid-plane of the two faces).
+    pose_uncertainty_m: float = 0.0
+    pose_uncertainty_deg: float = 0.0
 
     def __post_init__(self):
-        for name in ("distance_tol", "angle_tol_deg", "min_area", "min_width", "vertex_tol"):
+        for name in ("distance_tol", "angle_tol_deg", "min_area", "min_width", "vertex_tol",
+                     "pose_uncertainty_m", "pose_uncertainty_deg"):
             value = getattr(self, name)
             if (isinstance(value, bool) or not isinstance(value, numbers.Real)
                     or not math.isfinite(value) or value < 0):
                 raise ValueError(f"contact option {name} must be a finite number >= 0, "
                                  f"not {value!r}")
+
+    @property
+    def uncertain(self) -> bool:
+        """Whether a pose uncertainty is declared (the as-built rules apply)."""
+        return self.pose_uncertainty_m > 0 or self.pose_uncertainty_deg > 0
 
 
 @dataclass(frozen=True)
@@ -70,7 +83,9 @@ class Interface:
     """A planar contact polygon between blocks a and b (indices into the block list).
 
     ``frame.n`` points from a into b; ``frame.u`` follows the polygon's longest edge.
-    ``points`` are the polygon vertices (world) at which the contact forces act.
+    ``points`` are the polygon vertices (world) at which the contact forces act. ``gap``
+    (m) is how far apart the two faces are (negative: they overlap), the largest over the
+    polygon, and ``tol`` (m) the largest gap that makes them a contact.
     """
 
     a: int
@@ -78,6 +93,8 @@ class Interface:
     frame: PlaneFrame
     points: np.ndarray
     area: float
+    gap: float = 0.0
+    tol: float = 0.0
 
     def polygon2d(self) -> np.ndarray:
         return self.frame.to_2d(self.points)
@@ -111,7 +128,7 @@ class Interface:
         """The same contact between blocks renumbered ``a`` and ``b``, sharing the kern
         (direct construction, not dataclasses.replace: a sequence check renumbers every
         interface at every step)."""
-        out = Interface(a, b, self.frame, self.points, self.area)
+        out = Interface(a, b, self.frame, self.points, self.area, self.gap, self.tol)
         out.__dict__["kern"] = self.kern
         return out
 
@@ -143,7 +160,15 @@ def candidate_pairs(blocks: list[PosedBlock], margin: float) -> np.ndarray:
 
 def detect_interfaces(blocks: list[PosedBlock], options: ContactOptions = ContactOptions()
                       ) -> list[Interface]:
-    """Every face-to-face interface between the blocks (deterministic order).
+    """Every face-to-face interface between the blocks (deterministic order); see
+    :func:`detect_contacts`."""
+    return detect_contacts(blocks, options)[0]
+
+
+def detect_contacts(blocks: list[PosedBlock], options: ContactOptions = ContactOptions()
+                    ) -> tuple[list[Interface], list[Interface]]:
+    """Every face-to-face interface between the blocks, and the near contacts (face pairs
+    beyond the distance tolerance but within NEAR_FACTOR times it), deterministic order.
 
     Batched: face pairs of all candidate block pairs are screened in one numpy pass (opposite
     normals, one plane), the survivors' outlines are clipped against each other all at once
@@ -152,10 +177,14 @@ def detect_interfaces(blocks: list[PosedBlock], options: ContactOptions = Contac
     ragged arrays (vertices one polygon after another): width and vertex filters (see
     :class:`ContactOptions`), frames and lifting to 3D. Kerns are left to
     :meth:`Interface.compute_kerns` (batched) or to :attr:`Interface.kern` (on first use).
+    With a declared pose uncertainty the tolerances and the interface plane follow
+    :mod:`rbe_ros.geometry.uncertainty`.
     """
     if len(blocks) < 2:
-        return []
-    margin = options.distance_tol * max(b.size for b in blocks)
+        return [], []
+    allow = allowances(blocks, options.pose_uncertainty_m, options.pose_uncertainty_deg)
+    sizes = np.array([b.size for b in blocks])
+    margin = NEAR_FACTOR * (options.distance_tol * sizes.max() + 2 * allow.max())
     pairs = candidate_pairs(blocks, margin)
     face_count = np.array([len(b.face_offsets) for b in blocks])
     face_start = np.concatenate(([0], np.cumsum(face_count)[:-1]))
@@ -165,23 +194,36 @@ def detect_interfaces(blocks: list[PosedBlock], options: ContactOptions = Contac
     us = np.concatenate([b.face_us for b in blocks])
     vs = np.concatenate([b.face_vs for b in blocks])
     outlines = np.concatenate([b.face_outlines for b in blocks])
-    sizes = np.array([b.size for b in blocks])
 
-    # faces of the candidate pairs with opposite normals, then those in one plane
+    # faces of the candidate pairs with opposite normals, then those in one plane (or near)
+    angle = options.angle_tol_deg + 2 * options.pose_uncertainty_deg
     pair_of, fa, fb = _facing(pairs, face_count, face_start, normals,
-                              -np.cos(np.radians(options.angle_tol_deg)))
-    scale = np.minimum(sizes[pairs[pair_of, 0]], sizes[pairs[pair_of, 1]])
-    gap = np.abs(np.einsum("ij,ij->i", normals[fa], origins[fb]) - offsets[fa])
-    keep = gap <= options.distance_tol * scale
-    fa, fb, pair_of, scale = fa[keep], fb[keep], pair_of[keep], scale[keep]
+                              -np.cos(np.radians(min(angle, 90.0))))
+    first, second = pairs[pair_of, 0], pairs[pair_of, 1]
+    scale = np.minimum(sizes[first], sizes[second])
+    tol = options.distance_tol * scale + (allow[first] + allow[second])
+    gap = np.einsum("ij,ij->i", normals[fa], origins[fb]) - offsets[fa]
+    reach = NEAR_FACTOR * tol
+    if options.uncertain:       # tilted faces: face b's origin may be off the overlap
+        tilt = 1 + np.einsum("ij,ij->i", normals[fa], normals[fb])
+        reach = reach + np.sqrt(np.maximum(2 * tilt, 0.0)) * np.ptp(
+            np.array([b.aabb for b in blocks])[second], axis=1).max(axis=1)
+    keep = np.abs(gap) <= reach
+    fa, fb, pair_of, scale, tol, gap = (x[keep] for x in (fa, fb, pair_of, scale, tol, gap))
     if not len(fa):
-        return []
+        return [], []
 
-    # the overlap of the two outlines, in the frame of face a
+    # the overlap of the two outlines, in the frame of face a (or of the mid-plane)
     outline_a, outline_b = outlines[fa], outlines[fb]
-    coords_a, index_a = shapely.get_coordinates(outline_a, return_index=True)
-    coords_b, index_b = _in_frames(outline_b, origins[fb], us[fb], vs[fb],
-                                   origins[fa], us[fa], vs[fa])
+    if options.uncertain:
+        f_o, f_u, f_v, f_n = mid_frames(normals[fa], offsets[fa], origins[fa], normals[fb],
+                                        offsets[fb], origins[fb])
+        coords_a, index_a = _in_frames(outline_a, origins[fa], us[fa], vs[fa], f_o, f_u, f_v)
+        outline_a = shapely.set_coordinates(outline_a, coords_a)
+    else:
+        f_o, f_u, f_v, f_n = origins[fa], us[fa], vs[fa], normals[fa]
+        coords_a, index_a = shapely.get_coordinates(outline_a, return_index=True)
+    coords_b, index_b = _in_frames(outline_b, origins[fb], us[fb], vs[fb], f_o, f_u, f_v)
     box_a, box_b = _bounds(coords_a, index_a, len(fa)), _bounds(coords_b, index_b, len(fa))
     meet = (np.all(box_a[:, :2] <= box_b[:, 2:], axis=1)
             & np.all(box_b[:, :2] <= box_a[:, 2:], axis=1))
@@ -198,12 +240,12 @@ def detect_interfaces(blocks: list[PosedBlock], options: ContactOptions = Contac
         ring, counts = ring[np.repeat(ok, counts)], counts[ok]
         owner, area, centroid2d = owner[ok], area[ok], centroid2d[ok]
     if not len(owner):
-        return []
-    tol = scale[owner]
+        return [], []
+    size = scale[owner]
 
     # edge contacts go: area <= width * diameter <= width * bounding-box diagonal, so only
     # rings with area < min width * diagonal need their width measured
-    least = options.min_width * tol
+    least = options.min_width * size
     starts = np.cumsum(counts) - counts
     extent = np.maximum.reduceat(ring, starts) - np.minimum.reduceat(ring, starts)
     thick = area >= least * np.sqrt(extent[:, 0] ** 2 + extent[:, 1] ** 2)
@@ -212,30 +254,39 @@ def detect_interfaces(blocks: list[PosedBlock], options: ContactOptions = Contac
         thick[maybe] = ring_widths(ring[np.repeat(~thick, counts)], counts[maybe]) >= least[maybe]
     if not thick.all():
         ring, counts = ring[np.repeat(thick, counts)], counts[thick]
-        owner, area, centroid2d, tol = owner[thick], area[thick], centroid2d[thick], tol[thick]
+        owner, area, centroid2d, size = owner[thick], area[thick], centroid2d[thick], size[thick]
         if not len(owner):
-            return []
-    ring, counts = drop_collinear_rings(ring, counts, options.vertex_tol * tol)
+            return [], []
+    ring, counts = drop_collinear_rings(ring, counts, options.vertex_tol * size)
 
-    # lifted to 3D; frames: n of face a, u along the longest edge, origin at the centroid
-    face = fa[owner]
+    # lifted to 3D; frames: n of face a (or of the mid-plane), u along the longest edge,
+    # origin at the centroid
     rep = np.repeat(np.arange(len(counts)), counts)
-    f_o, f_u, f_v, f_n = origins[face], us[face], vs[face], normals[face]
-    pts = _lift(ring, f_o[rep], f_u[rep], f_v[rep])
+    o, fu, fv, n = f_o[owner], f_u[owner], f_v[owner], f_n[owner]
+    pts = _lift(ring, o[rep], fu[rep], fv[rep])
     _, nxt = ring_neighbours(counts)
     edges = pts[nxt] - pts
     lengths = np.sqrt(np.einsum("ij,ij->i", edges, edges))
     longest = first_argmin(-lengths, counts)
     u = edges[longest] / lengths[longest][:, None]
-    v = cross(f_n, u)
-    centroid = _lift(centroid2d, f_o, f_u, f_v)
+    v = cross(n, u)
+    centroid = _lift(centroid2d, o, fu, fv)
+    gap = gap[owner]
+    if options.uncertain:       # the gap along n at every vertex; the largest counts
+        face_a, face_b = fa[owner][rep], fb[owner][rep]
+        at = gaps(pts, n[rep], normals[face_a], offsets[face_a], normals[face_b],
+                  offsets[face_b])
+        gap = at[first_argmin(-np.abs(at), counts)]
+    within = (np.abs(gap) <= tol[owner]).tolist()
 
     pair = pairs[pair_of[owner]]
     ends = np.cumsum(counts).tolist()
-    return [Interface(i, j, PlaneFrame(o, uu, vv, n), pts[s:e], a)
-            for i, j, o, uu, vv, n, s, e, a in zip(
-                pair[:, 0].tolist(), pair[:, 1].tolist(), centroid, u, v, f_n,
-                [0] + ends[:-1], ends, area.tolist())]
+    found = ([], [])
+    for i, j, oo, uu, vv, nn, s, e, a, g, t, w in zip(
+            pair[:, 0].tolist(), pair[:, 1].tolist(), centroid, u, v, n, [0] + ends[:-1], ends,
+            area.tolist(), gap.tolist(), tol[owner].tolist(), within):
+        found[not w].append(Interface(i, j, PlaneFrame(oo, uu, vv, nn), pts[s:e], a, g, t))
+    return found
 
 
 def _facing(pairs: np.ndarray, face_count: np.ndarray, face_start: np.ndarray,

@@ -43,9 +43,11 @@ class Penetration(NamedTuple):
     tol: float      # m, the tolerance it exceeds
 
 
-def find_penetration(blocks: list[PosedBlock], tol_rel: float) -> Penetration | None:
+def find_penetration(blocks: list[PosedBlock], tol_rel: float,
+                     allowance: np.ndarray | None = None) -> Penetration | None:
     """The deepest confirmed interpenetration of two convex blocks (overlap beyond ``tol_rel``
-    times the smaller block's size), or None."""
+    times the smaller block's size, plus the two blocks' ``allowance`` (m) when given: what
+    their pose uncertainty explains), or None."""
     if len(blocks) < 2:
         return None
     pairs = candidate_pairs(blocks, 0.0)
@@ -55,6 +57,8 @@ def find_penetration(blocks: list[PosedBlock], tol_rel: float) -> Penetration | 
     convex = _convex(blocks)
     pairs = pairs[convex[pairs[:, 0]] & convex[pairs[:, 1]]]
     tol = tol_rel * np.minimum(sizes[pairs[:, 0]], sizes[pairs[:, 1]])
+    if allowance is not None:
+        tol = tol + allowance[pairs[:, 0]] + allowance[pairs[:, 1]]
     depth = _face_axis_depths(blocks, pairs)
     suspect = np.flatnonzero(depth > tol * (1 + 1e-9))     # not for rounding at the limit
     for k in suspect[np.argsort(-depth[suspect], kind="stable")]:

@@ -16,7 +16,7 @@ import functools
 import io
 import os
 import sys
-from collections.abc import Iterator, Mapping
+from collections.abc import Collection, Iterator, Mapping
 from importlib.metadata import version
 from pathlib import Path
 from typing import NamedTuple
@@ -316,8 +316,9 @@ def _finished(mcap_path: Path) -> bool:
         return f.read() == MCAP_MAGIC
 
 
-def read_bag(path) -> Iterator[BagMessage]:
-    """The messages of a bag directory (or a single .mcap file) as message dicts.
+def read_bag(path, msgtypes: Collection[str] | None = None) -> Iterator[BagMessage]:
+    """The messages of a bag directory (or a single .mcap file) as message dicts (only
+    those of ``msgtypes``, e.g. ``{"rbe_msgs/msg/StabilityReport"}``, if given).
 
     A finished bag is read with rosbags' AnyReader (types from the definitions stored in the
     bag, in time order). An MCAP file without footer (a recording that was killed) is scanned
@@ -326,16 +327,18 @@ def read_bag(path) -> Iterator[BagMessage]:
     path = Path(path)
     if all(_finished(f) for f in _mcap_files(path)):
         with AnyReader([path]) as reader:
-            for conn, stamp, raw in reader.messages():
+            connections = [c for c in reader.connections
+                           if msgtypes is None or c.msgtype in msgtypes]
+            for conn, stamp, raw in reader.messages(connections=connections):
                 obj = reader.deserialize(raw, conn.msgtype)
                 yield BagMessage(conn.topic, conn.msgtype, stamp,
                                  to_dict(reader.typestore, conn.msgtype, obj))
         return
     for f in _mcap_files(path):
-        yield from _scan_mcap(f)
+        yield from _scan_mcap(f, msgtypes)
 
 
-def _scan_mcap(path: Path) -> Iterator[BagMessage]:
+def _scan_mcap(path: Path, msgtypes: Collection[str] | None = None) -> Iterator[BagMessage]:
     store = get_typestore(Stores.EMPTY)
     schemas: dict[int, Schema] = {}
     channels: dict[int, Channel] = {}
@@ -354,6 +357,8 @@ def _scan_mcap(path: Path) -> Iterator[BagMessage]:
             elif isinstance(rec, Message) and rec.channel_id in channels:
                 ch = channels[rec.channel_id]
                 msgtype = schemas[ch.schema_id].name
+                if msgtypes is not None and msgtype not in msgtypes:
+                    continue
                 obj = store.deserialize_cdr(rec.data, msgtype)
                 yield BagMessage(ch.topic, msgtype, rec.log_time, to_dict(store, msgtype, obj))
 

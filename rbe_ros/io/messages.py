@@ -18,8 +18,9 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..rbe.result import InterfaceResult, Report, Status
-from ..scene import BOX_FACES, Hold, Scene, SceneError, box_vertices, make_block, make_scene
+from ..rbe.result import InterfaceResult, NearContact, Report, Status
+from ..scene import (BOX_FACES, Hold, Scene, SceneError, blame, box_vertices, make_block,
+                     make_scene)
 
 SOLID_PRIMITIVE_BOX = 1  # shape_msgs/SolidPrimitive.BOX
 _XYZ = ("x", "y", "z")
@@ -187,7 +188,10 @@ def scene_from_state_dict(d) -> Scene:
     if not isinstance(d, Mapping):
         raise SceneError("an AssemblyState must be a mapping (message dict), "
                          f"got {type(d).__name__}")
-    blocks = [_block_from_dict(i, b) for i, b in enumerate(_list(d, "blocks", "AssemblyState"))]
+    blocks = []
+    for i, b in enumerate(_list(d, "blocks", "AssemblyState")):
+        with blame(b.get("id") if isinstance(b, Mapping) else ""):
+            blocks.append(_block_from_dict(i, b))
     sequence = _list(d, "sequence", "AssemblyState")
     if not all(isinstance(s, str) for s in sequence):
         raise SceneError("AssemblyState.sequence must be a list of block ids (strings)")
@@ -295,6 +299,10 @@ def report_to_dict(report: Report, header: dict, *, arrays: bool = False) -> dic
         "message": str(report.message),
         "model": str(report.model),
         "dropped_states": int(report.dropped_states),
+        "near_contacts": [{"block_a": str(c.block_a), "block_b": str(c.block_b),
+                           "gap": float(c.gap), "overlap_area": float(c.overlap_area)}
+                          for c in report.near_contacts],
+        "verdict_sensitive": bool(report.verdict_sensitive),
     }
 
 
@@ -329,6 +337,9 @@ def report_from_dict(d: Mapping) -> Report:
         suggested_holds=[str(b) for b in d.get("suggested_holds", [])],
         model=str(d.get("model", "full")),
         dropped_states=int(d.get("dropped_states", 0)),
+        near_contacts=[NearContact(str(c["block_a"]), str(c["block_b"]), float(c["gap"]),
+                                   float(c["overlap_area"])) for c in d.get("near_contacts", [])],
+        verdict_sensitive=bool(d.get("verdict_sensitive", False)),
     )
 
 

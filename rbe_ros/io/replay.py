@@ -55,6 +55,7 @@ from ..scene import Scene, SceneError
 from .bag import BagWriter, read_bag, read_custom_data
 from .messages import (header_stamp_ns, report_header, report_to_dict, scene_from_state_dict,
                        state_to_dict)
+from .markers import MARKER_TOPIC, MARKER_TYPE, run_markers
 
 OPTIONS_KEY = "rbe_ros.check_options"
 STATE_TYPE = "rbe_msgs/msg/AssemblyState"
@@ -62,6 +63,9 @@ REPORT_TYPE = "rbe_msgs/msg/StabilityReport"
 #: Topics of bags written here: the names rbe_node uses (node name rbe_node).
 STATE_TOPIC = "/rbe_node/assembly"
 REPORT_TOPIC = "/rbe_node/report"
+#: Log-time spacing of the reports (and markers) of a recorded sequence: one step a second,
+#: so that a player's timeline (Foxglove) steps through the sequence one step at a time.
+STEP_NS = 1_000_000_000
 #: Report fields that are not compared.
 IGNORED = frozenset({"solve_time", "dropped_states"})
 
@@ -126,12 +130,18 @@ class Run:
                 f"{what})")
 
 
+def step_stamps(stamp_ns: int, count: int) -> list[int]:
+    """Log times of the ``count`` reports of a state logged at ``stamp_ns``."""
+    return [stamp_ns + (k + 1) * STEP_NS for k in range(count)]
+
+
 def read_runs(path) -> list[Run]:
     """The runs of a bag: every AssemblyState in log-time order, each with the reports whose
-    header stamp is its stamp (a report goes to the latest such state before it)."""
+    header stamp is its stamp (a report goes to the latest such state before it). Other
+    topics (markers) are not read."""
     runs: list[Run] = []
     by_key: dict[tuple[int, int], list[Run]] = {}
-    for m in read_bag(path):
+    for m in read_bag(path, msgtypes={STATE_TYPE, REPORT_TYPE}):
         if m.msgtype == STATE_TYPE:
             run = Run(m.data, m.stamp_ns, m.topic)
             runs.append(run)
@@ -412,9 +422,12 @@ def format_differences(runs: list[Run], differences: list[Difference], limit: in
 
 # --- writing ---------------------------------------------------------------------------------
 
-def write_runs(path, runs: list[Run], replayed: list[list[dict]], options: CheckOptions) -> None:
+def write_runs(path, runs: list[Run], replayed: list[list[dict]], options: CheckOptions, *,
+               markers: bool = True) -> None:
     """A bag with every run's state and its ``replayed`` reports (at the recorded report
-    times where there are as many, else just after the state); the options in custom_data."""
+    times where there are as many, else a step a second after the state: :data:`STEP_NS`);
+    with ``markers`` each report's MarkerArray on :data:`rbe_ros.io.markers.MARKER_TOPIC` at
+    its time; the options in custom_data."""
     with BagWriter(path, custom_data={OPTIONS_KEY: options_to_json(options)}) as bag:
         topics: set[str] = set()
         for run, reports in zip(runs, replayed):
@@ -423,18 +436,25 @@ def write_runs(path, runs: list[Run], replayed: list[list[dict]], options: Check
                 if topic not in topics:
                     bag.add_topic(topic, kind, transient_local=latched)
                     topics.add(topic)
+            if markers and MARKER_TOPIC not in topics:
+                bag.add_topic(MARKER_TOPIC, MARKER_TYPE, transient_local=True)
+                topics.add(MARKER_TOPIC)
             bag.write(run.topic, run.state, run.stamp_ns)
             stamps = run.report_stamps if len(run.report_stamps) == len(reports) else \
-                [run.stamp_ns + k + 1 for k in range(len(reports))]
+                step_stamps(run.stamp_ns, len(reports))
             for report, stamp in zip(reports, stamps):
                 bag.write(run.report_topic, report, stamp)
+            if markers:
+                for array, stamp in zip(run_markers(run.state, reports, options), stamps):
+                    bag.write(MARKER_TOPIC, array, stamp)
 
 
 def record_bag(path, scenes: list[tuple[Scene, str, int]], options: CheckOptions = CheckOptions(),
-               *, zero_times: bool = False) -> list[Run]:
-    """Check ``(scene, frame_id, stamp_ns)`` states as the node would and record states and
-    reports in a new bag at ``path`` (reports 1 ns apart after their state). ``zero_times``:
-    solve_time 0 in every report, so that reruns write identical files."""
+               *, zero_times: bool = False, markers: bool = True) -> list[Run]:
+    """Check ``(scene, frame_id, stamp_ns)`` states as the node would and record states,
+    reports and (``markers``) their markers in a new bag at ``path`` (a step a second after
+    their state). ``zero_times``: solve_time 0 in every report, so that reruns write
+    identical files."""
     runs = []
     for scene, frame, stamp in scenes:
         run = Run(state_to_dict(scene, frame, stamp), stamp)
@@ -442,9 +462,9 @@ def record_bag(path, scenes: list[tuple[Scene, str, int]], options: CheckOptions
         if zero_times:
             for r in run.reports:
                 r["solve_time"] = 0.0
-        run.report_stamps = [stamp + k + 1 for k in range(len(run.reports))]
+        run.report_stamps = step_stamps(stamp, len(run.reports))
         runs.append(run)
-    write_runs(path, runs, [r.reports for r in runs], options)
+    write_runs(path, runs, [r.reports for r in runs], options, markers=markers)
     return runs
 
 
@@ -491,12 +511,14 @@ def offline_reports(runs: list[Run], options: CheckOptions,
 
 def replay_bag(path, output=None, *, options: CheckOptions | None = None, compare: bool = True,
                recheck: Recheck = offline_reports, tolerances: Tolerances = Tolerances(),
-               write: bool = True, on_run: Callable[[int, Run], None] | None = None
-               ) -> ReplayResult:
+               write: bool = True, markers: bool = True,
+               on_run: Callable[[int, Run], None] | None = None) -> ReplayResult:
     """Re-check every state of the bag at ``path`` with ``recheck`` (offline; or through a
     live rbe_node: :func:`rbe_ros.ros.live.live_recheck`), write the states and the new
     reports to ``output`` (default: path + "_replay"; never overwritten; ``write=False``:
-    no bag), and with ``compare`` list the differences from the recorded reports."""
+    no bag; ``markers``: with the reports' markers), and with ``compare`` list the
+    differences from the recorded reports (markers are drawings of the reports: not
+    compared)."""
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"no bag at {str(path)!r}")
@@ -507,7 +529,7 @@ def replay_bag(path, output=None, *, options: CheckOptions | None = None, compar
     runs = read_runs(path)
     replayed = recheck(runs, options, on_run)
     if write:
-        write_runs(out, runs, replayed, options)
+        write_runs(out, runs, replayed, options, markers=markers)
     differences = compare_runs(runs, replayed, tolerances=tolerances) if compare else []
     return ReplayResult(runs, replayed, differences, out if write else None, options)
 
@@ -515,4 +537,4 @@ def replay_bag(path, output=None, *, options: CheckOptions | None = None, compar
 __all__ = ["Difference", "OPTIONS_KEY", "ReplayResult", "Run", "Tolerances", "bag_options",
            "compare_report", "compare_runs", "default_output", "free_weights",
            "offline_reports", "options_from_json", "options_to_json", "read_runs", "record_bag",
-           "replay_bag", "replay_run", "state_reports", "write_runs"]
+           "replay_bag", "replay_run", "state_reports", "step_stamps", "write_runs"]

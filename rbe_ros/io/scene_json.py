@@ -26,7 +26,8 @@ def scene_from_dict(data: dict, base_dir: Path | None = None) -> Scene:
     if not isinstance(holds, (list, tuple)):
         raise SceneError('"holds" must be a list of {"block", "from_step", "until_step"}')
     return make_scene(data.get("name", "scene"), blocks, data.get("gravity", DEFAULT_GRAVITY), seq,
-                      [_hold_from_dict(i, h) for i, h in enumerate(holds)])
+                      [_hold_from_dict(i, h) for i, h in enumerate(holds)],
+                      data.get("pose_uncertainty"))
 
 
 def _hold_from_dict(index: int, raw) -> Hold:
@@ -115,4 +116,6 @@ def scene_to_dict(scene: Scene) -> dict:
         out["holds"] = [{"block": h.block, "from_step": h.from_step,
                          **({} if h.until_step is None else {"until_step": h.until_step})}
                         for h in scene.holds]
+    if scene.pose_uncertainty is not None:
+        out["pose_uncertainty"] = list(scene.pose_uncertainty)
     return out

@@ -40,6 +40,17 @@ class InterfaceResult:
 
 
 @dataclass(frozen=True)
+class NearContact:
+    """A face pair just beyond the contact tolerance: not an interface, but a contact if the
+    poses were a little off (see rbe_ros.geometry.uncertainty)."""
+
+    block_a: str
+    block_b: str
+    gap: float              # m, between the faces (negative: they overlap)
+    overlap_area: float     # m^2, of the two faces projected on their mid-plane
+
+
+@dataclass(frozen=True)
 class Report:
     """Verdict of one check of an assembly or of one step of a sequence; made once, never
     changed (:func:`dataclasses.replace` makes a changed copy)."""
@@ -58,9 +69,12 @@ class Report:
     held_blocks: tuple[str, ...] = ()       # free blocks held as supports
     suggested_holds: tuple[str, ...] = ()   # smallest set to hold, if unstable
     dropped_states: int = 0   # node: states on ~/assembly dropped unchecked so far (overload)
+    near_contacts: tuple[NearContact, ...] = ()
+    verdict_sensitive: bool = False     # the verdict depends on the contact tolerance
 
     def __post_init__(self):
-        for name in ("interfaces", "unstable_blocks", "held_blocks", "suggested_holds"):
+        for name in ("interfaces", "unstable_blocks", "held_blocks", "suggested_holds",
+                     "near_contacts"):
             object.__setattr__(self, name, tuple(getattr(self, name)))
 
     @property

@@ -265,7 +265,7 @@ def scene_from_msg(msg, *, sequence: bool = True, limits: ValidationLimits | Non
             if vertices > limits.max_vertices or triangles > 2 * limits.max_vertices:
                 raise SceneError(f"block {block.id!r}: mesh of {vertices} vertices and "
                                  f"{triangles} triangles, more than the limit of "
-                                 f"{limits.max_vertices} vertices")
+                                 f"{limits.max_vertices} vertices", [block.id])
     values = message_to_dict(msg)
     if not sequence:
         values["sequence"] = []

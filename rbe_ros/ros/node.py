@@ -40,7 +40,6 @@ from dataclasses import replace
 from pathlib import Path
 
 import rclpy
-from builtin_interfaces.msg import Time
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType, SetParametersResult)
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
@@ -61,6 +60,7 @@ from ..analysis.pipeline import StateCheck, check_state
 from ..geometry.contacts import ContactOptions
 from ..io import cdr
 from ..io.bag import BagWriter, typestore
+from ..io.markers import MARKER_TYPE, run_markers, step_markers
 from ..io.messages import report_header, report_to_dict
 from ..io.replay import OPTIONS_KEY, options_to_json
 from ..rbe.cones import CONES, FRICTION_MODELS
@@ -68,7 +68,6 @@ from ..rbe.result import Report, Status
 from ..rbe.solver import OBJECTIVES, SolveOptions
 from ..scene import Scene, ValidationLimits
 from .convert import message_to_dict, scene_from_msg
-from .markers import report_markers
 
 NODE_NAME = "rbe_node"
 
@@ -91,7 +90,8 @@ RANGES = {"friction_coefficient": (0.0, 10.0, True), "friction_threshold": (0.0,
           "contact_distance_tolerance": (0.0, 1.0, False),
           "contact_angle_tolerance_deg": (0.0, 90.0, False),
           "contact_min_area": (0.0, 1.0, False), "contact_min_width": (0.0, 1.0, False),
-          "contact_vertex_tolerance": (0.0, 1.0, False)}
+          "contact_vertex_tolerance": (0.0, 1.0, False),
+          "pose_uncertainty_m": (0.0, 1.0, False), "pose_uncertainty_deg": (0.0, 90.0, False)}
 
 
 def _double(value: float, description: str, low: float, high: float) -> tuple:
@@ -140,6 +140,9 @@ PARAMETERS = {
                          "a timestamp suffix", read_only=True),
     "frame_id": _string("world", "frame of reports and markers when a received state has an "
                         "empty header frame_id"),
+    "record_markers": (True, ParameterDescriptor(
+        type=ParameterType.PARAMETER_BOOL, description="with mcap_path: record the markers of "
+        "every report too (false: a lean log of states and reports)")),
     "max_blocks": _integer(ValidationLimits().max_blocks, "largest number of blocks of a state; "
                            "a larger one gets an INVALID_INPUT report", 1, 1_000_000),
     "check_time_limit": _double(0.0, "time limit in s of each solver call of a check (a check "
@@ -171,6 +174,14 @@ PARAMETERS = {
     "contact_vertex_tolerance": _double(
         _CONTACT.vertex_tol, "contact detection: interface vertices closer than this "
         "to their neighbours' chord are left out, relative to the size", 0.0, 1.0),
+    # as-built poses (README: Checking as-built poses); 0 and 0: design geometry
+    "pose_uncertainty_m": _double(
+        _CONTACT.pose_uncertainty_m, "as-built poses: every block's position is known to "
+        "within this many m (about 3 sigma); contacts and the interpenetration limit follow "
+        "from it. 0 (with pose_uncertainty_deg 0): design geometry", 0.0, 1.0),
+    "pose_uncertainty_deg": _double(
+        _CONTACT.pose_uncertainty_deg, "as-built poses: every block's orientation is known to "
+        "within this many degrees (about 3 sigma)", 0.0, 90.0),
 }
 
 
@@ -205,6 +216,7 @@ class RbeNode(Node):
         # reports go out as CDR bytes made from their message dicts (rbe_ros.io.cdr), without
         # building the rclpy message (an object per Point) and serialising it
         self._encode_report = cdr.encoder(typestore(), "rbe_msgs/msg/StabilityReport")
+        self._encode_markers = cdr.encoder(typestore(), MARKER_TYPE)
         self._report_pub = self.create_publisher(StabilityReport, "~/report", LATCHED_QOS)
         self._marker_pub = self.create_publisher(MarkerArray, "~/markers", LATCHED_QOS)
         # raw: the callback gets the CDR bytes; a state is converted to a message only when
@@ -223,6 +235,7 @@ class RbeNode(Node):
 
         self.state_topic = self._state_sub.topic_name
         self.report_topic = self._report_pub.topic_name
+        self.marker_topic = self._marker_pub.topic_name
         self._open_bag()
         self._worker = threading.Thread(target=self._work, name="rbe_state_worker", daemon=True)
         self._worker.start()
@@ -266,7 +279,9 @@ class RbeNode(Node):
                                 angle_tol_deg=float(value("contact_angle_tolerance_deg")),
                                 min_area=float(value("contact_min_area")),
                                 min_width=float(value("contact_min_width")),
-                                vertex_tol=float(value("contact_vertex_tolerance"))),
+                                vertex_tol=float(value("contact_vertex_tolerance")),
+                                pose_uncertainty_m=float(value("pose_uncertainty_m")),
+                                pose_uncertainty_deg=float(value("pose_uncertainty_deg"))),
                             holds=HoldSearch(enabled=bool(value("suggest_holds")),
                                              max_size=int(value("hold_search_max_size")),
                                              max_checks=int(value("hold_search_max_checks"))))
@@ -294,6 +309,7 @@ class RbeNode(Node):
         self._bag.add_topic(self.state_topic, "rbe_msgs/msg/AssemblyState")
         self._bag.add_topic(self.report_topic, "rbe_msgs/msg/StabilityReport",
                             transient_local=True)
+        self._bag.add_topic(self.marker_topic, MARKER_TYPE, transient_local=True)
         self.bag_path = path
         self.get_logger().info(f"recording states and reports to {path}")
 
@@ -354,16 +370,26 @@ class RbeNode(Node):
         self._record(self.state_topic, state if raw is None else raw)
         return report_header(message_to_dict(state.header), self.get_parameter("frame_id").value)
 
-    def _publish(self, scene: Scene | None, report: Report, header: dict) -> bytes:
+    def _publish(self, scene: Scene | None, report: Report, header: dict,
+                 state: AssemblyState | None = None) -> bytes:
         """Record, then publish ``report`` and its markers; returns the report's CDR bytes
         (``deserialize_message(data, StabilityReport)`` where a message is needed). Recorded
-        first, so that a report anyone received is in the bag even if the node is killed."""
+        first, so that a report anyone received is in the bag even if the node is killed.
+        ``state``: the state of a check that failed, drawn as it came (the blocks at fault
+        of invalid input highlighted)."""
         report = replace(report, dropped_states=self._dropped)
         data = self._encode_report(report_to_dict(report, header, arrays=True))
         self._record(self.report_topic, data)
         self._report_pub.publish(data)
-        self._marker_pub.publish(report_markers(scene, report, header["frame_id"],
-                                                Time(**header["stamp"])))
+        if state is None:
+            markers = step_markers(scene, report, header)
+        else:
+            [markers] = run_markers(self._drawable(state), [report_to_dict(report, header)],
+                                    self.check_options())
+        markers = self._encode_markers(markers)
+        if self.get_parameter("record_markers").value:
+            self._record(self.marker_topic, markers)
+        self._marker_pub.publish(markers)
         where = f" step {report.step_index} ({report.block_placed})" \
             if report.step_index >= 0 else ""
         text = f"{header['frame_id']}{where}: {report.status.name}: {report.message}"
@@ -374,6 +400,10 @@ class RbeNode(Node):
         else:
             self.get_logger().info(text)
         return data
+
+    def _drawable(self, state: AssemblyState) -> dict:
+        """The message dict of an unchecked ``state`` to draw, if within the block limit."""
+        return message_to_dict(state) if len(state.blocks) <= self.limits().max_blocks else {}
 
     def check(self, state: AssemblyState, header: dict, sequence: bool, *,
               cancelled=None, on_step=None) -> tuple[StateCheck, list[bytes]]:
@@ -397,7 +427,7 @@ class RbeNode(Node):
         options = self.check_options()
         result = check_state(read, sequence, options, on_step=publish, cancelled=stop)
         if result.error is not None:
-            sent.append(self._publish(result.scene, result.error, header))
+            sent.append(self._publish(result.scene, result.error, header, state))
         return result, sent
 
     def check_whole(self, state: AssemblyState, header: dict) -> bytes:

@@ -21,7 +21,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from builtin_interfaces.msg import Time
 from rbe_msgs.msg import AssemblyState, StabilityReport
 from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import Header
@@ -34,7 +33,7 @@ from rbe_ros.generators import running_bond_wall
 from rbe_ros.io.messages import header_dict, report_to_dict, state_to_dict
 from rbe_ros.rbe.result import InterfaceResult, Report, Status
 from rbe_ros.ros.convert import dict_to_message, message_to_dict
-from rbe_ros.ros.markers import report_markers
+from rbe_ros.io.markers import step_markers
 from rbe_ros.scene import Hold, box_block, make_scene
 
 REPO = Path(__file__).resolve().parents[2]
@@ -127,9 +126,10 @@ def _cases() -> dict[str, tuple[str, dict, list]]:
     state["blocks"].append({"id": "p", "primitive": {"type": 1, "dimensions": [0.1, 0.2, 0.3]},
                             "pose": {"orientation": {"w": 1.0}}, "density": 100.0})
     cases["state"] = ("rbe_msgs/msg/AssemblyState", state, [])
-    markers = report_markers(scene, check_scene(stacked_boxes(0.55)), "map",
-                             Time(sec=3, nanosec=4))
-    cases["markers"] = ("visualization_msgs/msg/MarkerArray", message_to_dict(markers), [])
+    tipping = stacked_boxes(0.55)
+    cases["markers"] = ("visualization_msgs/msg/MarkerArray",
+                        step_markers(tipping, check_scene(tipping), header_dict("map", 3 * 10**9 + 4)),
+                        [])
     cases["header"] = ("std_msgs/msg/Header", {"stamp": {"sec": -1, "nanosec": 5},
                                                "frame_id": "ä"}, [])
     return cases

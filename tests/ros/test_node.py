@@ -95,23 +95,31 @@ def test_topic_report_and_markers(rbe, shift):
     markers = rbe.client.markers_for(r).markers
     assert markers[0].action == Marker.DELETEALL
     assert all(m.header.frame_id == "world" for m in markers)
-    by_ns = {m.ns: m for m in markers[1:]}
-    assert len(by_ns) == len(markers) - 1
+    assert len({(m.ns, m.id) for m in markers}) == len(markers)
+    by_ns = {}
+    for m in markers[1:]:
+        by_ns.setdefault(m.ns, []).append(m)
+    # every block a mesh, the tipping one red
+    blocks = {m.text: m for m in by_ns["blocks"]}
+    assert list(blocks) == ["ground", "a", "b"]
+    assert all(m.type == Marker.TRIANGLE_LIST and len(m.points) == 36 for m in blocks.values())
+    assert is_red(blocks["b"].color) == (shift > 0.5) and not is_red(blocks["a"].color)
+    assert max(p.x for p in blocks["b"].points) == pytest.approx(shift + 0.5)
+    # a segment per interface vertex, tension in a red marker of its own
     forces = by_ns["forces"]
-    # a segment per interface vertex: 2 points and 2 colours each
-    assert forces.type == Marker.LINE_LIST
-    assert len(forces.points) == len(forces.colors) == 2 * sum(len(i.polygon)
-                                                              for i in r.interfaces) == 16
-    red = [(forces.points[k], forces.points[k + 1])
-           for k in range(0, len(forces.points), 2) if is_red(forces.colors[k])]
+    assert all(m.type == Marker.LINE_LIST for m in forces)
+    assert sum(len(m.points) for m in forces) == 2 * sum(len(i.polygon)
+                                                        for i in r.interfaces) == 16
+    red = [(m.points[k], m.points[k + 1]) for m in forces if is_red(m.color)
+           for k in range(0, len(m.points), 2)]
     strips = by_ns["interfaces"]
-    assert strips.type == Marker.LINE_LIST
-    assert len(strips.points) == 2 * sum(len(i.polygon) for i in r.interfaces)
-    kerns = by_ns["kerns"]
-    assert kerns.type == Marker.LINE_LIST and 0 < kerns.scale.x < strips.scale.x
+    assert sum(len(m.points) for m in strips) == 2 * sum(len(i.polygon) for i in r.interfaces)
+    [kerns] = by_ns["kerns"]
+    assert kerns.type == Marker.LINE_LIST and 0 < kerns.scale.x < strips[0].scale.x
+    [text] = by_ns["text"]
+    assert text.text.endswith(r.message)
     if shift < 0.5:
-        assert red == [] and "unstable" not in by_ns
-        assert not any(is_red(c) for c in strips.colors)
+        assert red == [] and not any(is_red(m.color) for m in strips)
     else:
         top = interface(r, "a", "b")
         assert len(red) == sum(f < 0 for f in top.normal_forces) == 2
@@ -121,11 +129,7 @@ def test_topic_report_and_markers(rbe, shift):
                           for p, f in zip(top.polygon, top.normal_forces) if f < 0}
         assert all(end.z < start.z for start, end in red)
         # the edges of the tension interface a|b are red, the others not
-        assert sum(is_red(c) for c in strips.colors) == 2 * len(top.polygon)
-        unstable = by_ns["unstable"]
-        assert unstable.type == Marker.TRIANGLE_LIST
-        assert len(unstable.points) == 36 and unstable.color.a < 1.0
-        assert max(p.x for p in unstable.points) == pytest.approx(shift + 0.5)
+        assert sum(len(m.points) for m in strips if is_red(m.color)) == 2 * len(top.polygon)
 
 
 def test_topic_sequence_reports_every_step(rbe):
@@ -168,13 +172,20 @@ def test_invalid_input_does_not_kill_the_node(rbe):
     r = rbe.client.call_check(zero_q)
     assert r.status == StabilityReport.INVALID_INPUT and "'b'" in r.message
     assert "unit norm" in r.message
+    # the markers show the block at fault (drawn unrotated) and the reason
+    markers = rbe.client.markers_for(r).markers
+    colours = {m.text: m.color for m in markers if m.ns == "blocks"}
+    assert list(colours) == ["ground", "a", "b"]
+    assert [k for k, c in colours.items() if c.r > 0.9 and c.b > 0.9] == ["b"]
+    assert [m.text for m in markers if m.ns == "text"][0].endswith(r.message)
 
     no_shape = state_msg(stacked_boxes(0.45))
     no_shape.blocks[1].mesh.triangles = []
     rbe.client.publish(no_shape)
     r = rbe.client.report_for(no_shape)
     assert r.status == StabilityReport.INVALID_INPUT and "BOX" in r.message
-    assert [m.action for m in rbe.client.markers_for(r).markers] == [Marker.DELETEALL]
+    markers = rbe.client.markers_for(r).markers     # the shapeless block cannot be drawn
+    assert [m.text for m in markers if m.ns == "blocks"] == ["ground", "b"]
 
     assert rbe.proc.proc.poll() is None
     check_stack_report(rbe.client.call_check(state_msg(stacked_boxes(0.45))), 0.45)
@@ -267,11 +278,17 @@ def test_bag_holds_every_state_and_report(rbe):
     with AnyReader([rbe.bag], default_typestore=bag.typestore()) as reader:
         topics = {c.topic: c.msgtype for c in reader.connections}
         assert topics == {"/rbe_node/assembly": "rbe_msgs/msg/AssemblyState",
-                          "/rbe_node/report": "rbe_msgs/msg/StabilityReport"}
+                          "/rbe_node/report": "rbe_msgs/msg/StabilityReport",
+                          "/rbe_node/markers": "visualization_msgs/msg/MarkerArray"}
+        markers = 0
         for conn, stamp, raw in reader.messages():
             assert rbe.start_ns - 60e9 < stamp <= end_ns
+            if conn.topic == "/rbe_node/markers":
+                markers += 1        # one array per report (record_markers: true)
+                continue
             d = bag.to_dict(reader.typestore, conn.msgtype, reader.deserialize(raw, conn.msgtype))
             (states if conn.topic == "/rbe_node/assembly" else reports).append(d)
+    assert markers == len(reports)
 
     assert Counter(map(canonical, states)) == Counter(map(canonical, client.sent_states))
     recorded = [canonical(r) for r in reports]

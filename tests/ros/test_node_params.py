@@ -136,8 +136,9 @@ def test_unexpected_errors_become_solver_failed_reports(make_node, tmp_path, mon
     node.destroy_node()
     recorded = list(bag.read_bag(tmp_path / "bag"))
     assert [m.topic for m in recorded] == ["/rbe_unit_test/rbe_node/assembly",
-                                           "/rbe_unit_test/rbe_node/report"] * 2
-    assert [m.data["status"] for m in recorded[1::2]] == [StabilityReport.SOLVER_FAILED] * 2
+                                           "/rbe_unit_test/rbe_node/report",
+                                           "/rbe_unit_test/rbe_node/markers"] * 2
+    assert [m.data["status"] for m in recorded[1::3]] == [StabilityReport.SOLVER_FAILED] * 2
 
 
 def test_contact_parameters_reach_the_detection(make_node):

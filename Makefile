@@ -15,8 +15,10 @@ setup:
 
 demo: setup
 	$(VENV)/bin/rbe-ros check examples/build_sequence.json --sequence --bag out/demo --force
+	$(VENV)/bin/rbe-ros view out/demo -o out/demo/report.html
+	@echo "[demo] open out/demo/report.html in a browser (3D view, step slider, table of steps)"
 
-test: setup
+test: setup browser
 	@echo "[test] ROS_DOMAIN_ID=$(ROS_DOMAIN_ID) ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST"
 	ROS_DOMAIN_ID=$(ROS_DOMAIN_ID) ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST \
 		$(PY) -m pytest tests -q
@@ -35,7 +37,7 @@ paper: setup
 # Speed against accuracy against compas_cra, PyBullet and MuJoCo: docs/BENCHMARKS.md and
 # docs/bench/ (20-30 minutes). The physics engines go into .venv (requirements/bench.txt,
 # checked with pip check); compas-cra into a scratch venv (RBE_COMPAS_VENV, default
-# /tmp/rbe-compas-venv). make bench BENCH_ARGS=--quick: a subset in under 3 minutes,
+# .venv-compas, made by make setup). make bench BENCH_ARGS=--quick: a subset in under 3 minutes,
 # written to out/bench-quick/.
 .PHONY: bench
 bench: setup
@@ -56,5 +58,15 @@ scaling: setup
 lock:
 	python3 scripts/lock.py
 
+# Headless Chromium for the HTML view's browser test (Debian's chromium, chromium-driver;
+# apt-get as root or with sudo; seconds when already installed).
+.PHONY: browser screenshot
+browser:
+	bash scripts/setup_browser.sh
+
+# The README's screenshot of the HTML view, docs/view.png, taken in headless Chromium.
+screenshot: setup browser
+	$(PY) scripts/view_screenshot.py
+
 clean:
-	rm -rf build $(VENV)
+	rm -rf build $(VENV) .venv-compas

@@ -520,7 +520,7 @@ def _arch_section(result) -> list[str]:
     a = result["arch"]
     info = a["info"]
     L = ["### Semicircular arch: minimum thickness", "",
-         f"Exact reference: `benchmarks/_arch_limit.py`, a thrust-line LP of the plane arch with"
+         f"Exact reference: `tests/oracles/arch_limit.py`, a thrust-line LP of the plane arch with"
          f" the generator's geometry (independent of rbe_ros). Arch of {a['n']} voussoirs, mu"
          f" {a['mu']:g}: t_min/R = {a['exact']:.7f}. Each method bisects its own verdict on t/R"
          f" (ours to 1e-7, cvxpy and compas_cra to {a['tol']:g}, the physics engines to"

@@ -36,10 +36,11 @@ from scipy.spatial.transform import Rotation
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(ROOT / "tests"))   # the independent references (tests/oracles/)
 
-import _arch_limit as arch_limit  # noqa: E402
 import _physics as physics  # noqa: E402
 from machine import machine_summary  # noqa: E402
+from oracles import arch_limit  # noqa: E402
 from timing import best_of  # noqa: E402
 
 from rbe_ros import generators as gen  # noqa: E402
@@ -198,7 +199,7 @@ def arch_cases(quick: bool) -> tuple[list[Case], dict]:
         for f, ok in ((1.01, True), (0.99, False)):
             cases.append(Case(f"arch {n} voussoirs, t = t_min x{f:g}", "arch thickness", "verdict",
                               gen.semicircular_arch(n, f * t), mu, ok,
-                              f"t_min/R = {t:.6f} for n = {n} (thrust-line LP, _arch_limit.py;"
+                              f"t_min/R = {t:.6f} for n = {n} (thrust-line LP, tests/oracles/arch_limit.py;"
                               f" continuous 0.107426, Cocchetti & Rizzi 2020)",
                               physics=not quick or n == 15))
     n, ratio = 15, 0.15
@@ -562,7 +563,7 @@ def main(argv=None) -> int:
     parser.add_argument("--out", type=Path, help="docs folder (default docs/, or out/bench-quick with --quick)")
     parser.add_argument("--no-cra", action="store_true", help="leave compas_cra out")
     parser.add_argument("--no-physics", action="store_true", help="leave the physics engines out")
-    parser.add_argument("--cra-venv", type=Path, default=Path(os.environ.get("RBE_COMPAS_VENV", "/tmp/rbe-compas-venv")))
+    parser.add_argument("--cra-venv", type=Path, default=Path(os.environ.get("RBE_COMPAS_VENV", ROOT / ".venv-compas")))
     args = parser.parse_args(argv)
     out = args.out or (ROOT / "out" / "bench-quick" if args.quick else ROOT / "docs")
     t0 = time.perf_counter()

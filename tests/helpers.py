@@ -1,10 +1,16 @@
 """Small scene builders and independent checks shared by the tests."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from rbe_ros.analysis.options import CheckOptions
+from rbe_ros.analysis.pipeline import check_scene
 from rbe_ros.scene import box_block, make_scene
+
+from oracles.mass import mass_centroid
 
 DENSITY = 2000.0
 G = 9.81
@@ -21,17 +27,21 @@ def stacked_boxes(shift: float, width: float = 1.0, height: float = 1.0):
 
 def equilibrium_residual(scene, report) -> float:
     """Largest force or moment imbalance of any free block, from the reported forces alone,
-    relative to the total free weight (moments over weight times scene size)."""
+    relative to the total free weight (moments over weight times scene size). Masses and
+    centroids come from tests/oracles/mass.py, not from the code under test; blocks the
+    report holds as supports are not balanced."""
     g = np.asarray(scene.gravity)
-    from rbe_ros.geometry.block import pose_block
-    posed = {b.id: pose_block(b) for b in scene.blocks}
-    total = sum(p.mass for p in posed.values() if not p.support) * np.linalg.norm(g)
-    size = max(np.ptp(np.vstack([p.vertices for p in posed.values()]), axis=0))
+    held = set(report.held_blocks)
+    props = {b.id: mass_centroid(b) for b in scene.blocks}
+    free = [b.id for b in scene.blocks if not b.support and b.id not in held]
+    total = sum(props[bid][0] for bid in free) * np.linalg.norm(g)
+    corners = np.vstack([Rotation.from_quat(b.orientation).apply(b.vertices) + b.position
+                         for b in scene.blocks])
+    size = max(np.ptp(corners, axis=0))
     worst = 0.0
-    for bid, p in posed.items():
-        if p.support:
-            continue
-        force = p.mass * g
+    for bid in free:
+        mass, centroid = props[bid]
+        force = mass * g
         moment = np.zeros(3)
         for r in report.interfaces:
             sign = 1.0 if r.block_b == bid else -1.0 if r.block_a == bid else 0.0
@@ -39,9 +49,52 @@ def equilibrium_residual(scene, report) -> float:
                 continue
             f = sign * (r.normal_forces[:, None] * r.normal + r.tangential_forces)
             force = force + f.sum(axis=0)
-            moment = moment + np.cross(r.polygon - p.centroid, f).sum(axis=0)
+            moment = moment + np.cross(r.polygon - centroid, f).sum(axis=0)
         worst = max(worst, np.abs(force).max() / total, np.abs(moment).max() / (total * size))
     return worst
+
+
+def cone_excess(report, mu: float, cone: str = "soc") -> float:
+    """Largest violation of the friction-net cone at any vertex, in N: tension (-fn), or
+    tangential force beyond mu fn (the circle, or the pyramid's facets, its inradius
+    cos(pi/8) mu fn for the inscribed "pyramid8", mu fn for the others)."""
+    facets = {"pyramid4": (4, 1.0), "pyramid8": (8, math.cos(math.pi / 8)),
+              "pyramid8-outer": (8, 1.0)}
+    worst = 0.0
+    for r in report.interfaces:
+        fn, ft = r.normal_forces, r.tangential_forces
+        worst = max(worst, float(np.max(-fn, initial=0.0)))
+        if cone == "soc":
+            reach = np.linalg.norm(ft, axis=1)
+        else:
+            # the pyramid's facet normals lie along the interface's own (u, v) axes; any
+            # frame in the plane bounds the facet reach from above by the circumscribed
+            # circle, so check the circle of radius mu fn / cos(pi / n) (an upper bound)
+            n, h = facets[cone]
+            reach = np.linalg.norm(ft, axis=1) * math.cos(math.pi / n) / h
+        worst = max(worst, float(np.max(reach - mu * fn, initial=0.0)))
+    return worst
+
+
+def checked(scene, options: CheckOptions = CheckOptions()):
+    """check_scene, its report put through :func:`assert_physical` before it is returned."""
+    report = check_scene(scene, options)
+    assert_physical(scene, report, options.solve.mu, options.solve.cone)
+    return report
+
+
+def assert_physical(scene, report, mu: float = 0.6, cone: str = "soc", tol: float = 1e-6):
+    """The shared oracle of every fixed physics test: the reported forces balance every free
+    block (masses and centroids from tests/oracles/mass.py) and, when STABLE, lie inside the
+    friction cone of ``mu`` at every vertex with no tension, to ``tol`` of the free weight."""
+    assert report.interfaces or not report.stable, report.message
+    if not report.interfaces:
+        return
+    assert equilibrium_residual(scene, report) < tol, report.message
+    if report.stable and math.isfinite(mu):
+        g = float(np.linalg.norm(scene.gravity))
+        weight = g * sum(mass_centroid(b)[0] for b in scene.blocks if not b.support)
+        assert cone_excess(report, mu, cone) <= tol * weight, report.message
 
 
 def inclined_block(angle_deg: float):

@@ -4,7 +4,8 @@ tests/data/compas_two_cubes.json is ``generators.two_blocks(shift=0.2, height=1.
 ``save_compas_assembly``, loaded with compas 2.15.1 / compas_assembly 0.7.1, solved by
 compas_cra 0.8.0 ``rbe_solve`` (density 1, so its forces sum to the unit volume) and written
 back with ``compas.json_dump``: the format as COMPAS itself writes it, with the authors' forces.
-The compas_cra samples are found through $RBE_COMPAS_SAMPLES or an importable compas_cra.
+The compas_cra samples come from .venv-compas (scripts/setup.sh; tests/conftest.py points
+$RBE_COMPAS_SAMPLES at it).
 """
 import json
 from pathlib import Path
@@ -24,10 +25,17 @@ from rbe_ros.rbe.result import Status
 from rbe_ros.rbe.solver import SolveOptions
 from rbe_ros.scene import SceneError
 
+from helpers import assert_physical
+
 SAMPLE = Path(__file__).parent / "data" / "compas_two_cubes.json"
-SAMPLES = compas_samples_dir()
-needs_samples = pytest.mark.skipif(SAMPLES is None, reason="compas_cra samples not available"
-                                   " (set RBE_COMPAS_SAMPLES or install compas-cra)")
+
+
+@pytest.fixture(scope="module")
+def samples() -> Path:
+    found = compas_samples_dir()
+    assert found is not None and (found / "bridge.json").is_file(), \
+        "compas_cra's samples are missing: run make setup (it builds .venv-compas)"
+    return found
 
 
 def test_bundled_sample_loads_blocks_supports_and_density():
@@ -105,22 +113,20 @@ def test_round_trip_keeps_geometry_supports_and_verdict(tmp_path):
     assert check_scene(back, options).status == check_scene(scene, options).status == Status.STABLE
 
 
-@needs_samples
-def test_bridge_sample_loads_and_checks():
+def test_bridge_sample_loads_and_checks(samples):
     # compas_cra's example 09_bridge.py fixes nodes 0 and 1
-    scene = load_compas_assembly(SAMPLES / "bridge.json", supports=[0, 1])
+    scene = load_compas_assembly(samples / "bridge.json", supports=[0, 1])
     assert len(scene.blocks) == 16 and sum(b.support for b in scene.blocks) == 2
     report = check_scene(scene, CheckOptions(SolveOptions(mu=0.6)))
-    assert isinstance(report.status, Status) and report.num_blocks == 16
-    assert report.stable
+    assert report.status == Status.STABLE and report.num_blocks == 16
+    assert_physical(scene, report, mu=0.6)
 
 
-@needs_samples
-def test_armadillo_sample_loads_and_checks():
-    stored = compas_interfaces(SAMPLES / "armadillo_cra.json")
-    supports = {b.id for b in load_compas_assembly(SAMPLES / "armadillo_cra.json").blocks if b.support}
+def test_armadillo_sample_loads_and_checks(samples):
+    stored = compas_interfaces(samples / "armadillo_cra.json")
+    supports = {b.id for b in load_compas_assembly(samples / "armadillo_cra.json").blocks if b.support}
     assert len(stored) == 1014 and len(supports) == 33
-    scene = load_compas_assembly(SAMPLES / "armadillo.json", supports=supports)
+    scene = load_compas_assembly(samples / "armadillo.json", supports=supports)
     assert len(scene.blocks) == 399
     # its faces are a few percent of a block apart: detect with compas_cra's looser tolerance
     contact = ContactOptions(distance_tol=0.05, angle_tol_deg=5.0)
@@ -129,5 +135,5 @@ def test_armadillo_sample_loads_and_checks():
     ours = {frozenset((ids[it.a], ids[it.b])) for it in assembly.interfaces}
     assert {frozenset((it.a, it.b)) for it in stored} <= ours
     report = check_scene(scene, CheckOptions(SolveOptions(mu=0.6), contact=contact))
-    assert isinstance(report.status, Status) and report.num_blocks == 399
-    assert report.stable
+    assert report.status == Status.STABLE and report.num_blocks == 399
+    assert_physical(scene, report, mu=0.6)

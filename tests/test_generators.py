@@ -9,11 +9,12 @@ import trimesh
 from rbe_ros import generators as gen
 from rbe_ros.analysis.assembly import Assembly
 from rbe_ros.analysis.options import CheckOptions
-from rbe_ros.analysis.pipeline import check_scene
 from rbe_ros.geometry.block import pose_block
 from rbe_ros.rbe.result import Status
 from rbe_ros.rbe.solver import SolveOptions
 from rbe_ros.io.scene_json import scene_to_dict
+
+from helpers import checked
 
 SMALL = {  # every generator, small enough to be quick
     "two-blocks": dict(shift=0.3),
@@ -135,44 +136,44 @@ def test_harmonic_stack_overhang_is_half_the_harmonic_number(n):
 
 @pytest.mark.parametrize("n", [5, 10])
 def test_harmonic_stack_stands_below_and_falls_above_the_limit(n):
-    assert check_scene(gen.harmonic_stack(n, 0.98)).status == Status.STABLE
-    over = check_scene(gen.harmonic_stack(n, 1.02))
+    assert checked(gen.harmonic_stack(n, 0.98)).status == Status.STABLE
+    over = checked(gen.harmonic_stack(n, 1.02))
     assert over.status == Status.TENSION_REQUIRED and "h01" in over.unstable_blocks
 
 
 def test_two_blocks_tip_beyond_half_the_width():
-    assert check_scene(gen.two_blocks(0.45)).status == Status.STABLE
-    assert check_scene(gen.two_blocks(0.55)).status == Status.TENSION_REQUIRED
+    assert checked(gen.two_blocks(0.45)).status == Status.STABLE
+    assert checked(gen.two_blocks(0.55)).status == Status.TENSION_REQUIRED
 
 
 def test_inclined_two_blocks_need_tan_alpha_friction():
     scene = gen.two_blocks(incline_deg=23.6)
     mu_min = math.tan(math.radians(23.6))                                 # 0.437 (paper: 0.44)
-    assert check_scene(scene, opts(mu_min * 1.01)).status == Status.STABLE
-    assert check_scene(scene, opts(mu_min * 0.99)).status == Status.FRICTION_EXCEEDED
+    assert checked(scene, opts(mu_min * 1.01)).status == Status.STABLE
+    assert checked(scene, opts(mu_min * 0.99)).status == Status.FRICTION_EXCEEDED
     with pytest.raises(ValueError):
         gen.two_blocks(incline_deg=50)                                    # no thickness left
 
 
 def test_semicircular_arch_thickness_limit():
-    assert check_scene(gen.semicircular_arch(15, 0.15)).status == Status.STABLE
-    assert check_scene(gen.semicircular_arch(15, 0.08)).status == Status.TENSION_REQUIRED
+    assert checked(gen.semicircular_arch(15, 0.15)).status == Status.STABLE
+    assert checked(gen.semicircular_arch(15, 0.08)).status == Status.TENSION_REQUIRED
     # with 16 voussoirs the finite-n limit (0.1071 here) is close to the continuous 0.1074
-    assert check_scene(gen.semicircular_arch(16, 0.109)).stable
-    assert not check_scene(gen.semicircular_arch(16, 0.105)).stable
+    assert checked(gen.semicircular_arch(16, 0.109)).stable
+    assert not checked(gen.semicircular_arch(16, 0.105)).stable
 
 
 def test_dome_stands_under_self_weight():
-    report = check_scene(gen.dome(), opts(0.6))
+    report = checked(gen.dome(), opts(0.6))
     assert report.status == Status.STABLE
     assert report.max_tension < 1e-6 * sum(pose_block(b).mass for b in gen.dome().blocks) * 9.81
 
 
 def test_buttressed_arch_stands_and_needs_friction_near_031():
-    assert check_scene(gen.buttressed_arch(), opts(0.8, 0.6)).status == Status.STABLE
+    assert checked(gen.buttressed_arch(), opts(0.8, 0.6)).status == Status.STABLE
     # paper, Fig. 10(a): minimum friction 0.31 (here 0.309)
-    assert check_scene(gen.buttressed_arch(), opts(0.32)).stable
-    assert check_scene(gen.buttressed_arch(), opts(0.30)).status == Status.FRICTION_EXCEEDED
+    assert checked(gen.buttressed_arch(), opts(0.32)).stable
+    assert checked(gen.buttressed_arch(), opts(0.30)).status == Status.FRICTION_EXCEEDED
 
 
 def tilted(scene, degrees):
@@ -185,8 +186,8 @@ def test_buttressed_arch_tilting_capacity_is_about_12_degrees():
     # paper, Fig. 10(b): 12 deg (lambda 0.21); here 12.1 deg with the springing centred on
     # the buttresses, 13.5 deg with the buttresses flush with the intrados
     scene = gen.buttressed_arch()
-    assert check_scene(tilted(scene, 11.5), opts(0.8, 0.6)).stable
-    assert not check_scene(tilted(scene, 12.8), opts(0.8, 0.6)).stable
+    assert checked(tilted(scene, 11.5), opts(0.8, 0.6)).stable
+    assert not checked(tilted(scene, 12.8), opts(0.8, 0.6)).stable
     inner = gen.buttressed_arch(springing="inner")
-    assert check_scene(tilted(inner, 13.0), opts(0.8, 0.6)).stable
-    assert not check_scene(tilted(inner, 14.0), opts(0.8, 0.6)).stable
+    assert checked(tilted(inner, 13.0), opts(0.8, 0.6)).stable
+    assert not checked(tilted(inner, 14.0), opts(0.8, 0.6)).stable

@@ -235,30 +235,12 @@ def text_of(report: Report) -> str:
     return f"{where}{report.status.name}\n{report.message}"
 
 
-def report_markers(meshes: Meshes, roles: Mapping[str, str], report: Report, header: Mapping,
-                   *, max_length: float | None = None, tension_tol: float = 1e-5) -> dict:
-    """The visualization_msgs/MarkerArray dict of ``report``: the blocks of ``roles`` (id ->
-    role, present blocks in order) drawn from ``meshes``, the forces, interfaces and kerns of
-    the report, and its caption (``header``: a std_msgs/Header dict).
-
-    ``max_length``: m, the segment of the largest vertex force (default: half the largest
-    interface polygon extent, at least 0.05 m).
-    """
-    header = dict(header)
-    markers = [_marker(header, "", 0, TRIANGLE_LIST, (0, 0, 0, 0), action=DELETEALL)]
-    aggregate = len(roles) > BLOCK_MARKER_LIMIT
-    if aggregate:
-        for k, role in enumerate(ROLES):
-            ids = [b for b, r in roles.items() if r == role]
-            if ids:
-                markers.append(_marker(header, "blocks", k, TRIANGLE_LIST, ROLE_COLOURS[role],
-                                       points=meshes.of(ids), text=role))
-    else:
-        for bid, role in roles.items():
-            if bid in meshes.index:
-                markers.append(_marker(header, "blocks", meshes.index[bid], TRIANGLE_LIST,
-                                       ROLE_COLOURS[role], points=meshes.of([bid]), text=bid))
-
+def line_markers(report: Report, header: Mapping, *, outlines_of_all: bool = True,
+                 max_length: float | None = None, tension_tol: float = 1e-5) -> list[dict]:
+    """The LINE_LIST markers of ``report``: forces, interface outlines and kerns (see the
+    module docstring; ``outlines_of_all=False``: only of interfaces in tension or over
+    friction)."""
+    markers: list[dict] = []
     interfaces = list(report.interfaces)
     polygons = [_rows(r.polygon) for r in interfaces]
     if interfaces:
@@ -284,7 +266,7 @@ def report_markers(meshes: Meshes, roles: Mapping[str, str], report: Report, hea
                 markers.append(_marker(header, "forces", k, LINE_LIST, colour,
                                        points=segments, scale=(width, 0, 0)))
         kind = [2 if r.tension else 1 if r.friction_exceeded else 0 for r in interfaces]
-        shown = [k > 0 or not aggregate for k in kind]
+        shown = [k > 0 or outlines_of_all for k in kind]
         line = 0.01 * max_length
         for k, colour in enumerate(INTERFACE_COLOURS):
             outline = _outlines([p for p, kk, s in zip(polygons, kind, shown) if kk == k and s])
@@ -295,7 +277,35 @@ def report_markers(meshes: Meshes, roles: Mapping[str, str], report: Report, hea
         if len(kerns):
             markers.append(_marker(header, "kerns", 0, LINE_LIST, KERN, points=kerns,
                                    scale=(line, 0, 0)))
+    return markers
 
+
+def report_markers(meshes: Meshes, roles: Mapping[str, str], report: Report, header: Mapping,
+                   *, max_length: float | None = None, tension_tol: float = 1e-5) -> dict:
+    """The visualization_msgs/MarkerArray dict of ``report``: the blocks of ``roles`` (id ->
+    role, present blocks in order) drawn from ``meshes``, the forces, interfaces and kerns of
+    the report, and its caption (``header``: a std_msgs/Header dict).
+
+    ``max_length``: m, the segment of the largest vertex force (default: half the largest
+    interface polygon extent, at least 0.05 m).
+    """
+    header = dict(header)
+    markers = [_marker(header, "", 0, TRIANGLE_LIST, (0, 0, 0, 0), action=DELETEALL)]
+    aggregate = len(roles) > BLOCK_MARKER_LIMIT
+    if aggregate:
+        for k, role in enumerate(ROLES):
+            ids = [b for b, r in roles.items() if r == role]
+            if ids:
+                markers.append(_marker(header, "blocks", k, TRIANGLE_LIST, ROLE_COLOURS[role],
+                                       points=meshes.of(ids), text=role))
+    else:
+        for bid, role in roles.items():
+            if bid in meshes.index:
+                markers.append(_marker(header, "blocks", meshes.index[bid], TRIANGLE_LIST,
+                                       ROLE_COLOURS[role], points=meshes.of([bid]), text=bid))
+
+    markers += line_markers(report, header, outlines_of_all=not aggregate,
+                            max_length=max_length, tension_tol=tension_tol)
     drawn = meshes.of(list(roles))
     if len(drawn):
         lo, hi = drawn.min(axis=0), drawn.max(axis=0)
@@ -314,42 +324,37 @@ def step_markers(scene: Scene, report: Report, header: Mapping, **kw) -> dict:
     return report_markers(scene_meshes(scene), step_roles(scene, report), report, header, **kw)
 
 
-def invalid_markers(state: Mapping, report: Report, header: Mapping,
-                    fault: Sequence[str] = ()) -> dict:
-    """The markers of a report on a state that could not be checked (INVALID_INPUT): every
-    block that can be drawn, those at ``fault`` highlighted, and the reason."""
-    meshes = state_meshes(state)
-    return report_markers(meshes, fault_roles(meshes, fault), report, header)
-
-
-def state_report_markers(state: Mapping, report: Report, header: Mapping, scene: Scene | None,
-                         fault: Sequence[str] = ()) -> dict:
-    """The markers of ``report`` answering ``state`` (a message dict): on its step of
-    ``scene``, or, when the state could not be checked, of the state as it came."""
-    if scene is None or report.status == Status.INVALID_INPUT:
-        return invalid_markers(state, report, header, fault)
-    return step_markers(scene, report, header)
-
-
-def run_markers(state: Mapping, reports: Sequence[Mapping],
-                options: CheckOptions = CheckOptions()) -> list[dict]:
-    """The markers of each StabilityReport dict of ``reports`` answering ``state`` (an
-    AssemblyState dict checked with ``options``: step by step when it has a sequence), each
-    with its report's header. The blocks at fault of an INVALID_INPUT report are found by
-    validating the state again (the error names them)."""
+def run_roles(state: Mapping, reports: Sequence[Report],
+              options: CheckOptions = CheckOptions()) -> tuple[Meshes, list[dict[str, str]]]:
+    """The meshes of the blocks of ``state`` (an AssemblyState dict checked with
+    ``options``: step by step when it has a sequence) and the roles of the blocks at each of
+    ``reports``. A state that cannot be read is drawn as it came; the blocks at fault of an
+    INVALID_INPUT report are found by validating the state again (the error names them)."""
     scene, fault = None, ()
     try:
         scene = scene_from_state_dict(state if state.get("sequence")
                                       else {**state, "sequence": []})
-        if any(r.get("status") == Status.INVALID_INPUT for r in reports):
+        if any(r.status == Status.INVALID_INPUT for r in reports):
             validated_assembly(scene, options.limits, options.contact)
     except SceneError as exc:
         fault = exc.blocks
-    return [state_report_markers(state, report_from_dict(r), r["header"], scene, fault)
-            for r in reports]
+    meshes = state_meshes(state) if scene is None else scene_meshes(scene)
+    return meshes, [fault_roles(meshes, fault)
+                    if scene is None or r.status == Status.INVALID_INPUT
+                    else step_roles(scene, r) for r in reports]
+
+
+def run_markers(state: Mapping, reports: Sequence[Mapping],
+                options: CheckOptions = CheckOptions()) -> list[dict]:
+    """The markers of each StabilityReport dict of ``reports`` answering ``state`` (see
+    :func:`run_roles`), each with its report's header."""
+    parsed = [report_from_dict(r) for r in reports]
+    meshes, roles = run_roles(state, parsed, options)
+    return [report_markers(meshes, role, report, r["header"])
+            for role, report, r in zip(roles, parsed, reports)]
 
 
 __all__ = ["BLOCK_MARKER_LIMIT", "MARKER_TOPIC", "MARKER_TYPE", "Meshes", "ROLES",
-           "ROLE_COLOURS", "fault_roles", "invalid_markers", "report_markers",
-           "scene_meshes", "state_meshes", "state_report_markers", "step_markers",
-           "step_roles", "run_markers", "text_of"]
+           "ROLE_COLOURS", "fault_roles", "line_markers", "report_markers", "run_markers",
+           "run_roles", "scene_meshes", "state_meshes", "step_markers", "step_roles",
+           "text_of"]

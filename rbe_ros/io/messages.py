@@ -219,6 +219,35 @@ def _hold_from_dict(index: int, raw) -> Hold:
     return Hold(block, from_step, None if until_step == -1 else until_step)
 
 
+# --- BlockPoses -------------------------------------------------------------------------------
+
+def poses_to_dict(poses, frame_id: str = "world", stamp_ns: int = 0) -> dict:
+    """An rbe_msgs/BlockPoses dict of ``{id: (position, orientation)}``."""
+    return {"header": header_dict(frame_id, stamp_ns), "ids": [str(i) for i in poses],
+            "poses": [{"position": _vec(p), "orientation": _vec(q, _XYZW)}
+                      for p, q in poses.values()]}
+
+
+def poses_from_dict(d) -> dict:
+    """``{id: (position, orientation)}`` of an rbe_msgs/BlockPoses dict (SceneError; the
+    values are checked by :func:`rbe_ros.poses.scene_at_poses`)."""
+    ids = _list(d, "ids", "BlockPoses")
+    poses = _list(d, "poses", "BlockPoses")
+    if len(ids) != len(poses):
+        raise SceneError(f"BlockPoses has {len(ids)} ids but {len(poses)} poses")
+    out = {}
+    for i, (bid, pose) in enumerate(zip(ids, poses)):
+        if not isinstance(bid, str) or not bid:
+            raise SceneError(f"BlockPoses.ids[{i}] is not a block id (a non-empty string)")
+        if bid in out:
+            raise SceneError(f"BlockPoses names block {bid!r} twice")
+        where = f"BlockPoses: block {bid!r}"
+        out[bid] = (_xyz(_field(pose, "position", {}, where), f"{where}: position"),
+                    _xyz(_field(pose, "orientation", {}, where), f"{where}: orientation",
+                         _XYZW, (0.0, 0.0, 0.0, 1.0)))
+    return out
+
+
 # --- StabilityReport --------------------------------------------------------------------------
 
 def _interface_to_dict(r: InterfaceResult, arrays: bool = False) -> dict:
@@ -343,6 +372,6 @@ def report_from_dict(d: Mapping) -> Report:
     )
 
 
-__all__ = ["SOLID_PRIMITIVE_BOX", "header_dict", "header_stamp_ns", "json_safe", "report_header",
-           "report_from_dict", "report_json", "report_to_dict", "scene_from_state_dict",
-           "state_to_dict"]
+__all__ = ["SOLID_PRIMITIVE_BOX", "header_dict", "header_stamp_ns", "json_safe", "poses_from_dict",
+           "poses_to_dict", "report_from_dict", "report_header", "report_json", "report_to_dict",
+           "scene_from_state_dict", "state_to_dict"]

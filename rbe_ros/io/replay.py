@@ -45,7 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from ..analysis.options import CheckOptions, HoldSearch
-from ..analysis.pipeline import check_state
+from ..analysis.pipeline import StateCheck, check_state
 from ..analysis.steps import final_state, sequence_steps
 from ..geometry.block import pose_block
 from ..geometry.contacts import ContactOptions
@@ -53,16 +53,22 @@ from ..rbe.result import Report
 from ..rbe.solver import SolveOptions, Weights
 from ..scene import Scene, SceneError
 from .bag import BagWriter, read_bag, read_custom_data
-from .messages import (header_stamp_ns, report_header, report_to_dict, scene_from_state_dict,
-                       state_to_dict)
 from .markers import MARKER_TOPIC, MARKER_TYPE, run_markers
+from .messages import (header_stamp_ns, poses_from_dict, report_header, report_to_dict,
+                       scene_from_state_dict, state_to_dict)
+from .poses import AsBuilt
 
 OPTIONS_KEY = "rbe_ros.check_options"
 STATE_TYPE = "rbe_msgs/msg/AssemblyState"
+POSES_TYPE = "rbe_msgs/msg/BlockPoses"
 REPORT_TYPE = "rbe_msgs/msg/StabilityReport"
 #: Topics of bags written here: the names rbe_node uses (node name rbe_node).
 STATE_TOPIC = "/rbe_node/assembly"
 REPORT_TOPIC = "/rbe_node/report"
+DESIGN_TOPIC = "/rbe_node/design"
+POSES_TOPIC = "/rbe_node/poses"
+#: Kinds of run: a state checked as it is, a design (~/design), measured poses (~/poses).
+STATE, DESIGN, POSES = "state", "design", "poses"
 #: Log-time spacing of the reports (and markers) of a recorded sequence: one step a second,
 #: so that a player's timeline (Foxglove) steps through the sequence one step at a time.
 STEP_NS = 1_000_000_000
@@ -115,6 +121,7 @@ class Run:
     reports: list[dict] = field(default_factory=list)
     report_stamps: list[int] = field(default_factory=list)
     report_topic: str = REPORT_TOPIC
+    kind: str = STATE                               # STATE, DESIGN or POSES
 
     @property
     def key(self) -> tuple[int, int]:
@@ -125,9 +132,12 @@ class Run:
         header = self.state.get("header", {})
         seq = self.state.get("sequence") or []
         what = f"{len(seq)}-block sequence" if seq else "whole assembly"
-        return (f"state stamp {header_stamp_ns(header) / 1e9:.9f} s frame "
-                f"{header.get('frame_id', '')!r} ({len(self.state.get('blocks', []))} blocks, "
-                f"{what})")
+        contents = {STATE: f"{len(self.state.get('blocks', []))} blocks, {what}",
+                    DESIGN: f"design of {len(self.state.get('blocks', []))} blocks",
+                    POSES: f"{len(self.state.get('ids', []))} measured poses"}[self.kind]
+        return (f"{'state' if self.kind == STATE else self.kind} stamp "
+                f"{header_stamp_ns(header) / 1e9:.9f} s frame "
+                f"{header.get('frame_id', '')!r} ({contents})")
 
 
 def step_stamps(stamp_ns: int, count: int) -> list[int]:
@@ -141,9 +151,11 @@ def read_runs(path) -> list[Run]:
     topics (markers) are not read."""
     runs: list[Run] = []
     by_key: dict[tuple[int, int], list[Run]] = {}
-    for m in read_bag(path, msgtypes={STATE_TYPE, REPORT_TYPE}):
-        if m.msgtype == STATE_TYPE:
-            run = Run(m.data, m.stamp_ns, m.topic)
+    for m in read_bag(path, msgtypes={STATE_TYPE, POSES_TYPE, REPORT_TYPE}):
+        if m.msgtype in (STATE_TYPE, POSES_TYPE):
+            kind = POSES if m.msgtype == POSES_TYPE else \
+                DESIGN if m.topic.endswith("/design") else STATE
+            run = Run(m.data, m.stamp_ns, m.topic, kind=kind)
             runs.append(run)
             by_key.setdefault(run.key, []).append(run)
         elif m.msgtype == REPORT_TYPE:
@@ -158,6 +170,47 @@ def read_runs(path) -> list[Run]:
             owners[-1].report_stamps.append(m.stamp_ns)
             owners[-1].report_topic = m.topic
     return runs
+
+
+def merge_message(asbuilt: AsBuilt, kind: str, message: dict) -> Scene:
+    """The as-built scene after a design (``kind`` DESIGN, an AssemblyState dict) or
+    measured poses (POSES, a BlockPoses dict): the node's and the replay's one step
+    (SceneError: the message's report is INVALID_INPUT)."""
+    if kind == DESIGN:
+        try:
+            design, error = scene_from_state_dict(message), ""
+        except SceneError as exc:
+            design, error = None, str(exc)
+        return asbuilt.set_design(design, error)
+    return asbuilt.update(poses_from_dict(message))
+
+
+def asbuilt_scenes(runs: list[Run]) -> list[Scene | SceneError | None]:
+    """For each run, the as-built scene after it (or why there is none); None for states.
+    Every design and poses message counts, checked when recorded or not."""
+    asbuilt = AsBuilt()
+    out: list[Scene | SceneError | None] = []
+    for run in runs:
+        if run.kind == STATE:
+            out.append(None)
+            continue
+        try:
+            out.append(merge_message(asbuilt, run.kind, run.state))
+        except SceneError as exc:
+            out.append(exc)
+    return out
+
+
+def asbuilt_check(scene: Scene | SceneError, options: CheckOptions = CheckOptions()
+                  ) -> StateCheck:
+    """The check ``rbe_node`` makes of an as-built scene (as a whole), or the report of why
+    there is none: the node's own dispatch, as for a state."""
+    def read(_sequence: bool) -> Scene:
+        if isinstance(scene, SceneError):
+            raise scene
+        return scene
+
+    return check_state(read, False, options)
 
 
 def state_reports(state: dict, options: CheckOptions = CheckOptions()) -> list[Report]:
@@ -175,10 +228,15 @@ def replay_run(run: Run, options: CheckOptions = CheckOptions()) -> list[dict]:
     return [report_to_dict(r, header) for r in state_reports(run.state, options)]
 
 
-def free_weights(state: dict) -> dict[int, float]:
-    """Free weight W (N) by step index (-1: the whole assembly) of a state: the weight of the
-    free blocks present and not held. Empty if the state cannot be read."""
+def free_weights(state: dict | Scene | SceneError) -> dict[int, float]:
+    """Free weight W (N) by step index (-1: the whole assembly) of a state (or an as-built
+    scene): the weight of the free blocks present and not held. Empty if the state cannot
+    be read."""
+    if isinstance(state, SceneError):
+        return {}
     try:
+        if isinstance(state, Scene):
+            state = state_to_dict(state)
         scene = scene_from_state_dict(state)
         whole = scene_from_state_dict({**state, "sequence": []})
     except SceneError:
@@ -394,8 +452,9 @@ def compare_runs(runs: list[Run], replayed: list[list[dict]], *,
     """Differences between each run's recorded reports and ``replayed[i]`` (the same
     comparison offline and live)."""
     out: list[Difference] = []
+    asbuilt = asbuilt_scenes(runs)
     for i, (run, new) in enumerate(zip(runs, replayed)):
-        weights = free_weights(run.state)
+        weights = free_weights(run.state if run.kind == STATE else asbuilt[i])
         for rec, rep in zip(run.reports, new):
             w = weights.get(int(rec.get("step_index", -1)), 1.0)
             out += compare_report(rec, rep, run=i, free_weight=w, tolerances=tolerances)
@@ -428,10 +487,12 @@ def write_runs(path, runs: list[Run], replayed: list[list[dict]], options: Check
     times where there are as many, else a step a second after the state: :data:`STEP_NS`);
     with ``markers`` each report's MarkerArray on :data:`rbe_ros.io.markers.MARKER_TOPIC` at
     its time; the options in custom_data."""
+    asbuilt = asbuilt_scenes(runs) if markers else []
     with BagWriter(path, custom_data={OPTIONS_KEY: options_to_json(options)}) as bag:
         topics: set[str] = set()
-        for run, reports in zip(runs, replayed):
-            for topic, kind, latched in ((run.topic, STATE_TYPE, False),
+        for i, (run, reports) in enumerate(zip(runs, replayed)):
+            for topic, kind, latched in ((run.topic, POSES_TYPE if run.kind == POSES else
+                                          STATE_TYPE, run.kind == DESIGN),
                                          (run.report_topic, REPORT_TYPE, True)):
                 if topic not in topics:
                     bag.add_topic(topic, kind, transient_local=latched)
@@ -445,7 +506,10 @@ def write_runs(path, runs: list[Run], replayed: list[list[dict]], options: Check
             for report, stamp in zip(reports, stamps):
                 bag.write(run.report_topic, report, stamp)
             if markers:
-                for array, stamp in zip(run_markers(run.state, reports, options), stamps):
+                # an as-built run is drawn as the state checked: its scene, as a whole
+                drawn = run.state if run.kind == STATE else {} if isinstance(
+                    asbuilt[i], SceneError) else {**state_to_dict(asbuilt[i]), "sequence": []}
+                for array, stamp in zip(run_markers(drawn, reports, options), stamps):
                     bag.write(MARKER_TOPIC, array, stamp)
 
 
@@ -502,8 +566,14 @@ def offline_reports(runs: list[Run], options: CheckOptions,
                     on_run: Callable[[int, Run], None] | None = None) -> list[list[dict]]:
     """The report dicts of re-checking every run here, as the node would."""
     replayed = []
+    asbuilt = asbuilt_scenes(runs)
     for i, run in enumerate(runs):
-        replayed.append(replay_run(run, options))
+        if run.kind == STATE:
+            replayed.append(replay_run(run, options))
+        else:   # a design or poses message the node dropped unchecked is not checked
+            header = report_header(run.state.get("header"))
+            replayed.append([report_to_dict(r, header) for r in asbuilt_check(
+                asbuilt[i], options).reports] if run.reports else [])
         if on_run is not None:
             on_run(i, run)
     return replayed
@@ -534,7 +604,8 @@ def replay_bag(path, output=None, *, options: CheckOptions | None = None, compar
     return ReplayResult(runs, replayed, differences, out if write else None, options)
 
 
-__all__ = ["Difference", "OPTIONS_KEY", "ReplayResult", "Run", "Tolerances", "bag_options",
-           "compare_report", "compare_runs", "default_output", "free_weights",
-           "offline_reports", "options_from_json", "options_to_json", "read_runs", "record_bag",
-           "replay_bag", "replay_run", "state_reports", "step_stamps", "write_runs"]
+__all__ = ["DESIGN", "Difference", "OPTIONS_KEY", "POSES", "ReplayResult", "Run", "STATE",
+           "Tolerances", "asbuilt_check", "asbuilt_scenes", "bag_options", "compare_report",
+           "compare_runs", "default_output", "free_weights", "merge_message", "offline_reports",
+           "options_from_json", "options_to_json", "read_runs", "record_bag", "replay_bag",
+           "replay_run", "state_reports", "step_stamps", "write_runs"]

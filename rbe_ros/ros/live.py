@@ -9,7 +9,10 @@ bag's options).
 States are sent one at a time, each after the previous one is answered (the node checks the
 newest state on its topic and drops a waiting one under load): a state with a sequence as a
 ``~/check_sequence`` goal (the result holds one report per step), a state without on the
-``~/assembly`` topic, answered by the report on ``~/report`` with its header stamp.
+``~/assembly`` topic, answered by the report on ``~/report`` with its header stamp; a design
+on ``~/design`` and measured poses on ``~/poses`` likewise (the node merges each into its
+as-built state; one it dropped unchecked when recorded is answered now, and the answer left
+out).
 """
 from __future__ import annotations
 
@@ -25,7 +28,7 @@ from pathlib import Path
 
 import rclpy
 from rbe_msgs.action import CheckSequence
-from rbe_msgs.msg import AssemblyState, StabilityReport
+from rbe_msgs.msg import AssemblyState, BlockPoses, StabilityReport
 from rclpy.action import ActionClient
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -35,6 +38,7 @@ from rclpy.signals import SignalHandlerOptions
 from ..analysis.options import CheckOptions, HoldSearch
 from ..geometry.contacts import ContactOptions
 from ..rbe.solver import Weights
+from ..io.replay import DESIGN, POSES, STATE
 from .convert import dict_to_message, message_to_dict
 
 
@@ -121,6 +125,13 @@ class _Client:
         qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.VOLATILE)
         self.publisher = self.node.create_publisher(AssemblyState, f"{base}/assembly", qos)
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.publishers = {
+            STATE: (self.publisher, AssemblyState),
+            DESIGN: (self.node.create_publisher(AssemblyState, f"{base}/design", latched),
+                     AssemblyState),
+            POSES: (self.node.create_publisher(BlockPoses, f"{base}/poses", qos), BlockPoses)}
         self.node.create_subscription(StabilityReport, f"{base}/report", self._on_report, qos)
         self.action = ActionClient(self.node, CheckSequence, f"{base}/check_sequence")
         self.base = base
@@ -157,7 +168,7 @@ class _Client:
         while True:
             alive()
             if (self.action.server_is_ready()
-                    and self.publisher.get_subscription_count() >= 1
+                    and all(p.get_subscription_count() >= 1 for p, _ in self.publishers.values())
                     and self.node.count_publishers(f"{self.base}/report") >= 1):
                 return
             if time.monotonic() > end:
@@ -175,11 +186,12 @@ class _Client:
                             timeout, "check_sequence result")
         return [message_to_dict(r) for r in result.result.reports]
 
-    def check_whole(self, state, timeout: float) -> list[dict]:
+    def check_whole(self, state, timeout: float, kind: str = STATE) -> list[dict]:
+        """Publish ``state`` (a message of ``kind``) and wait for the report with its stamp."""
         key = (state.header.stamp.sec, state.header.stamp.nanosec)
         with self.lock:
             self.reports.clear()
-        self.publisher.publish(state)
+        self.publishers[kind][0].publish(state)
         end = time.monotonic() + timeout
         with self.lock:
             while True:
@@ -216,9 +228,12 @@ def live_reports(runs, options: CheckOptions, *, node_name: str | None = None, c
         client.wait_ready(60.0 if process is not None else 30.0, alive)
         out = []
         for i, run in enumerate(runs):
-            state = dict_to_message(run.state, AssemblyState)
-            out.append(client.check_sequence(state, timeout) if run.state.get("sequence")
-                       else client.check_whole(state, timeout))
+            state = dict_to_message(run.state, client.publishers[run.kind][1])
+            if run.kind == STATE and run.state.get("sequence"):
+                out.append(client.check_sequence(state, timeout))
+            else:
+                answer = client.check_whole(state, timeout, run.kind)
+                out.append(answer if run.kind == STATE or run.reports else [])
             alive()
             if on_run is not None:
                 on_run(i, run)

@@ -40,6 +40,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import rclpy
+from builtin_interfaces.msg import Time
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType, SetParametersResult)
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
@@ -51,7 +52,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.serialization import deserialize_message, serialize_message
 from rclpy.signals import SignalHandlerOptions
 from rbe_msgs.action import CheckSequence
-from rbe_msgs.msg import AssemblyState, StabilityReport
+from rbe_msgs.msg import AssemblyState, BlockPoses, StabilityReport
 from rbe_msgs.srv import CheckAssembly
 from visualization_msgs.msg import MarkerArray
 
@@ -60,19 +61,26 @@ from ..analysis.pipeline import StateCheck, check_state
 from ..geometry.contacts import ContactOptions
 from ..io import cdr
 from ..io.bag import BagWriter, typestore
+from ..io.inputs import load_design
 from ..io.markers import MARKER_TYPE, run_markers, step_markers
-from ..io.messages import report_header, report_to_dict
-from ..io.replay import OPTIONS_KEY, options_to_json
+from ..io.messages import report_header, report_to_dict, state_to_dict
+from ..io.poses import AsBuilt
+from ..io.replay import (DESIGN, OPTIONS_KEY, POSES, asbuilt_check, merge_message,
+                         options_to_json)
 from ..rbe.cones import CONES, FRICTION_MODELS
 from ..rbe.result import Report, Status
 from ..rbe.solver import OBJECTIVES, SolveOptions
-from ..scene import Scene, ValidationLimits
-from .convert import message_to_dict, scene_from_msg
+from ..scene import Scene, SceneError, ValidationLimits
+from .convert import dict_to_message, message_to_dict, scene_from_msg
 
 NODE_NAME = "rbe_node"
 
 #: Depth 1: under overload only the newest state matters (see the single-slot buffer).
 STATE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                       reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.VOLATILE)
+#: Measured poses: every update counts (the node merges each into the as-built state).
+POSES_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
                        reliability=ReliabilityPolicy.RELIABLE,
                        durability=DurabilityPolicy.VOLATILE)
 #: Reports and markers are latched: a late subscriber gets the last verdict.
@@ -135,6 +143,9 @@ PARAMETERS = {
     "tension_tolerance": _double(
         1e-5, "a vertex tension counts above this share of the free blocks' weight, in [0, 1]",
         0.0, 1.0),
+    "design_file": _string("", "design (a scene JSON or a COMPAS Assembly JSON, *.gz too) "
+                           "whose blocks ~/poses places, as if sent on ~/design at start; "
+                           "empty: none until one comes on ~/design", read_only=True),
     "mcap_path": _string("", "directory of a rosbag2 MCAP bag recording every received state "
                          "and every report; empty: no recording. An existing directory gets "
                          "a timestamp suffix", read_only=True),
@@ -195,12 +206,17 @@ class RbeNode(Node):
         self._action = None
         self._bag = None
         self._bag_lock = threading.Lock()
+        self._later_topics: dict[str, tuple[str, bool]] = {}   # bag topics not added yet
         # Overload: the subscription callback only puts the state in this one slot (a newer
         # state replaces a waiting one, counted in _dropped); the worker thread checks it.
-        self._slot: bytes | None = None             # CDR of the newest unchecked state
+        # CDR of the newest unchecked state, or an as-built state: (header, scene or error)
+        self._slot: bytes | tuple | None = None
         self._slot_cond = threading.Condition()
         self._dropped = 0
         self._worker: threading.Thread | None = None
+        # the design and the poses measured so far (~/design, ~/poses): updated in the
+        # callbacks, so that no measurement is lost when its check is dropped under overload
+        self._asbuilt = AsBuilt()
 
         self.add_on_set_parameters_callback(self._validate_parameters)
         for name, (value, descriptor) in PARAMETERS.items():
@@ -225,6 +241,13 @@ class RbeNode(Node):
         self._state_sub = self.create_subscription(
             AssemblyState, "~/assembly", self._on_state, STATE_QOS,
             callback_group=self._topic_group, raw=True)
+        self._design_sub = self.create_subscription(
+            AssemblyState, "~/design", self._on_design, LATCHED_QOS,
+            callback_group=self._topic_group, raw=True)
+        # deep: each update carries measurements that later checks build on
+        self._poses_sub = self.create_subscription(
+            BlockPoses, "~/poses", self._on_poses, POSES_QOS,
+            callback_group=self._topic_group, raw=True)
         self._service = self.create_service(
             CheckAssembly, "~/check", self._on_check, callback_group=self._service_group)
         self._action = ActionServer(
@@ -235,10 +258,14 @@ class RbeNode(Node):
 
         self.state_topic = self._state_sub.topic_name
         self.report_topic = self._report_pub.topic_name
+        self.design_topic = self._design_sub.topic_name
+        self.poses_topic = self._poses_sub.topic_name
         self.marker_topic = self._marker_pub.topic_name
         self._open_bag()
         self._worker = threading.Thread(target=self._work, name="rbe_state_worker", daemon=True)
         self._worker.start()
+        if self.get_parameter("design_file").value:
+            self._load_design_file(self.get_parameter("design_file").value)
         self.get_logger().info(
             f"ready: {self.state_topic} -> {self.report_topic}, service "
             f"{self._service.service_name}, mu {self.get_parameter('friction_coefficient').value}")
@@ -310,6 +337,9 @@ class RbeNode(Node):
         self._bag.add_topic(self.report_topic, "rbe_msgs/msg/StabilityReport",
                             transient_local=True)
         self._bag.add_topic(self.marker_topic, MARKER_TYPE, transient_local=True)
+        # added with their first message: a bag of states alone has only their topics
+        self._later_topics = {self.design_topic: ("rbe_msgs/msg/AssemblyState", True),
+                              self.poses_topic: ("rbe_msgs/msg/BlockPoses", False)}
         self.bag_path = path
         self.get_logger().info(f"recording states and reports to {path}")
 
@@ -323,6 +353,9 @@ class RbeNode(Node):
             if self._bag is None:
                 return
             try:
+                if topic in self._later_topics:
+                    msgtype, latched = self._later_topics.pop(topic)
+                    self._bag.add_topic(topic, msgtype, transient_local=latched)
                 self._bag.write(topic, data, stamp)
             except Exception as exc:  # a full disk must not stop the checks
                 self.get_logger().error(f"recording to {self.bag_path} failed, stopped: {exc}")
@@ -364,10 +397,10 @@ class RbeNode(Node):
 
     # --- checks -----------------------------------------------------------------------------
 
-    def _received(self, state: AssemblyState, raw: bytes | None = None) -> dict:
-        """Record ``state`` (its CDR bytes ``raw`` if given) and return the header dict its
-        reports carry."""
-        self._record(self.state_topic, state if raw is None else raw)
+    def _received(self, state, raw: bytes | None = None, topic: str | None = None) -> dict:
+        """Record ``state`` (its CDR bytes ``raw`` if given) on ``topic`` (default: the
+        state topic) and return the header dict its reports carry."""
+        self._record(topic or self.state_topic, state if raw is None else raw)
         return report_header(message_to_dict(state.header), self.get_parameter("frame_id").value)
 
     def _publish(self, scene: Scene | None, report: Report, header: dict,
@@ -437,7 +470,12 @@ class RbeNode(Node):
 
     def _on_state(self, data: bytes) -> None:
         """Subscription callback (raw CDR): put the state in the slot for the worker (never
-        blocks on a check); a state still waiting there is dropped and counted."""
+        blocks on a check)."""
+        self._put(data)
+
+    def _put(self, data: bytes | tuple) -> None:
+        """Put a state (CDR) or an as-built state in the slot for the worker; one still
+        waiting there is dropped and counted."""
         with self._slot_cond:
             stale, self._slot = self._slot, data
             if stale is not None:
@@ -445,8 +483,9 @@ class RbeNode(Node):
                 dropped = self._dropped
             self._slot_cond.notify()
         if stale is not None:
+            stamp = _cdr_stamp(stale) if isinstance(stale, bytes) else _stamp(stale[0])
             self.get_logger().warning(
-                f"overload: state of stamp {_cdr_stamp(stale)} dropped unchecked, a newer one"
+                f"overload: state of stamp {stamp} dropped unchecked, a newer one"
                 f" arrived first ({dropped} dropped so far)", throttle_duration_sec=1.0)
 
     def _work(self) -> None:
@@ -459,6 +498,9 @@ class RbeNode(Node):
                     return
                 data, self._slot = self._slot, None
             try:
+                if isinstance(data, tuple):
+                    self._check_asbuilt(*data)
+                    continue
                 try:
                     state = deserialize_message(data, AssemblyState)
                 except Exception as exc:
@@ -476,6 +518,59 @@ class RbeNode(Node):
             self.check(state, self._received(state, raw), bool(state.sequence))
         except Exception as exc:  # publishing itself failed (e.g. during shutdown)
             self.get_logger().error(f"state not handled: {type(exc).__name__}: {exc}")
+
+    # --- design and measured poses (rbe_ros.poses) -------------------------------------------
+
+    def _on_design(self, data: bytes) -> None:
+        """A design (raw CDR): recorded, the poses measured so far forgotten; the supports
+        alone are checked (nothing measured yet)."""
+        self._on_asbuilt(data, AssemblyState, self.design_topic, DESIGN)
+
+    def _on_poses(self, data: bytes) -> None:
+        """Measured poses (raw CDR): recorded, merged into the as-built state (an update
+        that cannot be merged changes nothing and is answered INVALID_INPUT)."""
+        self._on_asbuilt(data, BlockPoses, self.poses_topic, POSES)
+
+    def _on_asbuilt(self, data: bytes, msg_type, topic: str, kind: str) -> None:
+        """Record a design or poses message, merge it into the as-built state
+        (:func:`rbe_ros.replay.merge_message`) and put the result in the slot; never raises."""
+        try:
+            msg = deserialize_message(data, msg_type)
+            header = self._received(msg, data, topic)
+            try:        # the topic callbacks run one at a time (one exclusive group)
+                scene = merge_message(self._asbuilt, kind, message_to_dict(msg))
+            except SceneError as exc:
+                scene = exc
+            self._put((header, scene))
+        except Exception as exc:
+            self.get_logger().error(f"{topic}: message not handled: {type(exc).__name__}: "
+                                    f"{exc}")
+
+    def _check_asbuilt(self, header: dict, scene) -> None:
+        """Check an as-built scene (or report why there is none) as a whole."""
+        result = asbuilt_check(scene, self.check_options())
+        if result.error is None:
+            self._publish(result.scene, result.reports[0], header)
+            return
+        # drawn as a state that failed: what could be merged, the blocks at fault highlighted
+        state = AssemblyState() if result.scene is None else \
+            dict_to_message(state_to_dict(result.scene), AssemblyState)
+        self._publish(None, result.error, header, state)
+
+    def _load_design_file(self, path: str) -> None:
+        """The design of ``design_file``, sent through :meth:`_on_design` as the message a
+        pipeline would send (so that it is recorded, and replayed, like one)."""
+        frame = self.get_parameter("frame_id").value
+        stamp = self.get_clock().now().nanoseconds
+        try:
+            scene, _ = load_design(path)
+            state = dict_to_message(state_to_dict(scene, frame, stamp), AssemblyState)
+        except SceneError as exc:
+            self.get_logger().error(f"design_file {path!r}: {exc}")
+            state = AssemblyState()
+            state.header.frame_id, state.header.stamp = frame, Time(
+                sec=stamp // 1_000_000_000, nanosec=stamp % 1_000_000_000)
+        self._on_design(serialize_message(state))
 
     def _on_check(self, request: CheckAssembly.Request, response: CheckAssembly.Response):
         try:
@@ -521,6 +616,11 @@ class RbeNode(Node):
         else:  # the state could not be checked, or shutting down
             goal_handle.abort()
         return result
+
+
+def _stamp(header: dict) -> str:
+    stamp = header["stamp"]
+    return f"{stamp['sec']}.{stamp['nanosec']:09d}"
 
 
 def _cdr_stamp(data: bytes) -> str:

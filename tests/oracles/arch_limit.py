@@ -94,9 +94,14 @@ def _joints(n: int, ratio: float):
     return tuple(out), crown, (r_in, r_out)
 
 
-def feasible(n: int, ratio: float, mu: float = math.inf) -> bool:
-    """Whether the arch of n voussoirs with t/R = ``ratio`` stands with friction ``mu``."""
-    joints, crown, (r_in, r_out) = _joints(n, float(ratio))
+def feasible(n: int, ratio: float, mu: float = math.inf, band: float = 1.0) -> bool:
+    """Whether the arch of n voussoirs with t/R = ``ratio`` stands with friction ``mu``, the
+    thrust line confined to the middle ``band`` of every joint (1: the whole joint; 1/3: its
+    middle third, the kern of a rectangular joint, as kern-fitting asks)."""
+    joints, crown, _ = _joints(n, float(ratio))
+    r_in, r_out = 1.0 - band * ratio / 2, 1.0 + band * ratio / 2
+    if crown is not None:
+        crown = (r_in, r_out)
     rows, rhs = [], []
     if crown is not None:          # crown joint (n even): z_lo H <= m <= z_hi H
         rows += [[crown[0], -1.0], [-crown[1], 1.0]]
@@ -119,14 +124,15 @@ def feasible(n: int, ratio: float, mu: float = math.inf) -> bool:
     return res.status == 0
 
 
-def minimum_thickness(n: int, mu: float = math.inf, tol: float = 1e-9) -> float:
-    """Smallest t/R (to ``tol``) at which the arch of n voussoirs stands (nan if none < 1.9)."""
+def minimum_thickness(n: int, mu: float = math.inf, tol: float = 1e-9, band: float = 1.0) -> float:
+    """Smallest t/R (to ``tol``) at which the arch of n voussoirs stands (nan if none < 1.9),
+    the thrust line in the middle ``band`` of every joint (see :func:`feasible`)."""
     lo, hi = 1e-6, 1.9
-    if not feasible(n, hi, mu):
+    if not feasible(n, hi, mu, band):
         return math.nan
     while hi - lo > tol:
         mid = 0.5 * (lo + hi)
-        lo, hi = (lo, mid) if feasible(n, mid, mu) else (mid, hi)
+        lo, hi = (lo, mid) if feasible(n, mid, mu, band) else (mid, hi)
     return hi
 
 

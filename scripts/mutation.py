@@ -1,0 +1,186 @@
+"""The mutation score of the core: mutmut over rbe/, geometry/ and the verdict code.
+
+    make mutation                     # all target modules, then docs/MUTATION.md
+    .venv/bin/python scripts/mutation.py --module rbe_ros/rbe/cones.py [--module ...]
+    .venv/bin/python scripts/mutation.py --report        # docs/MUTATION.md from the last runs
+
+mutmut 3 (requirements/mutation.txt, which `make mutation` installs into .venv) works in a
+scratch copy, out/mutation/ (rbe_ros/, tests/ and a pyproject.toml with its settings), so
+the work tree is never touched; its results there are kept, and a rerun tests only what
+changed. The targets are found when the run starts: every module of rbe_ros/rbe/ and
+rbe_ros/geometry/, and the verdict code (rbe_ros/analysis/verdict.py, or check.py where the
+verdict still lives). The fast test selection (FAST_TESTS) runs in-process under mutmut's
+forks with the hypothesis profile ``dev``; mutmut runs, for each mutant, only the tests
+that reach its function.
+
+Equivalent mutants (no test can tell them from the original) are listed in
+scripts/mutation_equivalent.txt, one ``name: reason`` a line; the score leaves them out.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import shutil
+import subprocess
+import sys
+from collections import Counter
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+WORK = ROOT / "out" / "mutation"
+DOC = ROOT / "docs" / "MUTATION.md"
+EQUIVALENT = ROOT / "scripts" / "mutation_equivalent.txt"
+MUTMUT = Path(sys.executable).with_name("mutmut")
+
+#: Tests that check answers of the core directly (no subprocess, no ROS, no bags): a few
+#: seconds in all, so that a surviving mutant costs little.
+FAST_TESTS = ("test_mass_properties.py", "test_oracles.py", "test_rbe_method.py",
+              "test_check.py", "test_solver_results.py", "test_contacts.py",
+              "test_validation.py", "test_holds.py", "test_paper.py", "test_generators.py",
+              "test_properties.py", "test_core_units.py")
+
+
+def targets() -> list[str]:
+    """The modules to mutate, as they are in this tree now."""
+    pkg = ROOT / "rbe_ros"
+    found = sorted(p for d in ("rbe", "geometry") for p in (pkg / d).glob("*.py")
+                   if p.name != "__init__.py")
+    verdict = pkg / "analysis" / "verdict.py"
+    found.append(verdict if verdict.exists() else pkg / "analysis" / "check.py")
+    return [str(p.relative_to(ROOT)) for p in found]
+
+
+def prepare(modules: list[str]) -> None:
+    """The scratch copy: current sources and tests, and mutmut's settings."""
+    WORK.mkdir(parents=True, exist_ok=True)
+    for name in ("rbe_ros", "tests"):
+        shutil.copytree(ROOT / name, WORK / name, dirs_exist_ok=True,
+                        ignore=shutil.ignore_patterns("__pycache__", "ros"))
+    tests = [f"tests/{t}" for t in FAST_TESTS if (ROOT / "tests" / t).exists()]
+    (WORK / "pyproject.toml").write_text(
+        "[tool.mutmut]\n"
+        'source_paths = ["rbe_ros"]\n'
+        f"only_mutate = {modules!r}\n".replace("'", '"')
+        + f"pytest_add_cli_args_test_selection = {tests!r}\n".replace("'", '"')
+        + 'pytest_add_cli_args = ["-p", "no:cacheprovider", "-q"]\n')
+
+
+def run(modules: list[str], children: int) -> None:
+    prepare(modules)
+    env = {**os.environ, "HYPOTHESIS_PROFILE": "dev", "OPENBLAS_NUM_THREADS": "1",
+           "OMP_NUM_THREADS": "1"}
+    print(f"[mutation] mutmut over {len(modules)} modules in {WORK.relative_to(ROOT)}", flush=True)
+    subprocess.run([str(MUTMUT), "run", "--max-children", str(children)], cwd=WORK, env=env,
+                   check=False, stdout=subprocess.DEVNULL)
+
+
+def results() -> dict[str, str]:
+    """mutant name -> status (killed, survived, no tests, timeout, ...) of every mutant."""
+    out = subprocess.run([str(MUTMUT), "results", "--all", "true"], cwd=WORK, text=True,
+                         capture_output=True, check=True).stdout
+    return {m.group(1): m.group(2) for m in re.finditer(r"^\s+(\S+): (.+)$", out, re.M)}
+
+
+def equivalents() -> dict[str, str]:
+    if not EQUIVALENT.exists():
+        return {}
+    pairs = (line.split(":", 1) for line in EQUIVALENT.read_text().splitlines()
+             if line.strip() and not line.startswith("#"))
+    return {k.strip(): v.strip() for k, v in pairs}
+
+
+def diff_line(name: str) -> str:
+    """The mutated line of a mutant (its diff's + line)."""
+    out = subprocess.run([str(MUTMUT), "show", name], cwd=WORK, text=True, capture_output=True).stdout
+    plus = [ln[1:].strip() for ln in out.splitlines() if ln.startswith("+") and not ln.startswith("+++")]
+    return plus[0] if plus else "?"
+
+
+def _section(text: str, name: str) -> str | None:
+    m = re.search(rf"<!-- {name} -->\n.*?<!-- /{name} -->\n", text, re.S)
+    return m.group(0) if m else None
+
+
+def replace_section(name: str, body: str, title: str = "Planted bugs") -> None:
+    """Put ``body`` between the markers of section ``name`` of docs/MUTATION.md (appended
+    under ``title`` if it is not there yet); the rest of the file is kept."""
+    text = DOC.read_text() if DOC.exists() else "# Mutation score\n"
+    block = f"<!-- {name} -->\n{body}\n<!-- /{name} -->\n"
+    old = _section(text, name)
+    text = text.replace(old, block) if old else text.rstrip("\n") + f"\n\n## {title}\n\n{block}"
+    DOC.write_text(text)
+
+
+def module_of(name: str) -> str:
+    return name.rsplit(".", 1)[0]
+
+
+def report(modules: list[str]) -> tuple[int, int]:
+    """Write docs/MUTATION.md; returns (killed, non-equivalent mutants)."""
+    status = results()
+    wanted = {m[:-3].replace("/", ".") for m in modules}
+    status = {k: v for k, v in status.items() if module_of(k) in wanted}
+    equiv = equivalents()
+    counts: dict[str, Counter] = {}
+    for name, s in status.items():
+        kind = "equivalent" if name in equiv and s != "killed" else s
+        counts.setdefault(module_of(name), Counter())[kind] += 1
+    total = Counter()
+    for c in counts.values():
+        total.update(c)
+    scored = sum(total.values()) - total["equivalent"]
+    killed = total["killed"]
+    lines = [
+        "# Mutation score",
+        "",
+        "Generated by `make mutation` (`scripts/mutation.py`: mutmut 3 over the modules below, in",
+        "a scratch copy, with the fast test selection "
+        + ", ".join(f"`{t}`" for t in FAST_TESTS) + ").",
+        "A mutant is killed when a test fails on it; `no tests` means no test of the selection",
+        "reaches its function (counted as not killed); equivalent mutants",
+        "(`scripts/mutation_equivalent.txt`) cannot be told from the original and are left out.",
+        "",
+        f"**Killed: {killed} of {scored} non-equivalent mutants ({100 * killed / max(scored, 1):.1f} %)**;"
+        f" {total['equivalent']} equivalent.",
+        "",
+        "| module | mutants | killed | survived | no tests | timeout | equivalent | score |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for mod in sorted(counts):
+        c = counts[mod]
+        n = sum(c.values())
+        s = n - c["equivalent"]
+        lines.append(f"| {mod} | {n} | {c['killed']} | {c['survived']} | {c['no tests']}"
+                     f" | {c['timeout']} | {c['equivalent']} | {100 * c['killed'] / max(s, 1):.1f} % |")
+    open_ = sorted(k for k, v in status.items() if v != "killed" and k not in equiv)
+    lines += ["", "## Not killed", "",
+              "Each with its mutated line (`mutmut show NAME` in out/mutation/ gives the diff).", ""]
+    lines += [f"- `{k}` ({status[k]}): `{diff_line(k)}`" for k in open_] or ["none"]
+    lines += ["", "## Equivalent", ""]
+    lines += [f"- `{k}`: {equiv[k]}" for k in sorted(equiv) if k in status and status[k] != "killed"] \
+        or ["none"]
+    planted = _section(DOC.read_text(), "planted-bugs") if DOC.exists() else None
+    if planted:
+        lines += ["", "## Planted bugs", "", planted.rstrip("\n")]
+    DOC.write_text("\n".join(lines) + "\n")
+    return killed, scored
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--module", action="append", help="only this module (repeatable)")
+    parser.add_argument("--report", action="store_true", help="only write docs/MUTATION.md")
+    parser.add_argument("--children", type=int, default=2, help="parallel mutant runs")
+    args = parser.parse_args()
+    modules = args.module or targets()
+    if not args.report:
+        run(modules, args.children)
+    killed, scored = report(targets())
+    print(f"[mutation] killed {killed} of {scored} non-equivalent mutants"
+          f" ({100 * killed / max(scored, 1):.1f} %): {DOC.relative_to(ROOT)}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,50 @@
+#!/usr/bin/env python3
+"""The README's screenshot of the HTML view (docs/view.png), made as the browser test sees
+the page: ``rbe-ros view`` of a bag, opened in headless Chromium at one step.
+
+Usage: .venv/bin/python scripts/view_screenshot.py [--bag bags/wall_misplaced] [--step 12]
+"""
+from __future__ import annotations
+
+import argparse
+import io
+import sys
+import tempfile
+from pathlib import Path
+
+from PIL import Image
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+
+from browser import chromium, wait_drawn  # noqa: E402
+from rbe_ros.cli import main as rbe_ros  # noqa: E402
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--bag", default=str(ROOT / "bags" / "wall_misplaced"))
+    parser.add_argument("--step", type=int, default=12, help="row of the table to show")
+    parser.add_argument("-o", "--output", default=str(ROOT / "docs" / "view.png"))
+    args = parser.parse_args(argv)
+    with tempfile.TemporaryDirectory() as tmp:
+        page = Path(tmp) / "report.html"
+        rbe_ros(["view", args.bag, "-o", str(page)])
+        browser = chromium(1100, 1000)
+        try:
+            browser.get(page.as_uri())
+            wait_drawn(browser, 0)
+            browser.execute_script("document.getElementById('steps').rows"
+                                   f"[{args.step + 1}].click()")
+            wait_drawn(browser, args.step)
+            png = browser.get_screenshot_as_png()
+        finally:
+            browser.quit()
+    image = Image.open(io.BytesIO(png)).convert("RGB").quantize(colors=256, method=Image.Quantize.FASTOCTREE)
+    image.save(args.output, optimize=True)
+    print(f"screenshot written to {args.output} ({Path(args.output).stat().st_size // 1024} KiB)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,7 @@
+"""Independent references for the tests: computations that share no code with rbe_ros.
+
+``mass``: volume, mass and centroid of a block from its scene description (divergence
+theorem over the faces); ``arch_limit``: the exact stability limits of the semicircular arch
+by a thrust-line LP; ``stacks``: the closed-form verdict of a stack of boxes (the overhang
+condition). Benchmarks use them too (benchmarks/bench.py).
+"""

@@ -1,0 +1,77 @@
+"""``rbe-ros view`` on every example, generator scene and bag: one self-contained page
+whose rows are the reports (recorded, or the checker's own) and whose 3D data are the
+blocks present at each step."""
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+from rbe_ros.analysis.options import CheckOptions
+from rbe_ros.cli import main
+from rbe_ros.generators import GENERATORS
+from rbe_ros.io.replay import read_runs, replay_run, Run
+from rbe_ros.io.messages import state_to_dict
+from rbe_ros.io.scene_json import load_scene
+
+REPO = Path(__file__).resolve().parents[1]
+EXAMPLES = sorted((REPO / "examples").glob("*.json"))
+BAGS = sorted(p for p in (REPO / "bags").iterdir() if p.is_dir())
+
+
+def page_data(path: Path) -> dict:
+    text = path.read_text()
+    # self-contained: no script, style, image or link fetched from anywhere
+    assert not re.search(r"""<(script|link|img|iframe)[^>]*\b(src|href)=""", text)
+    assert "plotly" in text.lower() and len(text) > 4_000_000    # plotly.js inlined
+    data = re.search(r'<script id="data" type="application/json">(.*?)</script>', text, re.S)
+    return json.loads(data.group(1).replace("<\\/", "</"))
+
+
+def check_rows(data: dict, runs: list[tuple[dict, list[dict]]]) -> None:
+    """One row per report with its verdict and numbers; at each step the roles name exactly
+    the blocks the report checked (num_blocks) and every block has a mesh."""
+    rows = data["steps"]
+    reports = [(k, r) for k, (_, rs) in enumerate(runs) for r in rs]
+    assert len(rows) == len(reports) > 0
+    for row, (k, report) in zip(rows, reports):
+        assert row["run"] == k and row["step"] == report["step_index"]
+        assert row["status"] == next(n for n, v in data["statuses"].items()
+                                     if v == report["status"])
+        assert row["message"] == report["message"]
+        assert row["max_tension"] == pytest.approx(report["max_tension"])
+        blocks = {b["id"]: b for b in data["runs"][k]["blocks"]}
+        if report["status"] != data["statuses"]["INVALID_INPUT"]:
+            assert len(row["roles"]) == report["num_blocks"]
+        assert set(row["roles"]) <= set(blocks)
+        assert all(len(blocks[b]["x"]) % 3 == 0 and blocks[b]["x"] for b in row["roles"])
+        forces = sum(len(line["x"]) // 3 for line in row["lines"]
+                     if line["name"].startswith("forces"))
+        assert forces == sum(len(i["polygon"]) for i in report["interfaces"])
+
+
+@pytest.mark.parametrize("bag", BAGS, ids=[b.name for b in BAGS])
+def test_view_of_every_bag(bag, tmp_path):
+    out = tmp_path / "report.html"
+    assert main(["view", str(bag), "-o", str(out)]) == 0
+    check_rows(page_data(out), [(r.state, r.reports) for r in read_runs(bag)])
+
+
+@pytest.mark.parametrize("scene", [*EXAMPLES, *sorted(GENERATORS)],
+                         ids=[p.stem for p in EXAMPLES] + sorted(GENERATORS))
+def test_view_of_every_example_and_generator(scene, tmp_path):
+    if isinstance(scene, str):
+        path = tmp_path / f"{scene}.json"
+        assert main(["generate", scene, "-o", str(path)]) == 0
+    else:
+        path = scene
+    out = tmp_path / "report.html"
+    assert main(["view", str(path), "-o", str(out)]) == 0
+    data = page_data(out)
+    state = state_to_dict(load_scene(path), "world")
+    reports = replay_run(Run(state, 0), CheckOptions())   # the node's answers, independently
+    assert len(reports) == len(load_scene(path).sequence) > 0
+    check_rows(data, [(state, reports)])
+    assert data["options"]["solve"]["mu"] == 0.6

@@ -45,6 +45,26 @@ bench: setup
 	$(PY) -m pip check --disable-pip-version-check
 	$(PY) benchmarks/bench.py $(BENCH_ARGS)
 
+# As-built noise suite: perturbed poses under the declared uncertainty, the design rule with
+# raised tolerances and today's defaults; docs/ASBUILT.md and docs/figures/asbuilt.png
+# (about 15 minutes; make asbuilt ASBUILT_ARGS=--quick: 10 samples, out/asbuilt-quick/).
+.PHONY: asbuilt
+asbuilt: setup
+	$(PY) benchmarks/asbuilt.py $(ASBUILT_ARGS)
+
+# Mutation score of the core (rbe/, geometry/, the verdict) with a fast test selection:
+# docs/MUTATION.md (scripts/mutation.py; mutmut into .venv from requirements/mutation.txt,
+# checked with pip check; 1-2 hours on 2 busy cores, niced; reruns test only what changed).
+# make planted-bugs: the planted bugs of issue 17, each with the tests that catch it.
+.PHONY: mutation planted-bugs
+mutation: setup
+	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements/mutation.txt
+	$(PY) -m pip check --disable-pip-version-check
+	nice -n 10 $(PY) scripts/mutation.py $(MUTATION_ARGS)
+
+planted-bugs: setup
+	nice -n 10 $(PY) scripts/planted_bugs.py
+
 # Re-record the regression bags of bags/ (deterministic: same code, same files; ~30 s).
 bags: setup
 	$(PY) scripts/make_bags.py
@@ -52,6 +72,12 @@ bags: setup
 # Cost of a check against size, and of per-step sequence checks: docs/SCALING.md (minutes).
 scaling: setup
 	$(PY) benchmarks/scaling.py
+
+# Cost of the shape analysis of large meshes and the check time limit: docs/BOUNDED_CHECKS.md
+# (about a minute).
+.PHONY: bounded
+bounded: setup
+	$(PY) benchmarks/bounded_checks.py
 
 # Regenerate requirements/ros.txt and requirements/py.txt from the .in files
 # (resolves with pip, installs nothing; needs CPython 3.11 as python3).

@@ -20,6 +20,7 @@ from dataclasses import replace
 from .analysis.asbuilt import declared
 from .analysis.assembly import Assembly
 from .analysis.friction import minimum_friction
+from .analysis.margin import DEFAULT_DIRECTIONS
 from .analysis.options import CheckOptions, HoldSearch
 from .analysis.pipeline import check_scene, check_sequence, first_failing_step
 from .analysis.planning import plan_sequence
@@ -75,8 +76,13 @@ def _solver_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--tension-tol", type=float, default=1e-5,
                    help="tension counts above this share of the free weight")
     g.add_argument("--time-limit", type=float, default=0.0, metavar="S",
-                   help="time limit of each solver call in s (check: a check makes one to "
-                   "three); over it the verdict is SOLVER_FAILED (default 0: none)")
+                   help="time limit in s of each check (a sequence: of each step), geometry "
+                   "included; over it the verdict is SOLVER_FAILED naming the stage (default "
+                   "0: none)")
+    g.add_argument("--margin", action="store_true",
+                   help="report margin_g: the smallest horizontal acceleration (share of g) "
+                   f"that topples or slides each checked assembly, over {DEFAULT_DIRECTIONS} "
+                   "directions, and margin_direction")
     g.add_argument("--full-solve", action="store_true",
                    help="sequences: solve every step's whole assembly (default: local models "
                    "where they prove the verdict; the report's model says which answered)")
@@ -142,7 +148,8 @@ def _options(args) -> CheckOptions:
                                         args.pose_uncertainty or ())))
     return CheckOptions(solve=solve, mu_threshold=args.mu_threshold, tension_tol=args.tension_tol,
                         limits=ValidationLimits(max_blocks=args.max_blocks), holds=holds,
-                        full_solve=args.full_solve, contact=contact)
+                        full_solve=args.full_solve, contact=contact,
+                        margin_directions=DEFAULT_DIRECTIONS if args.margin else 0)
 
 
 def _scene(args) -> tuple[Scene, Assembly | None]:

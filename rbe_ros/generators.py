@@ -14,6 +14,7 @@ import math
 from dataclasses import replace
 
 import numpy as np
+from scipy.spatial import ConvexHull
 
 from .scene import BOX_FACES, Block, Scene, make_block, make_scene
 
@@ -303,6 +304,37 @@ def dome_joint_ring(block_a: str, block_b: str) -> tuple[str, str]:
     return block_a.split("_")[0], block_b.split("_")[0]
 
 
+def convex_domes(count: int = 1, vertices: int = 10_000, rim: int = 1000, radius: float = 0.3,
+                 height: float = 0.2, density: float = 2000.0, seed: int = 0) -> Scene:
+    """``count`` large convex blocks side by side on a ground slab (the cost of the shape
+    analysis): each the convex hull of random points on the upper half of an ellipsoid over a
+    flat base, a regular ``rim``-gon of ``radius`` (triangulated by the hull into many
+    coplanar triangles: one face to find), ``vertices`` vertices in all. Each copy is scaled
+    by 1 + k/1000, a distinct mesh."""
+    rng = np.random.default_rng(seed)
+    p = rng.normal(size=(vertices - rim, 3))
+    p /= np.linalg.norm(p, axis=1)[:, None]
+    p[:, 2] = np.abs(p[:, 2]) + 1e-2
+    t = np.linspace(0.0, 2.0 * math.pi, rim, endpoint=False)
+    points = np.vstack((p, np.column_stack((np.cos(t), np.sin(t), np.zeros(rim)))))
+    points *= [radius, radius, height]
+    hull = ConvexHull(points)
+    a, b, c = (points[hull.simplices[:, k]] for k in range(3))
+    outward = np.einsum("ij,ij->i", np.cross(b - a, c - a), hull.equations[:, :3]) > 0
+    faces = np.where(outward[:, None], hull.simplices, hull.simplices[:, ::-1]).tolist()
+    spacing = 2.5 * radius
+    blocks = [_box("ground", (-0.5 * spacing * count, -spacing / 2, -0.1),
+                   (0.5 * spacing * count, spacing / 2, 0.0), density=density, support=True)]
+    for k in range(count):
+        scaled = points * (1 + 1e-3 * k)
+        centre = scaled.mean(axis=0)
+        blocks.append(make_block(f"dome{k}", scaled - centre, faces,
+                                 centre + [spacing * (k - (count - 1) / 2), 0, 0],
+                                 density=density))
+    return make_scene(f"convex-domes({count}x{vertices})", blocks,
+                      sequence=[b.id for b in blocks[1:]])
+
+
 GENERATORS = {
     "two-blocks": two_blocks,
     "stack": stack,
@@ -311,4 +343,5 @@ GENERATORS = {
     "buttressed-arch": buttressed_arch,
     "dome": dome,
     "running-bond-wall": running_bond_wall,
+    "convex-domes": convex_domes,
 }

@@ -3,7 +3,8 @@
 ``ci`` (default): 100 examples per property test (5 tests: 500 generated scenes),
 derandomized and without an example database, so every run checks the same scenes.
 ``long``: 2,000 examples per test (10,000 scenes, random, 5-15 minutes on 2 cores):
-``HYPOTHESIS_PROFILE=long make test-long``. ``dev``: 20 examples per test, for a quick look.
+``HYPOTHESIS_PROFILE=long make test-long``. ``dev``: 20 examples per test, for a quick look;
+``mutation``: 10, derandomized (scripts/mutation.py).
 
 The compas_cra comparison (tests/test_compas_cra.py, the real samples of test_compas_io.py)
 uses .venv-compas, which scripts/setup.sh builds, unless $RBE_COMPAS_VENV and
@@ -19,6 +20,7 @@ _COMMON = dict(deadline=None, database=None, print_blob=True,
 settings.register_profile("ci", max_examples=100, derandomize=True, **_COMMON)
 settings.register_profile("long", max_examples=2000, **_COMMON)
 settings.register_profile("dev", max_examples=20, **_COMMON)
+settings.register_profile("mutation", max_examples=10, derandomize=True, **_COMMON)  # make mutation
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 COMPAS_VENV = Path(__file__).resolve().parents[1] / ".venv-compas"

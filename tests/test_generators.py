@@ -26,6 +26,7 @@ SMALL = {  # every generator, small enough to be quick
     "buttressed-arch-inner": dict(springing="inner"),
     "dome": dict(slices=8, courses=4),
     "running-bond-wall": dict(courses=3, bricks_per_course=3),
+    "convex-domes": dict(count=2, vertices=200, rim=40),
 }
 
 

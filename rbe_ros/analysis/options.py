@@ -45,6 +45,8 @@ class CheckOptions:
     contact: ContactOptions = field(default_factory=ContactOptions)
     full_solve: bool = False            # sequences: always solve the whole partial assembly
     holds: HoldSearch = field(default_factory=HoldSearch)   # suggested holds of unstable checks
+    #: Horizontal directions of the stability margin (margin.py); 0: no margin computed.
+    margin_directions: int = 0
     #: Sane ranges checked before the geometry stage (None: no validation); see validate.py.
     limits: ValidationLimits | None = field(default_factory=ValidationLimits)
 

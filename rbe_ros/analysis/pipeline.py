@@ -7,12 +7,14 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
+from ..deadline import CheckTimeout, stage, time_budget
 from ..rbe.result import Report, Status
 from ..scene import Scene, SceneError
 from .asbuilt import declared, sensitivity
 from .assembly import Assembly
 from .holds import suggested_holds
 from .incremental import StepChecker
+from .margin import report_margin
 from .options import CheckOptions
 from .steps import final_state, sequence_steps
 from .validate import validated_assembly
@@ -27,15 +29,24 @@ def check_scene(scene: Scene, options: CheckOptions = CheckOptions(),
     With holds, the assembly is the state after the last step: supports whose hold ends are
     taken away, free blocks held to the end are supports (``held_blocks``). An unstable
     report names the smallest set of blocks to hold (``suggested_holds``, see
-    :class:`~rbe_ros.analysis.options.HoldSearch`)."""
+    :class:`~rbe_ros.analysis.options.HoldSearch`). The whole check, geometry included, is
+    bounded by the solve options' ``time_limit``: over it, the report is SOLVER_FAILED
+    naming the stage (:func:`timeout_report`)."""
     start = time.perf_counter()
     options = declared(options, scene)
-    assembly = validated_assembly(scene, options.limits, options.contact, assembly)
-    held: tuple[str, ...] = ()
-    if scene.holds:
-        present, held = final_state(scene)
-        assembly = assembly.subset(present, held)
-    return _finished(check(assembly, options), assembly, held, options, start)
+    try:
+        with time_budget(options.solve.time_limit):
+            assembly = validated_assembly(scene, options.limits, options.contact, assembly)
+            held: tuple[str, ...] = ()
+            if scene.holds:
+                present, held = final_state(scene)
+                assembly = assembly.subset(present, held)
+            with stage("solve"):
+                report = check(assembly, options)
+            report = _completed(report, assembly, held, options)
+    except CheckTimeout as exc:
+        report = timeout_report(exc)
+    return replace(report, solve_time=time.perf_counter() - start)
 
 
 def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
@@ -44,45 +55,70 @@ def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
     """One report per step, in order. Contacts are detected once on the whole scene.
 
     ``on_step(report, total)`` is called after each step; when ``cancelled()`` turns true
-    the reports so far are returned.
+    the reports so far are returned. The solve options' ``time_limit`` bounds each step, and
+    the contact detection on the whole scene: a step over it is SOLVER_FAILED naming the
+    stage, and the sequence goes on; contacts over it make every step's report SOLVER_FAILED.
     """
     start = time.perf_counter()
     options = declared(options, scene)
-    full = validated_assembly(scene, options.limits, options.contact)
-    contact_time = time.perf_counter() - start
     steps = sequence_steps(scene)
+    limit = options.solve.time_limit
+    try:
+        with time_budget(limit):
+            full = validated_assembly(scene, options.limits, options.contact)
+    except CheckTimeout as exc:
+        full, geometry_timeout = None, exc
+    contact_time = time.perf_counter() - start
     checker = StepChecker(options, local=not options.full_solve)
     reports = []
     for step in steps:
         if cancelled is not None and cancelled():
             break
-        step_start = time.perf_counter() - contact_time / len(steps)
-        assembly = full.subset(step.present, step.held)
-        report = _finished(checker.check(assembly), assembly, step.held, options, step_start,
-                           step_index=step.index, block_placed=step.block)
+        step_start = time.perf_counter()
+        try:
+            if full is None:
+                raise geometry_timeout
+            assembly = full.subset(step.present, step.held)
+            with time_budget(limit):
+                with stage("solve"):
+                    report = checker.check(assembly)
+                report = _completed(report, assembly, step.held, options)
+        except CheckTimeout as exc:
+            report = replace(timeout_report(exc), num_blocks=len(step.present))
+        # the step's time, with its share of the contact detection done once for all steps
+        report = replace(report, step_index=step.index, block_placed=step.block,
+                         solve_time=time.perf_counter() - step_start + contact_time / len(steps))
         reports.append(report)
         if on_step is not None:
             on_step(report, len(steps))
     return reports
 
 
-def _finished(report: Report, assembly: Assembly, held, options: CheckOptions, start: float,
-              **step) -> Report:
-    """The report as the pipeline gives it: the near contacts and whether the verdict is
-    sensitive to the contact tolerance (why, in the message), the blocks held, the
-    suggested holds, the step (``step_index``, ``block_placed``) and the time since
-    ``start``, the one place where a check's time is taken."""
-    near, sensitive = sensitivity(report, assembly, options)
-    message = report.message + (f" | sensitive: {sensitive}" if sensitive else "")
-    suggested = suggested_holds(report, assembly, options)
-    return replace(report, message=message, near_contacts=near,
-                   verdict_sensitive=bool(sensitive), held_blocks=tuple(held),
-                   suggested_holds=suggested, solve_time=time.perf_counter() - start, **step)
+def _completed(report: Report, assembly: Assembly, held, options: CheckOptions) -> Report:
+    """The verdict of ``assembly`` completed in one place, each part in its stage of the
+    time budget: the near contacts and whether the verdict is sensitive to the contact
+    tolerance (why, in the message), the blocks held, the suggested holds, the margin."""
+    with stage("sensitivity"):
+        near, sensitive = sensitivity(report, assembly, options)
+    with stage("hold search"):
+        suggested = suggested_holds(report, assembly, options)
+    with stage("margin"):
+        found = report_margin(report, assembly, options.solve, options.margin_directions)
+    extra = {} if found is None else {"margin_g": found.margin_g,
+                                      "margin_direction": found.direction}
+    return replace(report, near_contacts=near, verdict_sensitive=bool(sensitive),
+                   message=report.message + (f" | sensitive: {sensitive}" if sensitive else ""),
+                   held_blocks=tuple(held), suggested_holds=suggested, **extra)
 
 
 def first_failing_step(reports: list[Report]) -> int:
     """The step index of the first report that is not stable; -1 when all are."""
     return next((r.step_index for r in reports if not r.stable), -1)
+
+
+def timeout_report(exc: CheckTimeout) -> Report:
+    """The report of a check stopped at its time limit."""
+    return Report(Status.SOLVER_FAILED, f"solver failed: {exc}")
 
 
 def error_report(exc: Exception) -> Report:

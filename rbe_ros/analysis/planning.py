@@ -33,6 +33,7 @@ import numpy as np
 
 from ..rbe.result import Report
 from ..scene import Hold, Scene, SceneError, make_scene
+from .asbuilt import declared
 from .assembly import Assembly
 from .holds import StabilityOracle, minimal_holds, release_unneeded
 from .options import CheckOptions
@@ -243,7 +244,8 @@ def plan_sequence(scene: Scene, max_held: int = 2, options: CheckOptions = Check
     """An insertion order of every free block of ``scene`` in which each step stands with at
     most ``max_held`` blocks held (see the module docstring), or where none was found."""
     start = time.perf_counter()
-    result = _Planner(scene, options, PlanOptions(max_held, beam, candidates, keep_sequence)).run()
+    result = _Planner(scene, declared(options, scene),
+                      PlanOptions(max_held, beam, candidates, keep_sequence)).run()
     result.time = time.perf_counter() - start
     return result
 

@@ -9,6 +9,7 @@ invalid: the check's verdict says so (INFEASIBLE).
 """
 from __future__ import annotations
 
+from ..deadline import stage
 from ..geometry.contacts import ContactOptions
 from ..geometry.overlap import find_penetration
 from ..geometry.uncertainty import allowances
@@ -46,8 +47,10 @@ def validated_assembly(scene: Scene, limits: ValidationLimits | None = Validatio
     ``assembly``: the scene's blocks on interfaces found elsewhere (stored in a COMPAS
     file), validated instead of detecting them."""
     if limits is not None:
-        validate_scene(scene, limits)
-    assembly = assembly or Assembly.from_scene(scene, contact)
-    if limits is not None:
-        validate_assembly(assembly, limits, contact)
+        with stage("validation"):
+            validate_scene(scene, limits)
+    with stage("geometry"):
+        assembly = assembly or Assembly.from_scene(scene, contact)
+        if limits is not None:
+            validate_assembly(assembly, limits, contact)
     return assembly

@@ -6,16 +6,21 @@ thousand identical bricks costs one shape analysis; posing is then a rigid trans
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import cached_property, lru_cache
+from itertools import chain
 
 import numpy as np
 import shapely
+from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 from trimesh.triangles import mass_properties
 
+from ..deadline import checkpoint
 from ..scene import Block, SceneError
 from .polygon import PlaneFrame, cross, tangent_basis
+from .support import projection_extents
 
 #: Faces whose normals differ by less than this (radians) and whose planes are within
 #: PLANE_TOL of the block size are one face (a triangulated mesh has several per plane).
@@ -54,6 +59,8 @@ class PosedBlock:
     face_vs: np.ndarray         # (F, 3)
     face_outlines: np.ndarray   # (F,) shapely outlines in face frame coordinates (shared,
                                 #      read-only: they do not depend on the pose)
+    face_extents: np.ndarray    # (F, 2) min and max of n . x over the block's vertices x
+    convex: bool                # every vertex inside every face plane (to 1e-6 of the size)
     position: np.ndarray        # (3,) origin of the block frame: pose errors turn about it
 
     @cached_property
@@ -76,6 +83,8 @@ class _Shape:
     outlines: np.ndarray        # (F,) object array, read-only
     volume: float
     centroid: np.ndarray
+    extents: np.ndarray         # (F, 2) min and max of n . x over the vertices
+    convex: bool
 
 
 def pose_block(block: Block) -> PosedBlock:
@@ -112,8 +121,9 @@ def pose_blocks(blocks) -> list[PosedBlock]:
     us = _rotate(np.concatenate([s.us for s in shapes]), rf)
     vs = _rotate(np.concatenate([s.vs for s in shapes]), rf)
     p = pos[of_face]
-    offsets = np.concatenate([s.offsets for s in shapes]) + (
-        normals[:, 0] * p[:, 0] + normals[:, 1] * p[:, 1] + normals[:, 2] * p[:, 2])
+    shift = normals[:, 0] * p[:, 0] + normals[:, 1] * p[:, 1] + normals[:, 2] * p[:, 2]
+    offsets = np.concatenate([s.offsets for s in shapes]) + shift
+    extents = np.concatenate([s.extents for s in shapes]) + shift[:, None]
     centroids = _rotate(np.array([s.centroid for s in shapes]), rot) + pos
     aabb = np.stack((np.minimum.reduceat(world, v0), np.maximum.reduceat(world, v0)), axis=1)
     vert_ends, face_ends = np.cumsum(n_vert).tolist(), np.cumsum(n_face).tolist()
@@ -125,7 +135,7 @@ def pose_blocks(blocks) -> list[PosedBlock]:
         out.append(PosedBlock(block.id, block.support, world[vb:ve], centroids[k], shape.volume,
                               float(mass), shape.volume ** (1.0 / 3.0), aabb[k], normals[fb:fe],
                               offsets[fb:fe], origins[fb:fe], us[fb:fe], vs[fb:fe],
-                              shape.outlines, pos[k]))
+                              shape.outlines, extents[fb:fe], shape.convex, pos[k]))
     return out
 
 
@@ -138,16 +148,25 @@ def _rotate(x: np.ndarray, rot: np.ndarray) -> np.ndarray:
 @lru_cache(maxsize=4096)
 def _shape(vertex_bytes: bytes, count: int, faces) -> _Shape:
     """Cached by the exact mesh, so identical blocks share it (raises ValueError)."""
+    checkpoint()
     vertices = np.frombuffer(vertex_bytes).reshape(count, 3)
-    tri = np.array([(f[0], f[i], f[i + 1]) for f in faces for i in range(1, len(f) - 1)])
-    if not _is_closed(tri):
+    ragged = _Ragged(faces)
+    if not _is_closed(ragged.fans()):
         raise ValueError("mesh is not closed (every edge must join exactly two faces,"
                          " wound consistently)")
-    volume, centroid = _volume_centroid(_centre_fans(vertices, faces))
+    centres = ragged.sums(vertices[ragged.corners]) / ragged.counts[:, None]
+    volume, centroid = _volume_centroid(_centre_fans(vertices, ragged, centres))
     scale = float(np.ptp(vertices, axis=0).max())
     if not volume > 1e-9 * scale ** 3:
         raise ValueError(f"mesh has no volume or is wound inside out (volume {volume:.3g} m^3)")
-    return _Shape(*_planar_faces(vertices, faces, volume ** (1.0 / 3.0)), volume, centroid)
+    size = volume ** (1.0 / 3.0)
+    checkpoint()
+    planes = _planar_faces(vertices, ragged, centres, size)
+    normals, offsets = planes[0], planes[1]
+    checkpoint()
+    extents = projection_extents(vertices, normals)
+    convex = bool((extents[:, 1] - offsets).max(initial=0.0) <= 1e-6 * size)
+    return _Shape(*planes, volume, centroid, extents, convex)
 
 
 def _is_closed(tri: np.ndarray) -> bool:
@@ -159,19 +178,48 @@ def _is_closed(tri: np.ndarray) -> bool:
     return len(np.unique(keys)) == len(keys) and bool(np.isin(reverse, keys).all())
 
 
-def _centre_fans(vertices: np.ndarray, faces) -> np.ndarray:
-    """Triangles (m, 3, 3) fanning each face from its vertex mean: the same as any fan for
-    planar faces, and for slightly non-planar ones (scanned or exported meshes) the symmetric
-    choice COMPAS makes too."""
-    out = []
-    for f in faces:
-        pts = vertices[list(f)]
-        if len(f) == 3:
-            out.append(pts[None])
-            continue
-        centre = np.broadcast_to(pts.mean(axis=0), pts.shape)
-        out.append(np.stack((centre, pts, np.concatenate((pts[1:], pts[:1]))), axis=1))
-    return np.concatenate(out)
+class _Ragged:
+    """The faces of a mesh as one array of corner indices, face after face."""
+
+    def __init__(self, faces):
+        self.counts = np.fromiter((len(f) for f in faces), dtype=np.intp, count=len(faces))
+        self.corners = np.fromiter(chain.from_iterable(faces), dtype=np.intp,
+                                   count=int(self.counts.sum()))
+        self.starts = np.cumsum(self.counts) - self.counts
+        self.face_of_corner = np.repeat(np.arange(len(faces)), self.counts)
+
+    def sums(self, values: np.ndarray, of: np.ndarray | None = None) -> np.ndarray:
+        """Per face, the sum of the rows of ``values`` (m, 3) whose face is ``of`` (default:
+        one row per corner)."""
+        of = self.face_of_corner if of is None else of
+        return np.column_stack([np.bincount(of, values[:, k], len(self.counts))
+                                for k in range(3)])
+
+    def fans(self) -> np.ndarray:
+        """(m, 3) vertex indices: each face as triangles (f0, f[i], f[i+1]), i = 1 .. k-2."""
+        fans = np.maximum(self.counts - 2, 0)
+        self.fan_face = np.repeat(np.arange(len(self.counts)), fans)
+        second = (self.starts[self.fan_face] + np.arange(len(self.fan_face))
+                  - np.repeat(np.cumsum(fans) - fans, fans) + 1)
+        c = self.corners
+        return np.column_stack((c[self.starts[self.fan_face]], c[second], c[second + 1]))
+
+
+def _centre_fans(vertices: np.ndarray, ragged: _Ragged, centres: np.ndarray) -> np.ndarray:
+    """Triangles (m, 3, 3) fanning each face from its vertex mean ``centres``: the same as
+    any fan for planar faces, and for slightly non-planar ones (scanned or exported meshes)
+    the symmetric choice COMPAS makes too. Triangles are kept as they are."""
+    k = ragged.counts
+    per_face = np.where(k == 3, 1, k)
+    face = np.repeat(np.arange(len(k)), per_face)
+    j = np.arange(len(face)) - np.repeat(np.cumsum(per_face) - per_face, per_face)
+    first = ragged.starts[face]
+    triangle = (k == 3)[face]
+    points = np.concatenate((vertices, centres))
+    apex = np.where(triangle, ragged.corners[first], len(vertices) + face)
+    b = ragged.corners[first + np.where(triangle, 1, j)]
+    c = ragged.corners[first + np.where(triangle, 2, (j + 1) % k[face])]
+    return points[np.column_stack((apex, b, c))]
 
 
 def _volume_centroid(triangles: np.ndarray) -> tuple[float, np.ndarray]:
@@ -179,40 +227,67 @@ def _volume_centroid(triangles: np.ndarray) -> tuple[float, np.ndarray]:
     return float(props["volume"]), np.asarray(props["center_mass"], dtype=float)
 
 
-def _planar_faces(vertices: np.ndarray, faces, size: float):
-    """Faces grouped by plane, each with a frame and one merged 2D outline (block frame)."""
-    groups: list[tuple[np.ndarray, float, list[np.ndarray]]] = []
-    for f in faces:
-        pts = vertices[list(f)]
-        area_vector = 0.5 * cross(pts[1:-1] - pts[0], pts[2:] - pts[0]).sum(axis=0)
-        length = np.linalg.norm(area_vector)
-        if length == 0.0:
-            continue                                  # degenerate sliver face
-        n = area_vector / length
-        d = float(n @ pts.mean(axis=0))
-        for gn, gd, members in groups:
-            if gn @ n > np.cos(ANGLE_TOL) and abs(gd - d) <= PLANE_TOL * size + 1e-12:
-                members.append(pts)
-                break
-        else:
-            groups.append((n, d, [pts]))
-    normals, offsets, origins, us, vs, outlines = [], [], [], [], [], []
-    for n, d, members in groups:
-        u, v = tangent_basis(n)
-        frame = PlaneFrame(members[0].mean(axis=0), u, v, n)
-        if len(members) == 1:
-            outline = shapely.Polygon(frame.to_2d(members[0]))
-        else:   # a triangulated face: merge, dropping the collinear vertices of the seams
-            outline = shapely.union_all([shapely.Polygon(frame.to_2d(p)).buffer(0)
-                                         for p in members]).simplify(0.0)
-        normals.append(n)
-        offsets.append(d)
-        origins.append(frame.origin)
-        us.append(u)
-        vs.append(v)
-        outlines.append(outline)
-    shared = np.empty(len(outlines), dtype=object)
-    shared[:] = outlines
+def _planar_faces(vertices: np.ndarray, ragged: _Ragged, centres: np.ndarray, size: float):
+    """Faces grouped by plane, each with a frame and one merged 2D outline (block frame).
+
+    A face joins the first plane (in face order) whose normal is within ANGLE_TOL of its own
+    and whose offset is within PLANE_TOL of the size; the candidates come from a k-d tree, so
+    grouping the F faces costs about F log F (a 10,000-vertex hull has 20,000 triangles), and
+    the normals, offsets and outlines are computed for all faces at once."""
+    counts, corners, corner_face = ragged.counts, ragged.corners, ragged.face_of_corner
+    # area vectors from each face's fan of triangles around its first vertex
+    fan = vertices[ragged.fans()]
+    area_vectors = ragged.sums(0.5 * cross(fan[:, 1] - fan[:, 0], fan[:, 2] - fan[:, 0]),
+                               ragged.fan_face)
+    lengths = np.sqrt((area_vectors ** 2).sum(axis=1))
+    kept = np.flatnonzero(lengths > 0.0)                  # degenerate sliver faces go
+    normals = area_vectors[kept] / lengths[kept, None]
+    offsets = (normals * centres[kept]).sum(axis=1)
+    group, first = _group_planes(normals, offsets, PLANE_TOL * size + 1e-12)
+    n = normals[first]
+    u, v = tangent_basis(n)
+    origins = centres[kept[first]]
+    # every kept face's outline in its plane's frame, then merged per plane
+    member = np.zeros(len(counts), dtype=bool)
+    member[kept] = True
+    plane_of_face = np.full(len(counts), -1)
+    plane_of_face[kept] = group
+    on = member[corner_face]
+    plane = plane_of_face[corner_face[on]]
+    d = vertices[corners[on]] - origins[plane]
+    coords = np.column_stack(((d * u[plane]).sum(axis=1), (d * v[plane]).sum(axis=1)))
+    outlines = shapely.polygons(shapely.linearrings(coords, indices=np.repeat(
+        np.arange(len(kept)), counts[kept])))
+    sizes = np.bincount(group, minlength=len(first))
+    shared = np.empty(len(first), dtype=object)
+    shared[:] = outlines[first]
+    for p in np.flatnonzero(sizes > 1):   # a triangulated face: merge, dropping the seams' vertices
+        shared[p] = shapely.union_all(shapely.buffer(outlines[group == p], 0)).simplify(0.0)
     shared.flags.writeable = False
-    return (np.array(normals), np.array(offsets), np.array(origins), np.array(us), np.array(vs),
-            shared)
+    return n, offsets[first], origins, u, v, shared
+
+
+def _group_planes(normals: np.ndarray, offsets: np.ndarray, plane_tol: float):
+    """Each face's plane index and each plane's first face: face j joins the plane of the
+    first face i < j starting a plane with n_i . n_j > cos(ANGLE_TOL) and |d_i - d_j| <=
+    plane_tol (the order in which faces are met, as a linear scan would group them)."""
+    chord = 2.0 * math.sin(ANGLE_TOL / 2.0)       # |n_i - n_j| at the angle tolerance
+    # offsets scaled so that both tolerances are one distance; the ball (with room for
+    # rounding) holds every match, which the exact test then confirms
+    points = np.column_stack((normals, offsets * (chord / plane_tol)))
+    near = cKDTree(points).query_ball_point(points, 2.0 * chord)
+    cos_tol = math.cos(ANGLE_TOL)
+    group = np.full(len(normals), -1)
+    first = []
+    for i, candidates in enumerate(near):
+        if i % 4096 == 0:
+            checkpoint()
+        if group[i] >= 0:
+            continue
+        group[i] = len(first)
+        first.append(i)
+        for j in candidates:
+            if (j > i and group[j] < 0 and normals[i] @ normals[j] > cos_tol
+                    and abs(offsets[i] - offsets[j]) <= plane_tol):
+                group[j] = group[i]
+    return group, np.array(first, dtype=np.intp)

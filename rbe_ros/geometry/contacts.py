@@ -17,6 +17,7 @@ from functools import cached_property
 import numpy as np
 import shapely
 
+from ..deadline import checkpoint
 from .block import PosedBlock
 from .clip import clip_convex, padded_rings
 from .kern import kern, kerns_ragged
@@ -213,6 +214,7 @@ def detect_contacts(blocks: list[PosedBlock], options: ContactOptions = ContactO
     if not len(fa):
         return [], []
 
+    checkpoint()
     # the overlap of the two outlines, in the frame of face a (or of the mid-plane)
     outline_a, outline_b = outlines[fa], outlines[fb]
     if options.uncertain:
@@ -235,6 +237,7 @@ def detect_contacts(blocks: list[PosedBlock], options: ContactOptions = ContactO
                                                  scale, 0.5 * options.min_width * scale))
     ring, counts, owner, area, centroid2d = _overlaps(outline_a, coords_a, index_a, outline_b,
                                                       coords_b, index_b, simple, scale, meet)
+    checkpoint()
     ok = area > options.min_area * scale[owner] ** 2
     if not ok.all():
         ring, counts = ring[np.repeat(ok, counts)], counts[ok]

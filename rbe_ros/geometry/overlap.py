@@ -24,9 +24,11 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..deadline import checkpoint
 from .block import PosedBlock
 from .contacts import candidate_pairs
 from .polygon import cross
+from .support import projection_extents
 
 #: Blocks with more vertices or faces than this are tested pair by pair (no padding).
 _SMALL = 64
@@ -54,7 +56,7 @@ def find_penetration(blocks: list[PosedBlock], tol_rel: float,
     if not len(pairs):
         return None
     sizes = np.array([b.size for b in blocks])
-    convex = _convex(blocks)
+    convex = np.array([b.convex for b in blocks])
     pairs = pairs[convex[pairs[:, 0]] & convex[pairs[:, 1]]]
     tol = tol_rel * np.minimum(sizes[pairs[:, 0]], sizes[pairs[:, 1]])
     if allowance is not None:
@@ -62,6 +64,7 @@ def find_penetration(blocks: list[PosedBlock], tol_rel: float,
     depth = _face_axis_depths(blocks, pairs)
     suspect = np.flatnonzero(depth > tol * (1 + 1e-9))     # not for rounding at the limit
     for k in suspect[np.argsort(-depth[suspect], kind="stable")]:
+        checkpoint()
         i, j = (int(x) for x in pairs[k])
         a, b = blocks[i], blocks[j]
         if len(a.face_normals) <= _SMALL and len(b.face_normals) <= _SMALL:
@@ -107,15 +110,6 @@ def _padded(arrays: list[np.ndarray], width: int) -> np.ndarray:
     return out
 
 
-def _convex(blocks: list[PosedBlock]) -> np.ndarray:
-    """Whether each block lies inside all of its own face planes (to 1e-6 of its size)."""
-    out = np.empty(len(blocks), dtype=bool)
-    for k, b in enumerate(blocks):
-        dist = b.vertices @ b.face_normals.T - b.face_offsets
-        out[k] = dist.max(initial=0.0) <= 1e-6 * b.size
-    return out
-
-
 def _face_axis_depths(blocks: list[PosedBlock], pairs: np.ndarray) -> np.ndarray:
     """Per pair, the smallest overlap of the two blocks' projections on the face normals of
     either block (<= 0: separated)."""
@@ -143,10 +137,10 @@ def _face_axis_depths(blocks: list[PosedBlock], pairs: np.ndarray) -> np.ndarray
             depth[chunk] = overlap.min(axis=1)
     for k in np.flatnonzero(~both):
         a, b = blocks[pairs[k, 0]], blocks[pairs[k, 1]]
-        axes = np.concatenate((a.face_normals, b.face_normals))
-        pa, pb = a.vertices @ axes.T, b.vertices @ axes.T
-        depth[k] = np.minimum(pa.max(axis=0) - pb.min(axis=0),
-                              pb.max(axis=0) - pa.min(axis=0)).min()
+        # each block's extents on its own normals are known from its shape
+        ea = np.concatenate((a.face_extents, projection_extents(a.vertices, b.face_normals)))
+        eb = np.concatenate((projection_extents(b.vertices, a.face_normals), b.face_extents))
+        depth[k] = np.minimum(ea[:, 1] - eb[:, 0], eb[:, 1] - ea[:, 0]).min()
     return depth
 
 

@@ -16,10 +16,12 @@ def cross(a, b) -> np.ndarray:
 
 
 def tangent_basis(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two unit vectors u, v with (u, v, normal) right-handed; deterministic for a given normal."""
-    helper = np.array([1.0, 0.0, 0.0]) if abs(normal[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    """Two unit vectors u, v with (u, v, normal) right-handed; deterministic for a given normal.
+    Normals (..., 3) give bases (..., 3)."""
+    normal = np.asarray(normal, dtype=float)
+    helper = np.where(np.abs(normal[..., :1]) < 0.9, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
     u = cross(helper, normal)
-    u /= np.linalg.norm(u)
+    u = u / np.sqrt((u * u).sum(axis=-1, keepdims=True))
     return u, cross(normal, u)
 
 

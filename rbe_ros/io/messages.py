@@ -18,7 +18,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..rbe.result import InterfaceResult, NearContact, Report, Status
+from ..rbe.result import NOT_COMPUTED, InterfaceResult, NearContact, Report, Status
 from ..scene import (BOX_FACES, Hold, Scene, SceneError, blame, box_vertices, make_block,
                      make_scene)
 
@@ -332,6 +332,8 @@ def report_to_dict(report: Report, header: dict, *, arrays: bool = False) -> dic
                            "gap": float(c.gap), "overlap_area": float(c.overlap_area)}
                           for c in report.near_contacts],
         "verdict_sensitive": bool(report.verdict_sensitive),
+        "margin_g": float(report.margin_g),
+        "margin_direction": _vec(report.margin_direction),
     }
 
 
@@ -369,6 +371,9 @@ def report_from_dict(d: Mapping) -> Report:
         near_contacts=[NearContact(str(c["block_a"]), str(c["block_b"]), float(c["gap"]),
                                    float(c["overlap_area"])) for c in d.get("near_contacts", [])],
         verdict_sensitive=bool(d.get("verdict_sensitive", False)),
+        margin_g=float(d.get("margin_g", NOT_COMPUTED)),
+        margin_direction=np.array(_xyz(d.get("margin_direction", {}), "margin_direction"),
+                                  dtype=float),
     )
 
 

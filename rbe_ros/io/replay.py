@@ -27,6 +27,8 @@ default parameters), unless given.
   torque: within F d;
 * ratios |V|/N: within ``ratio`` (1e-6) plus F (1 + |V|/N) / max(N, F); infinite equals
   infinite;
+* margin_g: within ``force`` (1e-6, a share of g); ``margin_direction`` is not
+  compared (directions whose margins tie within rounding, as on a symmetric dome, may swap);
 * not compared: ``solve_time`` (wall time), ``dropped_states`` (the node's load) and, unless
   ``Tolerances.message`` is set, the message: it names one of the most loaded interfaces,
   and of equally loaded ones (a symmetric arch) rounding picks which; with a tolerance (e.g.
@@ -49,7 +51,7 @@ from ..analysis.pipeline import StateCheck, check_state
 from ..analysis.steps import final_state, sequence_steps
 from ..geometry.block import pose_block
 from ..geometry.contacts import ContactOptions
-from ..rbe.result import Report
+from ..rbe.result import NOT_COMPUTED, Report
 from ..rbe.solver import SolveOptions, Weights
 from ..scene import Scene, SceneError
 from .bag import BagWriter, read_bag, read_custom_data
@@ -86,7 +88,7 @@ def options_to_json(options: CheckOptions) -> str:
                       "allow_tension": s.allow_tension},
             "mu_threshold": options.mu_threshold, "tension_tol": options.tension_tol,
             "contact": asdict(options.contact), "full_solve": options.full_solve,
-            "holds": asdict(options.holds)}
+            "holds": asdict(options.holds), "margin_directions": options.margin_directions}
     return json.dumps(data, sort_keys=True)
 
 
@@ -100,7 +102,8 @@ def options_from_json(text: str) -> CheckOptions:
                         tension_tol=data.get("tension_tol", 1e-5),
                         contact=ContactOptions(**data.get("contact", {})),
                         full_solve=data.get("full_solve", False),
-                        holds=HoldSearch(**data.get("holds", {})))
+                        holds=HoldSearch(**data.get("holds", {})),
+                        margin_directions=data.get("margin_directions", 0))
 
 
 def bag_options(path) -> CheckOptions:
@@ -382,7 +385,7 @@ class _Comparer:
 _TOP_EXACT = ("step_index", "block_placed", "stable", "status", "num_blocks", "unstable_blocks",
               "held_blocks", "suggested_holds", "model")
 _TOP_DONE = set(_TOP_EXACT) | {"header", "message", "max_tension", "worst_friction_ratio",
-                               "interfaces"} | IGNORED
+                               "interfaces", "margin_g", "margin_direction"} | IGNORED
 _IF_DONE = {"block_a", "block_b", "normal", "polygon", "normal_forces", "tangential_forces",
             "resultant_force", "normal_resultant", "shear_resultant", "centre_of_pressure",
             "torque", "kern", "friction_ratio", "tension", "friction_exceeded"}
@@ -442,6 +445,8 @@ def compare_report(recorded: dict, replayed: dict, *, run: int = 0, free_weight:
             c.exact(where, name, x.get(name), y.get(name))
     c.number("", "worst_friction_ratio", recorded.get("worst_friction_ratio", 0.0),
              replayed.get("worst_friction_ratio", 0.0), ratio_tol)
+    c.number("", "margin_g", recorded.get("margin_g", NOT_COMPUTED),
+             replayed.get("margin_g", NOT_COMPUTED), tolerances.force)
     for name in sorted(set(recorded) - _TOP_DONE):     # fields added later: exact
         c.exact("", name, recorded.get(name), replayed.get(name))
     return c.out

@@ -1,7 +1,7 @@
 """Results of an RBE check: per-interface forces and resultants, and the verdict."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import IntEnum
 
 import numpy as np
@@ -50,6 +50,10 @@ class NearContact:
     overlap_area: float     # m^2, of the two faces projected on their mid-plane
 
 
+#: margin_g of a report whose check computed no margin (a margin is never negative).
+NOT_COMPUTED = -1.0
+
+
 @dataclass(frozen=True)
 class Report:
     """Verdict of one check of an assembly or of one step of a sequence; made once, never
@@ -71,6 +75,11 @@ class Report:
     dropped_states: int = 0   # node: states on ~/assembly dropped unchecked so far (overload)
     near_contacts: tuple[NearContact, ...] = ()
     verdict_sensitive: bool = False     # the verdict depends on the contact tolerance
+    #: Smallest horizontal acceleration (share of g) that topples or slides the checked
+    #: assembly over the margin's directions, 0 when it does not stand; NOT_COMPUTED (-1)
+    #: when no margin was asked for.
+    margin_g: float = NOT_COMPUTED
+    margin_direction: np.ndarray = field(default_factory=lambda: np.zeros(3))  # body force, unit
 
     def __post_init__(self):
         for name in ("interfaces", "unstable_blocks", "held_blocks", "suggested_holds",

@@ -24,6 +24,7 @@ import clarabel
 import numpy as np
 import scipy.sparse as sp
 
+from ..deadline import checkpoint, remaining
 from .cones import CONES, FRICTION_MODELS, pyramid_facets
 from .model import EquilibriumModel
 
@@ -151,7 +152,10 @@ def solver_timing():
 
 def solve(model: EquilibriumModel, options: SolveOptions = SolveOptions(), *,
           load: np.ndarray | None = None, live_load: np.ndarray | None = None) -> Solution:
-    """Solve the RBE problem of ``model`` under ``load`` (scaled p; default: dead load)."""
+    """Solve the RBE problem of ``model`` under ``load`` (scaled p; default: dead load).
+    Within a check's time budget (:mod:`rbe_ros.deadline`) the solver gets what is left of it,
+    and a solve that runs out of it raises CheckTimeout."""
+    checkpoint()
     nv = model.num_vertices
     p = model.dead_load if load is None else load
     multiplier = live_load is not None
@@ -193,6 +197,8 @@ def solve(model: EquilibriumModel, options: SolveOptions = SolveOptions(), *,
     if accepted is not None:
         return replace(accepted, time=elapsed)
     kind = "infeasible" if status in _INFEASIBLE else "failed"
+    if kind == "failed":
+        checkpoint()
     return Solution(kind, status, np.full((4, nv), np.nan), elapsed)
 
 
@@ -204,8 +210,9 @@ def _settings(options: SolveOptions, attempt: _Attempt, spent: float, kkt_size: 
         settings.direct_solve_method = DIRECT_SOLVE_METHOD
     settings.iterative_refinement_enable = attempt.refine
     settings.static_regularization_constant = attempt.regularization or _DEFAULT_REGULARIZATION
-    if math.isfinite(options.time_limit):
-        settings.time_limit = max(float(options.time_limit) - spent, 1e-9)
+    limit = min(float(options.time_limit) - spent, remaining())
+    if math.isfinite(limit):
+        settings.time_limit = max(limit, 1e-9)
     return settings
 
 

@@ -19,11 +19,11 @@ Interfaces (relative to the node, e.g. ``/rbe_node/report``):
 Bad input never stops the node: a state that cannot be checked (outside the limits of
 :class:`rbe_ros.scene.ValidationLimits`, ``max_blocks`` among them) gives a report with status
 INVALID_INPUT and the reason, a solver failure or a solve over ``check_time_limit`` gives
-SOLVER_FAILED with the solver's status, and any other error in a callback is logged and gives
-SOLVER_FAILED with the exception text. With ``mcap_path`` set, every checked state and every
-report is recorded (CDR, receive/publish time) in a rosbag2 MCAP bag, each message flushed
-before the report is published (a report seen on DDS is on disk, even after SIGKILL); the bag
-is closed on shutdown (SIGINT, SIGTERM).
+SOLVER_FAILED naming the solver's status or the stage, and any other error in a callback is
+logged and gives SOLVER_FAILED with the exception text. With ``mcap_path`` set, every checked
+state and every report is recorded (CDR, receive/publish time) in a rosbag2 MCAP bag, each
+message flushed before the report is published (a report seen on DDS is on disk, even after
+SIGKILL); the bag is closed on shutdown (SIGINT, SIGTERM).
 
 Run: ``rbe_node --ros-args -p friction_coefficient:=0.5 -p mcap_path:=bags/run``
 (or ``python -m rbe_ros.ros.node``).
@@ -56,6 +56,7 @@ from rbe_msgs.msg import AssemblyState, BlockPoses, StabilityReport
 from rbe_msgs.srv import CheckAssembly
 from visualization_msgs.msg import MarkerArray
 
+from ..analysis.margin import DEFAULT_DIRECTIONS
 from ..analysis.options import CheckOptions, HoldSearch
 from ..analysis.pipeline import StateCheck, check_state
 from ..geometry.contacts import ContactOptions
@@ -156,9 +157,14 @@ PARAMETERS = {
         "every report too (false: a lean log of states and reports)")),
     "max_blocks": _integer(ValidationLimits().max_blocks, "largest number of blocks of a state; "
                            "a larger one gets an INVALID_INPUT report", 1, 1_000_000),
-    "check_time_limit": _double(0.0, "time limit in s of each solver call of a check (a check "
-                                "makes one to three); over it the report is SOLVER_FAILED "
-                                "(MaxTime). 0: no limit", 0.0, 3600.0),
+    "check_time_limit": _double(0.0, "time limit in s of each check (of each step of a "
+                                "sequence), geometry included; over it the report is "
+                                "SOLVER_FAILED naming the stage. 0: no limit", 0.0, 3600.0),
+    "compute_margin": (False, ParameterDescriptor(
+        type=ParameterType.PARAMETER_BOOL, description="reports carry margin_g: the smallest "
+        "horizontal acceleration (share of g) that topples or slides the checked assembly, over "
+        f"{DEFAULT_DIRECTIONS} directions, and margin_direction (about one solve per "
+        "direction)")),
     "full_solve": (False, ParameterDescriptor(
         type=ParameterType.PARAMETER_BOOL, description="sequences: solve every step's whole "
         "assembly instead of local models (a report's model field says which answered)")),
@@ -301,6 +307,7 @@ class RbeNode(Node):
         return CheckOptions(solve=solve, mu_threshold=threshold if threshold > 0 else None,
                             tension_tol=float(value("tension_tolerance")),
                             limits=self.limits(), full_solve=bool(value("full_solve")),
+                            margin_directions=DEFAULT_DIRECTIONS if value("compute_margin") else 0,
                             contact=ContactOptions(
                                 distance_tol=float(value("contact_distance_tolerance")),
                                 angle_tol_deg=float(value("contact_angle_tolerance_deg")),

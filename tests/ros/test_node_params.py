@@ -156,3 +156,19 @@ def test_contact_parameters_reach_the_detection(make_node):
     assert report.interfaces[0].normal_resultant == pytest.approx(2000 * 9.81, rel=1e-6)
     bad = node.set_parameters([Parameter("contact_min_width", value=-0.1)])[0]
     assert not bad.successful and "contact_min_width" in bad.reason
+
+
+def test_pose_uncertainty_parameters_reach_the_detection(make_node):
+    """The same box 5 mm above the slab, with every pose known to within 3 mm: the two
+    allowances (3 mm each) and the 1 mm tolerance make it a contact, on the mid-plane."""
+    scene = make_scene("gap", [box_block("ground", (4, 4, 0.2), (0, 0, -0.1), support=True,
+                                         density=2000),
+                               box_block("box", (1, 1, 1), (0, 0, 0.505), density=2000)])
+    node = make_node(pose_uncertainty_m=0.003, pose_uncertainty_deg=0.0)
+    contact = node.check_options().contact
+    assert (contact.pose_uncertainty_m, contact.pose_uncertainty_deg) == (0.003, 0.0)
+    report = check_scene(scene, node.check_options())
+    assert report.status == Status.STABLE and not report.near_contacts
+    assert report.interfaces[0].centre_of_pressure[2] == pytest.approx(0.0025, abs=1e-12)
+    bad = node.set_parameters([Parameter("pose_uncertainty_deg", value=-1.0)])[0]
+    assert not bad.successful and "pose_uncertainty_deg" in bad.reason

@@ -20,8 +20,8 @@ from dataclasses import replace
 from .analysis.asbuilt import declared
 from .analysis.assembly import Assembly
 from .analysis.friction import minimum_friction
-from .analysis.margin import DEFAULT_DIRECTIONS
-from .analysis.options import CheckOptions, HoldSearch
+from .analysis.option_spec import BY_PATH, OPTIONS, from_outer
+from .analysis.options import CheckOptions
 from .analysis.pipeline import check_scene, check_sequence, first_failing_step
 from .analysis.planning import plan_sequence
 from .analysis.tilt import DIRECTIONS, tilt_capacity
@@ -29,7 +29,6 @@ from .analysis.validate import validated_assembly
 from .analysis.verdict import check
 from .analysis.virtual import ANALYSES, virtual_assembly
 from .generators import GENERATORS
-from .geometry.contacts import ContactOptions
 from .io.figures import draw_report
 from .io.messages import header_dict, json_safe, report_json, report_to_dict, state_to_dict
 from .io.replay import (REPORT_TOPIC, STATE_TOPIC, Run, bag_options, default_output,
@@ -37,12 +36,10 @@ from .io.replay import (REPORT_TOPIC, STATE_TOPIC, Run, bag_options, default_out
 from .io.table import format_table
 from .io.view import ViewRun, checked_runs, write_html
 from .io.scene_json import scene_to_dict
-from .rbe.cones import CONES
-from .rbe.solver import SolveOptions
 from .io.inputs import load_design
 from .io.poses import load_poses, scene_at_poses
 from .io.stored_interfaces import compare_interfaces
-from .scene import Scene, SceneError, ValidationLimits
+from .scene import Scene, SceneError
 
 
 def _input_arguments(parser: argparse.ArgumentParser) -> None:
@@ -63,63 +60,31 @@ def _input_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _solver_arguments(parser: argparse.ArgumentParser) -> None:
+    """The input arguments and every check option of :data:`OPTIONS` with a flag."""
     _input_arguments(parser)
-    g = parser.add_argument_group("RBE model")
-    g.add_argument("--mu", type=float, default=0.6, help="friction coefficient (default 0.6)")
-    g.add_argument("--mu-threshold", type=float, default=None,
-                   help="post-check |V| <= threshold N per interface (default: --mu)")
-    g.add_argument("--objective", choices=("qp", "lp"), default="qp")
-    g.add_argument("--friction", choices=("net", "plus"), default="net",
-                   help="friction-net (decides stability) or friction+ (always feasible)")
-    g.add_argument("--cone", choices=CONES, default="soc",
-                   help="exact second-order cone or a linearised pyramid")
-    g.add_argument("--tension-tol", type=float, default=1e-5,
-                   help="tension counts above this share of the free weight")
-    g.add_argument("--time-limit", type=float, default=0.0, metavar="S",
-                   help="time limit in s of each check (a sequence: of each step), geometry "
-                   "included; over it the verdict is SOLVER_FAILED naming the stage (default "
-                   "0: none)")
-    g.add_argument("--margin", action="store_true",
-                   help="report margin_g: the smallest horizontal acceleration (share of g) "
-                   f"that topples or slides each checked assembly, over {DEFAULT_DIRECTIONS} "
-                   "directions, and margin_direction")
-    g.add_argument("--full-solve", action="store_true",
-                   help="sequences: solve every step's whole assembly (default: local models "
-                   "where they prove the verdict; the report's model says which answered)")
-    g.add_argument("--max-blocks", type=int, default=ValidationLimits().max_blocks,
-                   metavar="N", help="refuse scenes of more blocks (default "
-                   f"{ValidationLimits().max_blocks}; the other sane ranges: README)")
-    defaults = ContactOptions()
-    c = parser.add_argument_group("contact detection (lengths relative to the smaller block's "
-                                  "size, the cube root of its volume)")
-    c.add_argument("--distance-tol", type=float, default=defaults.distance_tol,
-                   metavar="R", help="largest gap or overlap between face planes in contact "
-                   f"(default {defaults.distance_tol:g}; noisy meshes need more)")
-    c.add_argument("--angle-tol", type=float, default=defaults.angle_tol_deg,
-                   metavar="DEG", help="largest deviation of the normals from opposite "
-                   f"(default {defaults.angle_tol_deg:g})")
-    c.add_argument("--min-area", type=float, default=defaults.min_area, metavar="R",
-                   help=f"smallest interface area / size^2 (default {defaults.min_area:g})")
-    c.add_argument("--min-width", type=float, default=defaults.min_width, metavar="R",
-                   help="thinner interface polygons are edge contacts and left out "
-                   f"(default {defaults.min_width:g}; 0 keeps all)")
-    c.add_argument("--vertex-tol", type=float, default=defaults.vertex_tol, metavar="R",
-                   help="vertices this close to their neighbours' chord are left out "
-                   f"(default {defaults.vertex_tol:g}; 0 keeps all)")
-    c.add_argument("--pose-uncertainty", type=uncertainty, default=None,
-                   metavar="POS_M[,ANGLE_DEG]", help="as-built poses: every pose is known to "
-                   "within POS_M metres and ANGLE_DEG degrees (about 3 sigma); contacts and the "
-                   "interpenetration limit then follow from it (README: Checking as-built "
-                   "poses; default: the scene's \"pose_uncertainty\", else design geometry)")
-    h = parser.add_argument_group("suggested holds (unstable checks)")
-    h.add_argument("--no-suggest-holds", action="store_true",
-                   help="do not search the smallest set of blocks to hold")
-    h.add_argument("--hold-max-size", type=int, default=HoldSearch().max_size, metavar="N",
-                   help="exact search up to N held blocks, then a greedy heuristic "
-                   f"(default {HoldSearch().max_size})")
-    h.add_argument("--hold-max-checks", type=int, default=HoldSearch().max_checks, metavar="N",
-                   help="sub-assembly checks the exact search may spend "
-                   f"(default {HoldSearch().max_checks})")
+    groups = {"contact": parser.add_argument_group(
+                  "contact detection (lengths relative to the smaller block's size, the cube "
+                  "root of its volume)"),
+              "holds": parser.add_argument_group("suggested holds (unstable checks)")}
+    model = parser.add_argument_group("RBE model")
+    for option in OPTIONS:
+        if option.flag is None:
+            continue
+        group = groups.get(option.path.split(".")[0], model)
+        if option.kind is bool:     # on by default: the flag turns it off
+            group.add_argument(option.flag, dest=option.path, help=option.help,
+                               action="store_false" if option.default else "store_true")
+            continue
+        metavar = option.metavar or option.flag.lstrip("-").upper().replace("-", "_")
+        group.add_argument(option.flag, dest=option.path, type=option.kind,
+                           default=option.default, choices=option.choices or None,
+                           metavar=None if option.choices else metavar,
+                           help=option.help if option.kind is str
+                           else f"{option.help} (default {option.default:g})")
+    groups["contact"].add_argument(
+        "--pose-uncertainty", type=uncertainty, default=None, metavar="POS_M[,ANGLE_DEG]",
+        help="both --pose-uncertainty-m and --pose-uncertainty-deg at once (README: Checking "
+        "as-built poses; default: the scene's \"pose_uncertainty\", else design geometry)")
 
 
 def uncertainty(text: str) -> tuple[float, float]:
@@ -131,25 +96,12 @@ def uncertainty(text: str) -> tuple[float, float]:
 
 
 def _options(args) -> CheckOptions:
-    if not (math.isfinite(args.time_limit) and args.time_limit >= 0):
-        raise ValueError("--time-limit must be a number of seconds >= 0 (0: no limit)")
-    if args.max_blocks < 1:
-        raise ValueError("--max-blocks must be at least 1")
-    solve = SolveOptions(objective=args.objective, friction=args.friction, cone=args.cone,
-                         mu=args.mu, time_limit=args.time_limit or math.inf)
-    if args.mu_threshold is not None and not args.mu_threshold > 0:
-        raise ValueError("--mu-threshold must be positive")
-    holds = HoldSearch(enabled=not args.no_suggest_holds, max_size=args.hold_max_size,
-                       max_checks=args.hold_max_checks)
-    contact = ContactOptions(distance_tol=args.distance_tol, angle_tol_deg=args.angle_tol,
-                             min_area=args.min_area, min_width=args.min_width,
-                             vertex_tol=args.vertex_tol,
-                             **dict(zip(("pose_uncertainty_m", "pose_uncertainty_deg"),
-                                        args.pose_uncertainty or ())))
-    return CheckOptions(solve=solve, mu_threshold=args.mu_threshold, tension_tol=args.tension_tol,
-                        limits=ValidationLimits(max_blocks=args.max_blocks), holds=holds,
-                        full_solve=args.full_solve, contact=contact,
-                        margin_directions=DEFAULT_DIRECTIONS if args.margin else 0)
+    """The check options of the flags (ValueError naming a flag out of its range)."""
+    values = {o: getattr(args, o.path) for o in OPTIONS if o.flag is not None}
+    if args.pose_uncertainty is not None:
+        m, deg = BY_PATH["contact.pose_uncertainty_m"], BY_PATH["contact.pose_uncertainty_deg"]
+        values[m], values[deg] = args.pose_uncertainty
+    return from_outer(values)
 
 
 def _scene(args) -> tuple[Scene, Assembly | None]:

@@ -17,6 +17,8 @@ from rbe_ros.analysis.pipeline import check_scene, check_sequence
 from rbe_ros.cli import main
 from rbe_ros.geometry.block import pose_blocks
 from rbe_ros.geometry.contacts import ContactOptions, detect_contacts
+from rbe_ros.io.bag import read_bag
+from rbe_ros.io.replay import bag_options, replay_bag
 from rbe_ros.io.scene_json import load_scene, scene_to_dict
 from rbe_ros.rbe.result import Status
 from rbe_ros.scene import SceneError, box_block, make_scene
@@ -164,3 +166,24 @@ def test_declared_in_scene_file_and_command_line(tmp_path, capsys):
     path.write_text(json.dumps(data))
     assert main(["check", str(path)]) == 2
     assert "pose_uncertainty" in capsys.readouterr().err
+
+
+def test_declared_uncertainty_is_recorded_and_replayed(tmp_path, capsys):
+    """The scene's declaration is stored with the bag's check options (states carry none),
+    so the replay checks the noisy poses as the CLI did; without it they are refused."""
+    noisy = perturb_scene(gen.running_bond_wall(courses=2, bricks_per_course=3),
+                          PoseNoise(0.001, 0.05), np.random.default_rng(3))
+    path = tmp_path / "noisy.json"
+    data = scene_to_dict(noisy)
+    path.write_text(json.dumps({**data, "pose_uncertainty": [0.003, 0.15]}))
+    bag = tmp_path / "run"
+    assert main(["check", str(path), "--sequence", "--bag", str(bag), "--no-markers"]) == 0
+    contact = bag_options(bag).contact
+    assert (contact.pose_uncertainty_m, contact.pose_uncertainty_deg) == (0.003, 0.15)
+    result = replay_bag(bag, tmp_path / "again", markers=False)
+    assert not result.differences
+    reports = [m.data for m in read_bag(bag) if m.topic.endswith("report")]
+    assert len(reports) == 7 and all(r["stable"] for r in reports)
+    path.write_text(json.dumps(data))
+    assert main(["check", str(path)]) == 2
+    assert "interpenetrate" in capsys.readouterr().err

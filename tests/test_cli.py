@@ -132,4 +132,4 @@ def test_contact_options_from_the_command_line(tmp_path, capsys):
     assert out["status"] == Status.STABLE
     assert out["interfaces"][0]["normal_resultant"] == pytest.approx(2000 * 9.81, rel=1e-6)
     assert main(["check", str(path), "--vertex-tol", "-1"]) == 2
-    assert "vertex_tol" in capsys.readouterr().err
+    assert "--vertex-tol" in capsys.readouterr().err

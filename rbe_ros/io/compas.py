@@ -148,7 +148,8 @@ def load_compas_assembly(path, supports=None, density: float | None = None,
                          default_density: float = DEFAULT_DENSITY) -> Scene:
     """A scene from a COMPAS Assembly JSON file (gzipped if its name ends in ``.gz``).
 
-    Blocks keep their world coordinates (identity pose). Ids are the node keys, or a node's
+    Each block's frame has the world axes and its origin at the mean of the block's vertices
+    (identity orientation, position that mean). Ids are the node keys, or a node's
     ``name`` attribute when it has one (files written by :func:`save_compas_assembly`).
     Supports are the nodes flagged ``is_support`` unless ``supports`` (node keys) is given,
     which replaces the flags. Density: ``density`` if given, else a node's ``density``
@@ -176,7 +177,11 @@ def compas_scene(doc: dict, stem: str, supports=None, density: float | None = No
         vertices, faces = _mesh(attr["block"], f"{stem}: node {key}")
         rho = density or attr.get("density") or default_density
         support = bool(attr.get("is_support")) if wanted is None else key in wanted
-        blocks.append(make_block(bid, vertices, faces, density=float(rho), support=support))
+        # block frame: world axes at the mean of its vertices, so that a measured pose (and
+        # a declared rotation uncertainty) turns the block about itself, not the world origin
+        origin = vertices.mean(axis=0)
+        blocks.append(make_block(bid, vertices - origin, faces, origin, density=float(rho),
+                                 support=support))
     attributes = _unwrap(doc).get("attributes") or {}
     name = attributes.get("name") if attributes.get("name") not in (None, "Assembly") else stem
     return make_scene(str(name), blocks)

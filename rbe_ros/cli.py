@@ -23,7 +23,10 @@ from .analysis.friction import minimum_friction
 from .analysis.option_spec import BY_PATH, OPTIONS, from_outer
 from .analysis.options import CheckOptions
 from .analysis.pipeline import check_scene, check_sequence, first_failing_step
+from .analysis.executors import ProcessPool, ray_cluster
+from .analysis.perturb import PoseNoise
 from .analysis.planning import plan_sequence
+from .analysis.robust import RobustJob, estimate, sample_scene, serial
 from .analysis.tilt import DIRECTIONS, tilt_capacity
 from .analysis.validate import validated_assembly
 from .analysis.verdict import check
@@ -35,7 +38,7 @@ from .io.replay import (REPORT_TOPIC, STATE_TOPIC, Run, bag_options, default_out
                         offline_reports, read_runs, replay_bag, step_stamps, write_runs)
 from .io.table import format_table
 from .io.view import ViewRun, checked_runs, write_html
-from .io.scene_json import scene_to_dict
+from .io.scene_json import load_scene, scene_to_dict
 from .io.inputs import load_design
 from .io.poses import load_poses, scene_at_poses
 from .io.stored_interfaces import compare_interfaces
@@ -211,6 +214,33 @@ def build_parser() -> argparse.ArgumentParser:
     _solver_arguments(plan)
     plan.set_defaults(run=_run_plan)
 
+    robust = sub.add_parser("robust", help="probability that the assembly (or each step) "
+                            "stands under Gaussian placement error (Monte Carlo)")
+    robust.add_argument("scene")
+    robust.add_argument("--pose-sigma", type=uncertainty, required=True, metavar="POS_M[,ANGLE_DEG]",
+                        help="standard deviation of each free block's position per axis (m) "
+                        "and of its rotation about a random axis (deg); samples are checked "
+                        "with the pose uncertainty declared at 3 sigma")
+    robust.add_argument("--samples", type=int, default=400, metavar="N")
+    robust.add_argument("--seed", type=int, default=0, metavar="S",
+                        help="sample k is drawn from the seed (S, k): same numbers whatever "
+                        "the executor")
+    robust.add_argument("--sequence", action="store_true",
+                        help="p_stable of every step too (a sample's step k is its partial "
+                        "assembly)")
+    robust.add_argument("--json", action="store_true", help="print one JSON object")
+    robust.add_argument("-o", "--output", metavar="WORST.json",
+                        help="write the failing sample closest to the design as a scene file")
+    robust.add_argument("--workers", type=int, default=1, metavar="K",
+                        help="local worker processes (default 1: this process)")
+    robust.add_argument("--ray", metavar="ADDRESS",
+                        help="run the batches as Ray tasks on the cluster at ADDRESS ('auto': "
+                        "the local cluster's; README: How sure is a step?)")
+    robust.add_argument("--batch", type=int, default=16, metavar="B",
+                        help="samples per task (default 16)")
+    _solver_arguments(robust)
+    robust.set_defaults(run=_run_robust)
+
     view = sub.add_parser("view", help="write one self-contained HTML report of a scene's "
                           "check or of a bag: 3D view, step slider, table of steps, options")
     view.add_argument("scene", metavar="SCENE|BAG", help="a scene file (checked here, every "
@@ -350,6 +380,46 @@ def _run_generate(args) -> int:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(scene_to_dict(scene)))
     print(f"{scene.name}: {len(scene.blocks)} blocks written to {path}")
+    return 0
+
+
+def _run_robust(args) -> int:
+    if args.samples < 1 or args.batch < 1:
+        raise ValueError("--samples and --batch must be at least 1")
+    scene = load_scene(args.scene)
+    job = RobustJob(scene, PoseNoise(*args.pose_sigma), args.seed, _options(args), args.sequence)
+    pool = ProcessPool(args.workers) if args.workers > 1 and not args.ray else None
+    executor = ray_cluster(args.ray) if args.ray else pool or serial
+
+    def progress(done: int, total: int) -> None:
+        if not args.json:
+            print(f"  {done}/{total} samples", file=sys.stderr)
+
+    try:
+        result = estimate(job, args.samples, executor, args.batch, progress)
+    finally:
+        if pool is not None:
+            pool.close()
+    out = {"scene": scene.name, "pose_sigma": list(args.pose_sigma), "seed": args.seed,
+           "p_stable": result.p_stable, "interval": list(result.interval),
+           "samples": result.samples, "closest_failing_sample": result.closest_failure}
+    if args.sequence:
+        out["steps"] = result.steps
+    if args.output and result.closest_failure is not None:
+        worst = sample_scene(job, result.closest_failure)
+        Path(args.output).write_text(json.dumps(scene_to_dict(worst)))
+    if args.json:
+        print(json.dumps(out, indent=1))
+        return 0
+    lo, hi = result.interval
+    print(f"p_stable {result.p_stable:.3f} (95% {lo:.3f} .. {hi:.3f}) over {result.samples} "
+          f"samples, seed {args.seed}")
+    for s in result.steps:
+        print(f"  step {s['step']:>3}  {s['block'] or '-':<20} p_stable {s['p_stable']:.3f}"
+              f"  ({s['interval'][0]:.3f} .. {s['interval'][1]:.3f})")
+    if args.output:
+        print(f"closest failing sample ({result.closest_failure}) written to {args.output}"
+              if result.closest_failure is not None else "no sample failed: nothing written")
     return 0
 
 

@@ -12,10 +12,11 @@ from rbe_ros.analysis.assembly import Assembly
 from rbe_ros.geometry.kern import kern, kerns
 from rbe_ros.geometry.polygon import ring_widths
 from rbe_ros.rbe.cones import cone_capacity, pyramid_facets
+from rbe_ros.rbe.model import build_model
 from rbe_ros.rbe.result import Status
 from rbe_ros.rbe.solver import SolveOptions
 from rbe_ros.analysis.options import CheckOptions
-from rbe_ros.analysis.verdict import infeasible_report
+from rbe_ros.analysis.verdict import infeasible_report, is_stable, stable_forces
 from rbe_ros.scene import box_block, make_block, make_scene
 
 from helpers import DENSITY, checked, inclined_block, stacked_boxes
@@ -168,3 +169,31 @@ def test_a_solver_out_of_time_is_reported_as_failed():
     assert report.status == Status.SOLVER_FAILED
     assert report.message.startswith("solver failed: ")
     assert report.stable is False
+
+
+def test_is_stable_is_the_verdict_without_its_explanation():
+    options = CheckOptions(SolveOptions(mu=0.6))
+    for scene, expected in ((stacked_boxes(0.3), True), (stacked_boxes(0.6), False),
+                            (inclined_block(40.0), False)):
+        assert is_stable(Assembly.from_scene(scene), options) is expected
+    floating = make_scene("f", [
+        box_block("ground", (4, 4, 0.2), (0, 0, -0.1), support=True, density=DENSITY),
+        box_block("f", (1, 1, 1), (0, 0, 3.0), density=DENSITY)])
+    assert is_stable(Assembly.from_scene(floating), options) is False
+
+
+def test_stable_forces_take_the_load_and_the_options_given():
+    """Twice the dead load gives twice the forces; a slope of 20 deg has none at mu 0.3 (the
+    default 0.6 would hold it); friction+ that needs glue to stand is not stable."""
+    assembly = Assembly.from_scene(inclined_block(20.0))
+    model = build_model(assembly.blocks, assembly.interfaces, assembly.gravity)
+    options = CheckOptions(SolveOptions(mu=0.6))
+    once, _ = stable_forces(model, options)
+    twice, results = stable_forces(model, options, 2.0 * model.dead_load)
+    assert np.allclose(twice.forces, 2.0 * once.forces, atol=1e-6 * np.abs(once.forces).max())
+    assert results[0].normal_resultant == pytest.approx(
+        2.0 * DENSITY * 0.5 * 9.81 * math.cos(math.radians(20.0)), rel=1e-6)
+    assert stable_forces(model, CheckOptions(SolveOptions(mu=0.3))) is None
+    tipping = Assembly.from_scene(stacked_boxes(0.6))
+    glued = build_model(tipping.blocks, tipping.interfaces, tipping.gravity)
+    assert stable_forces(glued, CheckOptions(SolveOptions(friction="plus"))) is None

@@ -10,8 +10,10 @@ Interfaces (relative to the node, e.g. ``/rbe_node/report``):
   every report, a throttled warning in the log), so memory stays bounded and the newest state
   is always answered;
 * publishes ``~/report`` (rbe_msgs/StabilityReport, reliable, transient_local, depth 1) and
-  ``~/markers`` (visualization_msgs/MarkerArray, same QoS) for every report the node makes,
-  whatever asked for it (topic, service or action);
+  ``~/markers`` (visualization_msgs/MarkerArray, same QoS: the blocks, forces and verdict,
+  :mod:`rbe_ros.io.markers`) for every report the node makes, whatever asked for it (topic,
+  service or action); with ``foxglove_port`` the markers also go to Foxglove as SceneUpdates
+  (:mod:`rbe_ros.io.foxglove_scene`);
 * serves ``~/check`` (rbe_msgs/srv/CheckAssembly): the assembly as a whole, sequence ignored;
 * serves the action ``~/check_sequence`` (rbe_msgs/action/CheckSequence): feedback per step,
   all reports and the first failing step as result; cancellable between steps.

@@ -217,7 +217,8 @@ def build_parser() -> argparse.ArgumentParser:
     robust = sub.add_parser("robust", help="probability that the assembly (or each step) "
                             "stands under Gaussian placement error (Monte Carlo)")
     robust.add_argument("scene")
-    robust.add_argument("--pose-sigma", type=uncertainty, required=True, metavar="POS_M[,ANGLE_DEG]",
+    robust.add_argument("--pose-sigma", type=uncertainty, required=True,
+                        metavar="POS_M[,ANGLE_DEG]",
                         help="standard deviation of each free block's position per axis (m) "
                         "and of its rotation about a random axis (deg); samples are checked "
                         "with the pose uncertainty declared at 3 sigma")

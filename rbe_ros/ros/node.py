@@ -8,7 +8,9 @@ Interfaces (relative to the node, e.g. ``/rbe_node/report``):
   thread from a single-slot buffer: when states arrive faster than they can be checked, the
   newest replaces the waiting one, and the dropped ones are counted (``dropped_states`` of
   every report, a throttled warning in the log), so memory stays bounded and the newest state
-  is always answered;
+  is always answered. A state that arrives while a sequence is checked supersedes it between
+  two steps: the sequence's last report (SOLVER_FAILED, "superseded: ...") names the first
+  step not checked, and the newer state is checked next;
 * publishes ``~/report`` (rbe_msgs/StabilityReport, reliable, transient_local, depth 1) and
   ``~/markers`` (visualization_msgs/MarkerArray, same QoS: the blocks, forces and verdict,
   :mod:`rbe_ros.io.markers`) for every report the node makes, whatever asked for it (topic,
@@ -559,7 +561,7 @@ def superseded_report(result: StateCheck) -> Report:
     checked, no verdict (SOLVER_FAILED), and why."""
     done = len(result.reports)
     step = sequence_step(result.scene, done)
-    return Report(False, Status.SOLVER_FAILED,
+    return Report(Status.SOLVER_FAILED,
                   f"superseded: a newer state arrived after {done} of {result.total} steps; "
                   "the remaining steps were not checked",
                   step_index=step.index, block_placed=step.block)

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import gzip
 import io
 import json
 import os
@@ -38,8 +39,12 @@ def _load(spec: dict):
     from compas_cra.datastructures import CRA_Assembly
     from compas_cra.equilibrium import density_setup
 
-    path = os.path.join(compas_cra.SAMPLE, spec["file"])
-    assembly = compas.json_load(path)
+    path = os.path.join(compas_cra.SAMPLE, spec["file"])    # an absolute file stays as it is
+    if path.endswith(".gz"):
+        with gzip.open(path, "rt") as f:
+            assembly = compas.json_loads(f.read())
+    else:
+        assembly = compas.json_load(path)
     assembly = assembly.copy(cls=CRA_Assembly)
     if spec.get("supports") is not None:        # else the file's own is_support flags
         assembly.set_boundary_conditions(spec["supports"])

@@ -20,29 +20,29 @@ from dataclasses import replace
 from .analysis.asbuilt import declared
 from .analysis.assembly import Assembly
 from .analysis.friction import minimum_friction
-from .analysis.margin import DEFAULT_DIRECTIONS
-from .analysis.options import CheckOptions, HoldSearch
+from .analysis.option_spec import BY_PATH, OPTIONS, from_outer
+from .analysis.options import CheckOptions
 from .analysis.pipeline import check_scene, check_sequence, first_failing_step
+from .analysis.executors import ProcessPool, ray_cluster
+from .analysis.perturb import PoseNoise
 from .analysis.planning import plan_sequence
+from .analysis.robust import RobustJob, estimate, sample_scene, serial
 from .analysis.tilt import DIRECTIONS, tilt_capacity
 from .analysis.validate import validated_assembly
 from .analysis.verdict import check
 from .analysis.virtual import ANALYSES, virtual_assembly
 from .generators import GENERATORS
-from .geometry.contacts import ContactOptions
 from .io.figures import draw_report
-from .io.messages import header_dict, report_to_dict, state_to_dict
+from .io.messages import header_dict, json_safe, report_json, report_to_dict, state_to_dict
 from .io.replay import (REPORT_TOPIC, STATE_TOPIC, Run, bag_options, default_output,
                         offline_reports, read_runs, replay_bag, step_stamps, write_runs)
-from .io.report import format_table, json_number, report_json
+from .io.table import format_table
 from .io.view import ViewRun, checked_runs, write_html
-from .io.scene_json import scene_to_dict
-from .rbe.cones import CONES
-from .rbe.solver import SolveOptions
+from .io.scene_json import load_scene, scene_to_dict
 from .io.inputs import load_design
 from .io.poses import load_poses, scene_at_poses
 from .io.stored_interfaces import compare_interfaces
-from .scene import Scene, SceneError, ValidationLimits
+from .scene import Scene, SceneError
 
 
 def _input_arguments(parser: argparse.ArgumentParser) -> None:
@@ -63,63 +63,31 @@ def _input_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _solver_arguments(parser: argparse.ArgumentParser) -> None:
+    """The input arguments and every check option of :data:`OPTIONS` with a flag."""
     _input_arguments(parser)
-    g = parser.add_argument_group("RBE model")
-    g.add_argument("--mu", type=float, default=0.6, help="friction coefficient (default 0.6)")
-    g.add_argument("--mu-threshold", type=float, default=None,
-                   help="post-check |V| <= threshold N per interface (default: --mu)")
-    g.add_argument("--objective", choices=("qp", "lp"), default="qp")
-    g.add_argument("--friction", choices=("net", "plus"), default="net",
-                   help="friction-net (decides stability) or friction+ (always feasible)")
-    g.add_argument("--cone", choices=CONES, default="soc",
-                   help="exact second-order cone or a linearised pyramid")
-    g.add_argument("--tension-tol", type=float, default=1e-5,
-                   help="tension counts above this share of the free weight")
-    g.add_argument("--time-limit", type=float, default=0.0, metavar="S",
-                   help="time limit in s of each check (a sequence: of each step), geometry "
-                   "included; over it the verdict is SOLVER_FAILED naming the stage (default "
-                   "0: none)")
-    g.add_argument("--margin", action="store_true",
-                   help="report margin_g: the smallest horizontal acceleration (share of g) "
-                   f"that topples or slides each checked assembly, over {DEFAULT_DIRECTIONS} "
-                   "directions, and margin_direction")
-    g.add_argument("--full-solve", action="store_true",
-                   help="sequences: solve every step's whole assembly (default: local models "
-                   "where they prove the verdict; the report's model says which answered)")
-    g.add_argument("--max-blocks", type=int, default=ValidationLimits().max_blocks,
-                   metavar="N", help="refuse scenes of more blocks (default "
-                   f"{ValidationLimits().max_blocks}; the other sane ranges: README)")
-    defaults = ContactOptions()
-    c = parser.add_argument_group("contact detection (lengths relative to the smaller block's "
-                                  "size, the cube root of its volume)")
-    c.add_argument("--distance-tol", type=float, default=defaults.distance_tol,
-                   metavar="R", help="largest gap or overlap between face planes in contact "
-                   f"(default {defaults.distance_tol:g}; noisy meshes need more)")
-    c.add_argument("--angle-tol", type=float, default=defaults.angle_tol_deg,
-                   metavar="DEG", help="largest deviation of the normals from opposite "
-                   f"(default {defaults.angle_tol_deg:g})")
-    c.add_argument("--min-area", type=float, default=defaults.min_area, metavar="R",
-                   help=f"smallest interface area / size^2 (default {defaults.min_area:g})")
-    c.add_argument("--min-width", type=float, default=defaults.min_width, metavar="R",
-                   help="thinner interface polygons are edge contacts and left out "
-                   f"(default {defaults.min_width:g}; 0 keeps all)")
-    c.add_argument("--vertex-tol", type=float, default=defaults.vertex_tol, metavar="R",
-                   help="vertices this close to their neighbours' chord are left out "
-                   f"(default {defaults.vertex_tol:g}; 0 keeps all)")
-    c.add_argument("--pose-uncertainty", type=uncertainty, default=None,
-                   metavar="POS_M[,ANGLE_DEG]", help="as-built poses: every pose is known to "
-                   "within POS_M metres and ANGLE_DEG degrees (about 3 sigma); contacts and the "
-                   "interpenetration limit then follow from it (README: Checking as-built "
-                   "poses; default: the scene's \"pose_uncertainty\", else design geometry)")
-    h = parser.add_argument_group("suggested holds (unstable checks)")
-    h.add_argument("--no-suggest-holds", action="store_true",
-                   help="do not search the smallest set of blocks to hold")
-    h.add_argument("--hold-max-size", type=int, default=HoldSearch().max_size, metavar="N",
-                   help="exact search up to N held blocks, then a greedy heuristic "
-                   f"(default {HoldSearch().max_size})")
-    h.add_argument("--hold-max-checks", type=int, default=HoldSearch().max_checks, metavar="N",
-                   help="sub-assembly checks the exact search may spend "
-                   f"(default {HoldSearch().max_checks})")
+    groups = {"contact": parser.add_argument_group(
+                  "contact detection (lengths relative to the smaller block's size, the cube "
+                  "root of its volume)"),
+              "holds": parser.add_argument_group("suggested holds (unstable checks)")}
+    model = parser.add_argument_group("RBE model")
+    for option in OPTIONS:
+        if option.flag is None:
+            continue
+        group = groups.get(option.path.split(".")[0], model)
+        if option.kind is bool:     # on by default: the flag turns it off
+            group.add_argument(option.flag, dest=option.path, help=option.help,
+                               action="store_false" if option.default else "store_true")
+            continue
+        metavar = option.metavar or option.flag.lstrip("-").upper().replace("-", "_")
+        group.add_argument(option.flag, dest=option.path, type=option.kind,
+                           default=option.default, choices=option.choices or None,
+                           metavar=None if option.choices else metavar,
+                           help=option.help if option.kind is str
+                           else f"{option.help} (default {option.default:g})")
+    groups["contact"].add_argument(
+        "--pose-uncertainty", type=uncertainty, default=None, metavar="POS_M[,ANGLE_DEG]",
+        help="both --pose-uncertainty-m and --pose-uncertainty-deg at once (README: Checking "
+        "as-built poses; default: the scene's \"pose_uncertainty\", else design geometry)")
 
 
 def uncertainty(text: str) -> tuple[float, float]:
@@ -131,25 +99,12 @@ def uncertainty(text: str) -> tuple[float, float]:
 
 
 def _options(args) -> CheckOptions:
-    if not (math.isfinite(args.time_limit) and args.time_limit >= 0):
-        raise ValueError("--time-limit must be a number of seconds >= 0 (0: no limit)")
-    if args.max_blocks < 1:
-        raise ValueError("--max-blocks must be at least 1")
-    solve = SolveOptions(objective=args.objective, friction=args.friction, cone=args.cone,
-                         mu=args.mu, time_limit=args.time_limit or math.inf)
-    if args.mu_threshold is not None and not args.mu_threshold > 0:
-        raise ValueError("--mu-threshold must be positive")
-    holds = HoldSearch(enabled=not args.no_suggest_holds, max_size=args.hold_max_size,
-                       max_checks=args.hold_max_checks)
-    contact = ContactOptions(distance_tol=args.distance_tol, angle_tol_deg=args.angle_tol,
-                             min_area=args.min_area, min_width=args.min_width,
-                             vertex_tol=args.vertex_tol,
-                             **dict(zip(("pose_uncertainty_m", "pose_uncertainty_deg"),
-                                        args.pose_uncertainty or ())))
-    return CheckOptions(solve=solve, mu_threshold=args.mu_threshold, tension_tol=args.tension_tol,
-                        limits=ValidationLimits(max_blocks=args.max_blocks), holds=holds,
-                        full_solve=args.full_solve, contact=contact,
-                        margin_directions=DEFAULT_DIRECTIONS if args.margin else 0)
+    """The check options of the flags (ValueError naming a flag out of its range)."""
+    values = {o: getattr(args, o.path) for o in OPTIONS if o.flag is not None}
+    if args.pose_uncertainty is not None:
+        m, deg = BY_PATH["contact.pose_uncertainty_m"], BY_PATH["contact.pose_uncertainty_deg"]
+        values[m], values[deg] = args.pose_uncertainty
+    return from_outer(values)
 
 
 def _scene(args) -> tuple[Scene, Assembly | None]:
@@ -181,6 +136,7 @@ def _assembly(args) -> Assembly:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The parser of every rbe-ros command and its options."""
     parser = argparse.ArgumentParser(prog="rbe-ros", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
     check = sub.add_parser("check", help="check an assembly, or every step of its sequence")
@@ -236,7 +192,8 @@ def build_parser() -> argparse.ArgumentParser:
     generate = sub.add_parser("generate", help="write a parametric scene as JSON")
     generate.add_argument("name", choices=sorted(GENERATORS))
     generate.add_argument("-p", "--param", action="append", default=[], metavar="KEY=VALUE",
-                          help="generator parameter (JSON value), e.g. -p n=15 -p thickness_ratio=0.12")
+                          help="generator parameter (JSON value), e.g. -p n=15 "
+                          "-p thickness_ratio=0.12")
     generate.add_argument("-o", "--output", required=True, help="scene JSON file to write")
     generate.set_defaults(run=_run_generate)
 
@@ -256,6 +213,34 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--json", action="store_true", help="print one JSON object")
     _solver_arguments(plan)
     plan.set_defaults(run=_run_plan)
+
+    robust = sub.add_parser("robust", help="probability that the assembly (or each step) "
+                            "stands under Gaussian placement error (Monte Carlo)")
+    robust.add_argument("scene")
+    robust.add_argument("--pose-sigma", type=uncertainty, required=True,
+                        metavar="POS_M[,ANGLE_DEG]",
+                        help="standard deviation of each free block's position per axis (m) "
+                        "and of its rotation about a random axis (deg); samples are checked "
+                        "with the pose uncertainty declared at 3 sigma")
+    robust.add_argument("--samples", type=int, default=400, metavar="N")
+    robust.add_argument("--seed", type=int, default=0, metavar="S",
+                        help="sample k is drawn from the seed (S, k): same numbers whatever "
+                        "the executor")
+    robust.add_argument("--sequence", action="store_true",
+                        help="p_stable of every step too (a sample's step k is its partial "
+                        "assembly)")
+    robust.add_argument("--json", action="store_true", help="print one JSON object")
+    robust.add_argument("-o", "--output", metavar="WORST.json",
+                        help="write the failing sample closest to the design as a scene file")
+    robust.add_argument("--workers", type=int, default=1, metavar="K",
+                        help="local worker processes (default 1: this process)")
+    robust.add_argument("--ray", metavar="ADDRESS",
+                        help="run the batches as Ray tasks on the cluster at ADDRESS ('auto': "
+                        "the local cluster's; README: How sure is a step?)")
+    robust.add_argument("--batch", type=int, default=16, metavar="B",
+                        help="samples per task (default 16)")
+    _solver_arguments(robust)
+    robust.set_defaults(run=_run_robust)
 
     view = sub.add_parser("view", help="write one self-contained HTML report of a scene's "
                           "check or of a bag: 3D view, step slider, table of steps, options")
@@ -304,7 +289,7 @@ def _run_check(args) -> int:
 
         reports = check_sequence(scene, options, on_step=None if args.json else progress)
         out = {"scene": scene.name, "first_failing_step": first_failing_step(reports),
-               "steps": [report_json(r) for r in reports]}
+               "reports": [report_json(r) for r in reports]}
     else:
         reports = [check_scene(scene, options, stored)]
         out = {"scene": scene.name, **report_json(reports[0])}
@@ -324,11 +309,11 @@ def _run_check(args) -> int:
 def _run_tilt(args) -> int:
     result = tilt_capacity(_assembly(args), _options(args),
                            args.direction, args.tol_deg)
-    out = {"direction": result.direction, "tilt_deg": json_number(result.tilt_deg),
-           "multiplier": json_number(result.multiplier),
-           "tilt_deg_multiplier": json_number(result.tilt_deg_multiplier),
-           "bisection_trials": result.trials, "time_bisection": result.time_bisection,
-           "time_multiplier": result.time_multiplier}
+    out = json_safe({"direction": result.direction, "tilt_deg": result.tilt_deg,
+                     "multiplier": result.multiplier,
+                     "tilt_deg_multiplier": result.tilt_deg_multiplier,
+                     "bisection_trials": result.trials, "time_bisection": result.time_bisection,
+                     "time_multiplier": result.time_multiplier})
     if args.json:
         print(json.dumps(out, indent=1))
     elif math.isnan(result.tilt_deg):
@@ -343,7 +328,7 @@ def _run_tilt(args) -> int:
 def _run_min_friction(args) -> int:
     mu = minimum_friction(_assembly(args), _options(args), args.tol)
     if args.json:
-        print(json.dumps({"mu_min": json_number(mu)}))
+        print(json.dumps(json_safe({"mu_min": mu})))
     else:
         print(f"minimum friction coefficient: {mu:.4f}" if math.isfinite(mu)
               else "no friction coefficient makes the assembly stand (it needs tension)")
@@ -370,7 +355,8 @@ def _run_analyse(args) -> int:
 def _run_figure(args) -> int:
     assembly, report = _analysed(args)
     title = f"{args.analysis + ': ' if args.analysis else ''}{report.message}"
-    print(f"figure written to {draw_report(assembly, report, args.output, title=title, view=tuple(args.view))}")
+    path = draw_report(assembly, report, args.output, title=title, view=tuple(args.view))
+    print(f"figure written to {path}")
     return 0
 
 
@@ -395,6 +381,46 @@ def _run_generate(args) -> int:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(scene_to_dict(scene)))
     print(f"{scene.name}: {len(scene.blocks)} blocks written to {path}")
+    return 0
+
+
+def _run_robust(args) -> int:
+    if args.samples < 1 or args.batch < 1:
+        raise ValueError("--samples and --batch must be at least 1")
+    scene = load_scene(args.scene)
+    job = RobustJob(scene, PoseNoise(*args.pose_sigma), args.seed, _options(args), args.sequence)
+    pool = ProcessPool(args.workers) if args.workers > 1 and not args.ray else None
+    executor = ray_cluster(args.ray) if args.ray else pool or serial
+
+    def progress(done: int, total: int) -> None:
+        if not args.json:
+            print(f"  {done}/{total} samples", file=sys.stderr)
+
+    try:
+        result = estimate(job, args.samples, executor, args.batch, progress)
+    finally:
+        if pool is not None:
+            pool.close()
+    out = {"scene": scene.name, "pose_sigma": list(args.pose_sigma), "seed": args.seed,
+           "p_stable": result.p_stable, "interval": list(result.interval),
+           "samples": result.samples, "closest_failing_sample": result.closest_failure}
+    if args.sequence:
+        out["steps"] = result.steps
+    if args.output and result.closest_failure is not None:
+        worst = sample_scene(job, result.closest_failure)
+        Path(args.output).write_text(json.dumps(scene_to_dict(worst)))
+    if args.json:
+        print(json.dumps(out, indent=1))
+        return 0
+    lo, hi = result.interval
+    print(f"p_stable {result.p_stable:.3f} (95% {lo:.3f} .. {hi:.3f}) over {result.samples} "
+          f"samples, seed {args.seed}")
+    for s in result.steps:
+        print(f"  step {s['step']:>3}  {s['block'] or '-':<20} p_stable {s['p_stable']:.3f}"
+              f"  ({s['interval'][0]:.3f} .. {s['interval'][1]:.3f})")
+    if args.output:
+        print(f"closest failing sample ({result.closest_failure}) written to {args.output}"
+              if result.closest_failure is not None else "no sample failed: nothing written")
     return 0
 
 
@@ -447,7 +473,7 @@ def _run_plan(args) -> int:
                "order": plan.order, "failed_step": plan.failed_step, "message": plan.message,
                "holds": scene_to_dict(plan.scene).get("holds", []) if plan.scene else [],
                "search_checks": plan.checks, "time": plan.time,
-               "steps": [{"held": list(r.held_blocks), **report_json(r)} for r in plan.reports]}
+               "reports": [report_json(r) for r in plan.reports]}
         print(json.dumps(out, indent=1))
     else:
         verdict = "feasible" if plan.feasible else f"NOT feasible (step {plan.failed_step})"
@@ -518,6 +544,7 @@ def _run_replay(args) -> int:
 
 
 def main(argv=None) -> int:
+    """Run one command; bad input is one line on stderr and exit status 2."""
     parser = build_parser()
     args = parser.parse_args(argv)
     try:

@@ -75,3 +75,19 @@ def test_view_of_every_example_and_generator(scene, tmp_path):
     assert len(reports) == len(load_scene(path).sequence) > 0
     check_rows(data, [(state, reports)])
     assert data["options"]["solve"]["mu"] == 0.6
+
+
+def test_view_shows_the_margin_where_known(tmp_path):
+    out = tmp_path / "report.html"
+    example = str(REPO / "examples" / "build_sequence.json")
+    assert main(["view", example, "-o", str(out), "--margin"]) == 0
+    rows = page_data(out)["steps"]
+    state = state_to_dict(load_scene(example), "world")
+    options = CheckOptions(margin_directions=8)
+    reports = replay_run(Run(state, 0), options)
+    assert [r["margin"] for r in rows] == pytest.approx(
+        [None if r["margin_g"] < 0 else r["margin_g"] for r in reports])
+    assert any(r["margin"] and r["margin"] > 0 for r in rows)
+    assert rows[-1]["margin"] == 0.0                       # the cap tips: no margin
+    assert main(["view", example, "-o", str(out)]) == 0
+    assert {r["margin"] for r in page_data(out)["steps"]} == {None}   # not computed

@@ -148,7 +148,8 @@ def load_compas_assembly(path, supports=None, density: float | None = None,
                          default_density: float = DEFAULT_DENSITY) -> Scene:
     """A scene from a COMPAS Assembly JSON file (gzipped if its name ends in ``.gz``).
 
-    Blocks keep their world coordinates (identity pose). Ids are the node keys, or a node's
+    Each block's frame has the world axes and its origin at the mean of the block's vertices
+    (identity orientation, position that mean). Ids are the node keys, or a node's
     ``name`` attribute when it has one (files written by :func:`save_compas_assembly`).
     Supports are the nodes flagged ``is_support`` unless ``supports`` (node keys) is given,
     which replaces the flags. Density: ``density`` if given, else a node's ``density``
@@ -176,7 +177,11 @@ def compas_scene(doc: dict, stem: str, supports=None, density: float | None = No
         vertices, faces = _mesh(attr["block"], f"{stem}: node {key}")
         rho = density or attr.get("density") or default_density
         support = bool(attr.get("is_support")) if wanted is None else key in wanted
-        blocks.append(make_block(bid, vertices, faces, density=float(rho), support=support))
+        # block frame: world axes at the mean of its vertices, so that a measured pose (and
+        # a declared rotation uncertainty) turns the block about itself, not the world origin
+        origin = vertices.mean(axis=0)
+        blocks.append(make_block(bid, vertices - origin, faces, origin, density=float(rho),
+                                 support=support))
     attributes = _unwrap(doc).get("attributes") or {}
     name = attributes.get("name") if attributes.get("name") not in (None, "Assembly") else stem
     return make_scene(str(name), blocks)
@@ -199,7 +204,8 @@ def interfaces_of(doc: dict, stem: str) -> list[CompasInterface]:
             raw = attr.get("interfaces") or ([attr["interface"]] if attr.get("interface") else [])
             if not raw and attr.get("interface_points"):             # compas_assembly 1.x
                 raw = [{"points": attr["interface_points"], "size": attr.get("interface_size"),
-                        "frame": attr.get("interface_frame"), "forces": attr.get("interface_forces")}]
+                        "frame": attr.get("interface_frame"),
+                        "forces": attr.get("interface_forces")}]
             out.extend(_interface(str(u), str(v), _unwrap(it)) for it in raw)
     return out
 
@@ -248,13 +254,15 @@ def save_compas_assembly(scene: Scene, path, *, interfaces: bool = True) -> None
             "attributes": {"name": block.id, "node": i},
             "default_vertex_attributes": {"x": 0.0, "y": 0.0, "z": 0.0},
             "default_edge_attributes": {}, "default_face_attributes": {},
-            "vertex": {str(k): dict(zip("xyz", map(float, p))) for k, p in enumerate(posed.vertices)},
+            "vertex": {str(k): dict(zip("xyz", map(float, p)))
+                       for k, p in enumerate(posed.vertices)},
             "face": {str(k): [int(v) for v in f] for k, f in enumerate(block.faces)},
             "facedata": {}, "edgedata": {},
             "max_vertex": len(posed.vertices) - 1, "max_face": len(block.faces) - 1,
         }
         node = {"block": {"dtype": "compas_assembly.datastructures/Block", "data": mesh,
-                          "guid": str(uuid.uuid5(uuid.NAMESPACE_URL, f"rbe_ros/{scene.name}/{block.id}"))},
+                          "guid": str(uuid.uuid5(uuid.NAMESPACE_URL,
+                                                 f"rbe_ros/{scene.name}/{block.id}"))},
                 "is_support": block.support, "name": block.id}
         node["density" if block.density > 0 else "mass"] = block.density or block.mass
         nodes[str(i)] = node

@@ -9,8 +9,8 @@ the node (``~/poses``) and replay; :class:`AsBuilt` keeps the poses measured so 
 messages (node and replay).
 
 A pose is ``(position, orientation)``: metres and a unit quaternion (x, y, z, w) of the block
-frame, the frame the design gives the block's vertices in (a COMPAS block's is the world
-frame: identity pose as designed).
+frame, the frame the design gives the block's vertices in (a COMPAS block's: the world axes
+at the mean of its vertices).
 """
 from __future__ import annotations
 

@@ -37,22 +37,21 @@ default parameters), unless given.
 """
 from __future__ import annotations
 
-import json
 import math
 import re
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from ..analysis.options import CheckOptions, HoldSearch
+from ..analysis.option_spec import from_json as options_from_json
+from ..analysis.option_spec import to_json as options_to_json
+from ..analysis.options import CheckOptions
 from ..analysis.pipeline import StateCheck, check_state
 from ..analysis.steps import final_state, sequence_steps
 from ..geometry.block import pose_block
-from ..geometry.contacts import ContactOptions
 from ..rbe.result import NOT_COMPUTED, Report
-from ..rbe.solver import SolveOptions, Weights
 from ..scene import Scene, SceneError
 from .bag import BagWriter, read_bag, read_custom_data
 from .markers import MARKER_TOPIC, MARKER_TYPE, run_markers
@@ -79,32 +78,6 @@ IGNORED = frozenset({"solve_time", "dropped_states"})
 
 
 # --- check options <-> JSON ------------------------------------------------------------------
-
-def options_to_json(options: CheckOptions) -> str:
-    """The options that decide a check's result, as JSON (stored in a bag's metadata)."""
-    s = options.solve
-    data = {"solve": {"objective": s.objective, "friction": s.friction, "cone": s.cone,
-                      "mu": s.mu, "weights": asdict(s.weights),
-                      "allow_tension": s.allow_tension},
-            "mu_threshold": options.mu_threshold, "tension_tol": options.tension_tol,
-            "contact": asdict(options.contact), "full_solve": options.full_solve,
-            "holds": asdict(options.holds), "margin_directions": options.margin_directions}
-    return json.dumps(data, sort_keys=True)
-
-
-def options_from_json(text: str) -> CheckOptions:
-    """Inverse of :func:`options_to_json` (missing keys: defaults)."""
-    data = json.loads(text)
-    solve = dict(data.get("solve", {}))
-    weights = Weights(**solve.pop("weights", {}))
-    return CheckOptions(solve=SolveOptions(weights=weights, **solve),
-                        mu_threshold=data.get("mu_threshold"),
-                        tension_tol=data.get("tension_tol", 1e-5),
-                        contact=ContactOptions(**data.get("contact", {})),
-                        full_solve=data.get("full_solve", False),
-                        holds=HoldSearch(**data.get("holds", {})),
-                        margin_directions=data.get("margin_directions", 0))
-
 
 def bag_options(path) -> CheckOptions:
     """The check options recorded in the bag at ``path``, else the defaults."""
@@ -262,6 +235,8 @@ def free_weights(state: dict | Scene | SceneError) -> dict[int, float]:
 
 @dataclass(frozen=True)
 class Tolerances:
+    """How far a replayed report may be from the recorded one (module docstring)."""
+
     force: float = 1e-6          # share of the step's free weight
     position: float = 1e-6       # m
     ratio: float = 1e-6          # |V|/N, absolute (plus the force tolerance's share)
@@ -539,6 +514,8 @@ def record_bag(path, scenes: list[tuple[Scene, str, int]], options: CheckOptions
 
 @dataclass
 class ReplayResult:
+    """The runs of a bag, their replayed reports and how they differ from the recorded."""
+
     runs: list[Run]
     replayed: list[list[dict]]
     differences: list[Difference]
@@ -554,6 +531,7 @@ class ReplayResult:
 
 
 def default_output(path) -> Path:
+    """Where a replay of the bag at ``path`` is written unless told: beside it, + "_replay"."""
     path = Path(path)
     return path.with_name(path.name + "_replay")
 

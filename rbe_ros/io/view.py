@@ -4,8 +4,9 @@ The page holds plotly.js (the copy the plotly package ships, inlined: nothing is
 when it is viewed), the data as JSON, and a small script: a 3D view of the assembly at the
 chosen step (the blocks in the colours of :mod:`rbe_ros.io.markers`, the force segments,
 interface outlines and kerns of the same :func:`~rbe_ros.io.markers.line_markers`), a step
-slider, the table of steps (verdict, max tension, worst |V|/N, model, margin where the
-report has one, reason) and the check options. Why plotly and not three.js: docs/VIEW.md.
+slider, the table of steps (verdict, max tension, worst |V|/N, model, margin_g where the
+report has one: ``--margin``, or a bag recorded with it; reason) and the check options. Why
+plotly and not three.js: docs/VIEW.md.
 """
 from __future__ import annotations
 
@@ -67,6 +68,12 @@ def _number(value):
     return value if np.isfinite(value) else str(value)
 
 
+def _margin(report: dict) -> float | None:
+    """margin_g of a report dict, None where it was not computed (-1, or an older bag)."""
+    margin = float(report.get("margin_g", -1.0))
+    return None if margin < 0 else margin
+
+
 def view_data(runs: Sequence[ViewRun], options: CheckOptions, title: str) -> dict:
     """The page's data: per run the block meshes, per report its row, block roles and lines."""
     out_runs, steps = [], []
@@ -90,7 +97,7 @@ def view_data(runs: Sequence[ViewRun], options: CheckOptions, title: str) -> dic
                 "status": report.status.name, "stable": report.stable,
                 "max_tension": _number(report.max_tension),
                 "worst_friction_ratio": _number(report.worst_friction_ratio),
-                "model": report.model, "margin": d.get("margin"), "message": report.message,
+                "model": report.model, "margin": _margin(d), "message": report.message,
                 "roles": {bid: ROLES.index(role) for bid, role in role.items()},
                 "lines": lines})
     return {"title": title, "runs": out_runs, "steps": steps,
@@ -139,7 +146,7 @@ tr { cursor: pointer; }
 <div class="legend" id="legend"></div>
 <div id="plot"></div>
 <table id="steps"><thead><tr><th>run</th><th>step</th><th>block</th><th>verdict</th>
-<th>max tension N</th><th>worst |V|/N</th><th>model</th><th>margin</th><th>reason</th>
+<th>max tension N</th><th>worst |V|/N</th><th>model</th><th>margin g</th><th>reason</th>
 </tr></thead><tbody></tbody></table>
 <h3>Check options</h3><table id="options"><tbody></tbody></table>
 <script id="data" type="application/json">@DATA@</script>
@@ -229,7 +236,9 @@ function build() {
   const options = document.querySelector("#options tbody");
   (function walk(o, prefix) {
     for (const [key, value] of Object.entries(o)) {
-      if (value !== null && typeof value === "object") { walk(value, prefix + key + "."); continue; }
+      if (value !== null && typeof value === "object") {
+        walk(value, prefix + key + "."); continue;
+      }
       const tr = document.createElement("tr");
       cell(tr, prefix + key); cell(tr, JSON.stringify(value));
       options.appendChild(tr);

@@ -1,9 +1,10 @@
 """Live replay: play recorded states into a running ``rbe_node`` and collect its reports.
 
-:func:`live_recheck` is what :func:`rbe_ros.io.replay.replay_bag` takes as ``recheck``. The node is started here
-(``python -m rbe_ros.ros.node`` under a unique node name, with the parameters of the bag's
-check options, in the ROS_DOMAIN_ID of the environment) or, with ``node_name``, the running
-node of that name is used as it is (its parameters must match the bag's options).
+:func:`live_recheck` is what :func:`rbe_ros.io.replay.replay_bag` takes as ``recheck``. The
+node is started here (``python -m rbe_ros.ros.node`` under a unique node name, with the
+parameters of the bag's check options, in the ROS_DOMAIN_ID of the environment) or, with
+``node_name``, the running node of that name is used as it is (its parameters must match the
+bag's options).
 
 States are sent one at a time, each after the previous one is answered (the node checks the
 newest state on its topic and drops a waiting one under load): a state with a sequence as a
@@ -34,31 +35,10 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
-from ..analysis.options import CheckOptions, HoldSearch
-from ..geometry.contacts import ContactOptions
-from ..rbe.solver import Weights
+from ..analysis.option_spec import node_parameters
+from ..analysis.options import CheckOptions
 from ..io.replay import DESIGN, POSES, STATE
 from .convert import dict_to_message, message_to_dict
-
-
-def node_parameters(options: CheckOptions) -> dict[str, object]:
-    """rbe_node parameters for ``options`` (ValueError if the node cannot be set to them)."""
-    s = options.solve
-    fixed = {"contact options": options.contact == ContactOptions(),
-             "solve weights": s.weights == Weights(), "allow_tension": s.allow_tension,
-             "full_solve": not options.full_solve,
-             "hold search greedy_width": options.holds.greedy_width == HoldSearch().greedy_width}
-    bad = [name for name, ok in fixed.items() if not ok]
-    if bad:
-        raise ValueError(f"rbe_node has no parameters for the bag's {', '.join(bad)}: "
-                         "replay it offline")
-    return {"friction_coefficient": float(s.mu),
-            "friction_threshold": float(options.mu_threshold or 0.0),
-            "objective": s.objective, "friction_model": s.friction, "friction_cone": s.cone,
-            "tension_tolerance": float(options.tension_tol),
-            "suggest_holds": bool(options.holds.enabled),
-            "hold_search_max_size": int(options.holds.max_size),
-            "hold_search_max_checks": int(options.holds.max_checks)}
 
 
 def _ros_value(value) -> str:

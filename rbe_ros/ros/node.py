@@ -10,8 +10,10 @@ Interfaces (relative to the node, e.g. ``/rbe_node/report``):
   every report, a throttled warning in the log), so memory stays bounded and the newest state
   is always answered;
 * publishes ``~/report`` (rbe_msgs/StabilityReport, reliable, transient_local, depth 1) and
-  ``~/markers`` (visualization_msgs/MarkerArray, same QoS) for every report the node makes,
-  whatever asked for it (topic, service or action);
+  ``~/markers`` (visualization_msgs/MarkerArray, same QoS: the blocks, forces and verdict,
+  :mod:`rbe_ros.io.markers`) for every report the node makes, whatever asked for it (topic,
+  service or action); with ``foxglove_port`` the markers also go to Foxglove as SceneUpdates
+  (:mod:`rbe_ros.io.foxglove_scene`);
 * serves ``~/check`` (rbe_msgs/srv/CheckAssembly): the assembly as a whole, sequence ignored;
 * serves the action ``~/check_sequence`` (rbe_msgs/action/CheckSequence): feedback per step,
   all reports and the first failing step as result; cancellable between steps.
@@ -19,26 +21,27 @@ Interfaces (relative to the node, e.g. ``/rbe_node/report``):
 Bad input never stops the node: a state that cannot be checked (outside the limits of
 :class:`rbe_ros.scene.ValidationLimits`, ``max_blocks`` among them) gives a report with status
 INVALID_INPUT and the reason, a solver failure or a solve over ``check_time_limit`` gives
-SOLVER_FAILED naming the solver's status or the stage, and any other error in a callback is logged and gives
-SOLVER_FAILED with the exception text. With ``mcap_path`` set, every checked state and every
-report is recorded (CDR, receive/publish time) in a rosbag2 MCAP bag, each message flushed
-before the report is published (a report seen on DDS is on disk, even after SIGKILL); the bag
-is closed on shutdown (SIGINT, SIGTERM).
+SOLVER_FAILED naming the solver's status or the stage, and any other error in a callback is
+logged and gives SOLVER_FAILED with the exception text. With ``mcap_path`` set, every checked
+state and every report is recorded (CDR, receive/publish time) in a rosbag2 MCAP bag, each
+message flushed before the report is published (a report seen on DDS is on disk, even after
+SIGKILL); the bag is closed on shutdown (SIGINT, SIGTERM).
 
 Run: ``rbe_node --ros-args -p friction_coefficient:=0.5 -p mcap_path:=bags/run``
 (or ``python -m rbe_ros.ros.node``).
 """
 from __future__ import annotations
 
-import math
 import os
 import signal
 import struct
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import rclpy
+from builtin_interfaces.msg import Time
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType, SetParametersResult)
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
@@ -54,22 +57,20 @@ from rbe_msgs.msg import AssemblyState, BlockPoses, StabilityReport
 from rbe_msgs.srv import CheckAssembly
 from visualization_msgs.msg import MarkerArray
 
-from ..analysis.margin import DEFAULT_DIRECTIONS
-from ..analysis.options import CheckOptions, HoldSearch
+from ..analysis.option_spec import BY_PARAM, OPTIONS, Option, from_outer
+from ..analysis.options import CheckOptions
 from ..analysis.pipeline import StateCheck, check_state
-from ..geometry.contacts import ContactOptions
 from ..io import cdr
 from ..io.bag import BagWriter, typestore
 from ..io.inputs import load_design
+from ..io.foxglove_scene import SceneServer
 from ..io.markers import MARKER_TYPE, run_markers, step_markers
 from ..io.messages import report_header, report_to_dict, state_to_dict
 from ..io.poses import AsBuilt
 from ..io.replay import (DESIGN, OPTIONS_KEY, POSES, asbuilt_check, merge_message,
                          options_to_json)
-from ..rbe.cones import CONES, FRICTION_MODELS
 from ..rbe.result import Report, Status
-from ..rbe.solver import OBJECTIVES, SolveOptions
-from ..scene import Scene, SceneError, ValidationLimits
+from ..scene import Scene, SceneError
 from .convert import dict_to_message, message_to_dict, scene_from_msg
 
 NODE_NAME = "rbe_node"
@@ -87,36 +88,24 @@ LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                          reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
-#: Allowed values of the string parameters.
-CHOICES = {"objective": OBJECTIVES, "friction_model": FRICTION_MODELS, "friction_cone": CONES}
-#: (lowest, highest, lowest excluded) of the floating point parameters.
-RANGES = {"friction_coefficient": (0.0, 10.0, True), "friction_threshold": (0.0, 10.0, False),
-          "tension_tolerance": (0.0, 1.0, False), "check_time_limit": (0.0, 3600.0, False),
-          "max_blocks": (1, 1_000_000, False), "hold_search_max_size": (0, 1000, False),
-          "hold_search_max_checks": (0, 1_000_000, False),
-          "contact_distance_tolerance": (0.0, 1.0, False),
-          "contact_angle_tolerance_deg": (0.0, 90.0, False),
-          "contact_min_area": (0.0, 1.0, False), "contact_min_width": (0.0, 1.0, False),
-          "contact_vertex_tolerance": (0.0, 1.0, False),
-          "pose_uncertainty_m": (0.0, 1.0, False), "pose_uncertainty_deg": (0.0, 90.0, False)}
+
+_PARAMETER_TYPES = {float: ParameterType.PARAMETER_DOUBLE, int: ParameterType.PARAMETER_INTEGER,
+                    bool: ParameterType.PARAMETER_BOOL, str: ParameterType.PARAMETER_STRING}
 
 
-def _double(value: float, description: str, low: float, high: float) -> tuple:
-    return value, ParameterDescriptor(
-        type=ParameterType.PARAMETER_DOUBLE, description=description,
-        floating_point_range=[FloatingPointRange(from_value=low, to_value=high, step=0.0)])
-
-
-def _integer(value: int, description: str, low: int, high: int) -> tuple:
-    return value, ParameterDescriptor(
-        type=ParameterType.PARAMETER_INTEGER, description=description,
-        integer_range=[IntegerRange(from_value=low, to_value=high, step=1)])
-
-
-def _choice(value: str, description: str, choices) -> tuple:
-    return value, ParameterDescriptor(
-        type=ParameterType.PARAMETER_STRING, description=description,
-        additional_constraints="one of: " + ", ".join(choices))
+def _descriptor(option: Option) -> ParameterDescriptor:
+    """The parameter descriptor of a check option (type, range or choices, help)."""
+    descriptor = ParameterDescriptor(type=_PARAMETER_TYPES[option.kind],
+                                     description=option.help)
+    if option.choices:
+        descriptor.additional_constraints = "one of: " + ", ".join(option.choices)
+    elif option.kind is float:
+        descriptor.floating_point_range = [FloatingPointRange(
+            from_value=float(option.low), to_value=float(option.high), step=0.0)]
+    elif option.kind is int:
+        descriptor.integer_range = [IntegerRange(from_value=int(option.low),
+                                                 to_value=int(option.high), step=1)]
+    return descriptor
 
 
 def _string(value: str, description: str, *, read_only: bool = False) -> tuple:
@@ -124,24 +113,10 @@ def _string(value: str, description: str, *, read_only: bool = False) -> tuple:
                                       description=description, read_only=read_only)
 
 
-_CONTACT = ContactOptions()    # the defaults of the contact_* parameters
-
+#: The node's parameters: every check option with a parameter (rbe_ros.analysis.option_spec),
+#: and those of the node itself.
 PARAMETERS = {
-    "friction_coefficient": _double(
-        0.6, "Coulomb friction coefficient mu of every interface, in (0, 10]", 0.0, 10.0),
-    "friction_threshold": _double(
-        0.0, "post-check |V| <= threshold * N per interface; 0 means the same as "
-        "friction_coefficient", 0.0, 10.0),
-    "objective": _choice("qp", "objective of the force solve: qp (smooth, unique forces) "
-                         "or lp", OBJECTIVES),
-    "friction_model": _choice("net", "net (friction-net: decides stability) or plus "
-                              "(friction+: always feasible, shows where tension is needed)",
-                              FRICTION_MODELS),
-    "friction_cone": _choice("soc", "friction cone: exact second-order cone or a linearised "
-                             "pyramid", CONES),
-    "tension_tolerance": _double(
-        1e-5, "a vertex tension counts above this share of the free blocks' weight, in [0, 1]",
-        0.0, 1.0),
+    **{o.param: (o.default, _descriptor(o)) for o in OPTIONS if o.param},
     "design_file": _string("", "design (a scene JSON or a COMPAS Assembly JSON, *.gz too) "
                            "whose blocks ~/poses places, as if sent on ~/design at start; "
                            "empty: none until one comes on ~/design", read_only=True),
@@ -150,53 +125,16 @@ PARAMETERS = {
                          "a timestamp suffix", read_only=True),
     "frame_id": _string("world", "frame of reports and markers when a received state has an "
                         "empty header frame_id"),
+    "foxglove_port": (0, ParameterDescriptor(
+        type=ParameterType.PARAMETER_INTEGER, read_only=True,
+        description="TCP port of a Foxglove WebSocket server sending the markers of every "
+        "report as SceneUpdates on /rbe_node/scene (foxglove-sdk); 0: no server",
+        integer_range=[IntegerRange(from_value=0, to_value=65535, step=1)])),
+    "foxglove_host": _string("127.0.0.1", "address the Foxglove WebSocket server listens on "
+                             "(0.0.0.0: every interface)", read_only=True),
     "record_markers": (True, ParameterDescriptor(
         type=ParameterType.PARAMETER_BOOL, description="with mcap_path: record the markers of "
         "every report too (false: a lean log of states and reports)")),
-    "max_blocks": _integer(ValidationLimits().max_blocks, "largest number of blocks of a state; "
-                           "a larger one gets an INVALID_INPUT report", 1, 1_000_000),
-    "check_time_limit": _double(0.0, "time limit in s of each check (of each step of a "
-                                "sequence), geometry included; over it the report is "
-                                "SOLVER_FAILED naming the stage. 0: no limit", 0.0, 3600.0),
-    "compute_margin": (False, ParameterDescriptor(
-        type=ParameterType.PARAMETER_BOOL, description="reports carry margin_g: the smallest "
-        "horizontal acceleration (share of g) that topples or slides the checked assembly, over "
-        f"{DEFAULT_DIRECTIONS} directions, and margin_direction (about one solve per "
-        "direction)")),
-    "full_solve": (False, ParameterDescriptor(
-        type=ParameterType.PARAMETER_BOOL, description="sequences: solve every step's whole "
-        "assembly instead of local models (a report's model field says which answered)")),
-    "suggest_holds": (HoldSearch().enabled, ParameterDescriptor(
-        type=ParameterType.PARAMETER_BOOL, description="an unstable report names the smallest "
-        "set of blocks to hold (suggested_holds)")),
-    "hold_search_max_size": _integer(HoldSearch().max_size, "suggested holds: exact search up "
-                                     "to this many blocks, then a greedy heuristic", 0, 1000),
-    "hold_search_max_checks": _integer(HoldSearch().max_checks, "suggested holds: sub-assembly "
-                                       "checks the exact search may spend", 0, 1_000_000),
-    # contact detection; lengths relative to the smaller block's size (cube root of its volume)
-    "contact_distance_tolerance": _double(
-        _CONTACT.distance_tol, "contact detection: largest gap or overlap between two "
-        "face planes in contact, relative to the smaller block's size", 0.0, 1.0),
-    "contact_angle_tolerance_deg": _double(
-        _CONTACT.angle_tol_deg, "contact detection: largest deviation of two faces' "
-        "normals from opposite, in degrees", 0.0, 90.0),
-    "contact_min_area": _double(
-        _CONTACT.min_area, "contact detection: smallest interface area, relative to "
-        "the size squared", 0.0, 1.0),
-    "contact_min_width": _double(
-        _CONTACT.min_width, "contact detection: thinner interface polygons are edge "
-        "contacts and are left out, relative to the size", 0.0, 1.0),
-    "contact_vertex_tolerance": _double(
-        _CONTACT.vertex_tol, "contact detection: interface vertices closer than this "
-        "to their neighbours' chord are left out, relative to the size", 0.0, 1.0),
-    # as-built poses (README: Checking as-built poses); 0 and 0: design geometry
-    "pose_uncertainty_m": _double(
-        _CONTACT.pose_uncertainty_m, "as-built poses: every block's position is known to "
-        "within this many m (about 3 sigma); contacts and the interpenetration limit follow "
-        "from it. 0 (with pose_uncertainty_deg 0): design geometry", 0.0, 1.0),
-    "pose_uncertainty_deg": _double(
-        _CONTACT.pose_uncertainty_deg, "as-built poses: every block's orientation is known to "
-        "within this many degrees (about 3 sigma)", 0.0, 90.0),
 }
 
 
@@ -233,15 +171,15 @@ class RbeNode(Node):
         self._service_group = MutuallyExclusiveCallbackGroup()
         self._action_group = ReentrantCallbackGroup()
 
-        # reports go out as CDR bytes made from their message dicts (rbe_ros.io.cdr): ~6x faster
-        # than building the rclpy message (an object per Point) and serialising it
+        # reports go out as CDR bytes made from their message dicts (rbe_ros.io.cdr), without
+        # building the rclpy message (an object per Point) and serialising it
         self._encode_report = cdr.encoder(typestore(), "rbe_msgs/msg/StabilityReport")
         self._encode_markers = cdr.encoder(typestore(), MARKER_TYPE)
         self._report_pub = self.create_publisher(StabilityReport, "~/report", LATCHED_QOS)
         self._marker_pub = self.create_publisher(MarkerArray, "~/markers", LATCHED_QOS)
         # raw: the callback gets the CDR bytes; a state is converted to a message only when
-        # the worker checks it (converting a 100-block state costs ~15 ms of the GIL, which
-        # at 100 Hz would starve the checks)
+        # the worker checks it (converting every state that arrives would hold the GIL and
+        # starve the checks at high rates)
         self._state_sub = self.create_subscription(
             AssemblyState, "~/assembly", self._on_state, STATE_QOS,
             callback_group=self._topic_group, raw=True)
@@ -266,6 +204,11 @@ class RbeNode(Node):
         self.poses_topic = self._poses_sub.topic_name
         self.marker_topic = self._marker_pub.topic_name
         self._open_bag()
+        self.foxglove = None
+        if self.get_parameter("foxglove_port").value:
+            self.foxglove = SceneServer(self.get_parameter("foxglove_port").value,
+                                        self.get_parameter("foxglove_host").value, NODE_NAME)
+            self.get_logger().info(f"Foxglove WebSocket server on port {self.foxglove.port}")
         self._worker = threading.Thread(target=self._work, name="rbe_state_worker", daemon=True)
         self._worker.start()
         if self.get_parameter("design_file").value:
@@ -278,49 +221,15 @@ class RbeNode(Node):
 
     def _validate_parameters(self, params) -> SetParametersResult:
         for p in params:
-            if p.name in CHOICES and p.value not in CHOICES[p.name]:
-                return SetParametersResult(
-                    successful=False, reason=f"{p.name} must be one of "
-                    f"{', '.join(CHOICES[p.name])}, not {p.value!r}")
-            if p.name in RANGES:
-                low, high, open_low = RANGES[p.name]
-                v = p.value
-                ok = (isinstance(v, (int, float)) and math.isfinite(v)
-                      and (v > low if open_low else v >= low) and v <= high)
-                if not ok:
-                    interval = f"{'(' if open_low else '['}{low:g}, {high:g}]"
-                    return SetParametersResult(
-                        successful=False, reason=f"{p.name} must be in {interval}, not {v!r}")
+            option = BY_PARAM.get(p.name)
+            problem = option.problem(p.value) if option is not None else None
+            if problem is not None:
+                return SetParametersResult(successful=False, reason=f"{p.name} {problem}")
         return SetParametersResult(successful=True)
 
     def check_options(self) -> CheckOptions:
         """The core's options from the current parameter values."""
-        value = lambda name: self.get_parameter(name).value  # noqa: E731
-        threshold = float(value("friction_threshold"))
-        time_limit = float(value("check_time_limit"))
-        solve = SolveOptions(objective=value("objective"), friction=value("friction_model"),
-                             cone=value("friction_cone"),
-                             mu=float(value("friction_coefficient")),
-                             time_limit=time_limit if time_limit > 0 else math.inf)
-        return CheckOptions(solve=solve, mu_threshold=threshold if threshold > 0 else None,
-                            tension_tol=float(value("tension_tolerance")),
-                            limits=self.limits(), full_solve=bool(value("full_solve")),
-                            margin_directions=DEFAULT_DIRECTIONS if value("compute_margin") else 0,
-                            contact=ContactOptions(
-                                distance_tol=float(value("contact_distance_tolerance")),
-                                angle_tol_deg=float(value("contact_angle_tolerance_deg")),
-                                min_area=float(value("contact_min_area")),
-                                min_width=float(value("contact_min_width")),
-                                vertex_tol=float(value("contact_vertex_tolerance")),
-                                pose_uncertainty_m=float(value("pose_uncertainty_m")),
-                                pose_uncertainty_deg=float(value("pose_uncertainty_deg"))),
-                            holds=HoldSearch(enabled=bool(value("suggest_holds")),
-                                             max_size=int(value("hold_search_max_size")),
-                                             max_checks=int(value("hold_search_max_checks"))))
-
-    def limits(self) -> ValidationLimits:
-        """The validation limits: the defaults, with ``max_blocks`` from its parameter."""
-        return ValidationLimits(max_blocks=int(self.get_parameter("max_blocks").value))
+        return from_outer({o: self.get_parameter(o.param).value for o in OPTIONS if o.param})
 
     # --- recording --------------------------------------------------------------------------
 
@@ -336,7 +245,8 @@ class RbeNode(Node):
                 k += 1
                 path = path.with_name(f"{stem}_{k}")
         # the options at the start, so that `rbe-ros replay` re-checks the same way
-        self._bag = BagWriter(path, custom_data={OPTIONS_KEY: options_to_json(self.check_options())})
+        self._bag = BagWriter(path,
+                              custom_data={OPTIONS_KEY: options_to_json(self.check_options())})
         self._bag.add_topic(self.state_topic, "rbe_msgs/msg/AssemblyState")
         self._bag.add_topic(self.report_topic, "rbe_msgs/msg/StabilityReport",
                             transient_local=True)
@@ -391,6 +301,9 @@ class RbeNode(Node):
                 self.get_logger().warning("the state worker is still checking; closing anyway")
         with self._bag_lock:
             self._close_bag_locked()
+        server, self.foxglove = self.foxglove, None
+        if server is not None:
+            server.stop()
         if self._destroyed:
             return
         self._destroyed = True
@@ -414,7 +327,7 @@ class RbeNode(Node):
         first, so that a report anyone received is in the bag even if the node is killed.
         ``state``: the state of a check that failed, drawn as it came (the blocks at fault
         of invalid input highlighted)."""
-        report.dropped_states = self._dropped
+        report = replace(report, dropped_states=self._dropped)
         data = self._encode_report(report_to_dict(report, header, arrays=True))
         self._record(self.report_topic, data)
         self._report_pub.publish(data)
@@ -423,6 +336,8 @@ class RbeNode(Node):
         else:
             [markers] = run_markers(self._drawable(state), [report_to_dict(report, header)],
                                     self.check_options())
+        if self.foxglove is not None:
+            self.foxglove.publish(markers)
         markers = self._encode_markers(markers)
         if self.get_parameter("record_markers").value:
             self._record(self.marker_topic, markers)
@@ -440,7 +355,8 @@ class RbeNode(Node):
 
     def _drawable(self, state: AssemblyState) -> dict:
         """The message dict of an unchecked ``state`` to draw, if within the block limit."""
-        return message_to_dict(state) if len(state.blocks) <= self.limits().max_blocks else {}
+        within = len(state.blocks) <= self.get_parameter("max_blocks").value
+        return message_to_dict(state) if within else {}
 
     def check(self, state: AssemblyState, header: dict, sequence: bool, *,
               cancelled=None, on_step=None) -> tuple[StateCheck, list[bytes]]:

@@ -172,3 +172,20 @@ def test_pose_uncertainty_parameters_reach_the_detection(make_node):
     assert report.interfaces[0].centre_of_pressure[2] == pytest.approx(0.0025, abs=1e-12)
     bad = node.set_parameters([Parameter("pose_uncertainty_deg", value=-1.0)])[0]
     assert not bad.successful and "pose_uncertainty_deg" in bad.reason
+
+
+def test_record_markers_false_keeps_a_lean_bag(make_node, tmp_path):
+    from rbe_msgs.msg import AssemblyState
+    from rbe_msgs.srv import CheckAssembly
+
+    from rbe_client import stacked_boxes
+    from rbe_ros.io import bag, messages
+    from rbe_ros.ros.convert import dict_to_message
+
+    node = make_node(mcap_path=str(tmp_path / "bag"), record_markers=False)
+    state = dict_to_message(messages.state_to_dict(stacked_boxes(0.45), "", 1), AssemblyState)
+    assert node._on_check(CheckAssembly.Request(assembly=state),
+                          CheckAssembly.Response()).report.stable
+    node.destroy_node()
+    assert [m.topic for m in bag.read_bag(tmp_path / "bag")] == [
+        "/rbe_unit_test/rbe_node/assembly", "/rbe_unit_test/rbe_node/report"]

@@ -46,7 +46,7 @@ from timing import best_of  # noqa: E402
 from rbe_ros import generators as gen  # noqa: E402
 from rbe_ros.analysis.assembly import Assembly  # noqa: E402
 from rbe_ros.analysis.options import CheckOptions  # noqa: E402
-from rbe_ros.analysis.pipeline import check_scene
+from rbe_ros.analysis.pipeline import check_scene  # noqa: E402
 from rbe_ros.analysis.tilt import horizontal, tilt_capacity  # noqa: E402
 from rbe_ros.geometry.contacts import ContactOptions  # noqa: E402
 from rbe_ros.rbe.model import build_model  # noqa: E402

@@ -11,6 +11,8 @@ from ..scene import Scene
 
 @dataclass(frozen=True)
 class Step:
+    """One step of a sequence: the block placed and the blocks present and held."""
+
     index: int
     block: str                      # "" at the release step after the last placement
     present: tuple[str, ...]

@@ -23,10 +23,12 @@ ANALYSES = ("kern-fitting", "inner-base-fitting", "outer-base-fitting", "max-thr
 
 
 def to_kern(it: Interface) -> Interface:
+    """The interface reduced to its kern (resultants there cannot open the joint)."""
     return _with_points(it, it.kern)
 
 
 def towards_point(it: Interface, factor: float, point: np.ndarray | None = None) -> Interface:
+    """Shrink by ``factor`` towards ``point`` (default: the interface's frame origin)."""
     q = it.frame.origin if point is None else np.asarray(point, dtype=float)
     return _with_points(it, q + factor * (it.points - q))
 
@@ -65,6 +67,7 @@ def _vertical_axis(assembly: Assembly) -> tuple[np.ndarray, np.ndarray]:
 
 
 def support_interfaces(assembly: Assembly) -> list[int]:
+    """Indices of the interfaces on a support."""
     return [k for k, it in enumerate(assembly.interfaces)
             if assembly.blocks[it.a].support or assembly.blocks[it.b].support]
 

@@ -27,7 +27,7 @@ from rbe_ros.analysis.perturb import PoseNoise
 from rbe_ros.analysis.robust import RobustJob, run_batch, sample_scene, wilson_interval
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402  (after the backend is chosen)
+import matplotlib.pyplot as plt
 
 ROOT = Path(__file__).resolve().parents[1]
 SIGMAS = (0.002, 0.005, 0.01, 0.02, 0.04)

@@ -271,7 +271,7 @@ def markdown(result: dict) -> str:
           " weights 1 / 1e6 / 1), run by `benchmarks/_bench_cra_driver.py` in the scratch venv of"
           " `benchmarks/compas_compare.py` (it reuses `_compas_driver.py`'s loading and solve). It"
           " solves on the interfaces our detection found, written into its JSON by"
-          " `compas_io.save_compas_assembly`, so its verdicts compare formulations, not detections;"
+          " `rbe_ros.io.compas.save_compas_assembly`, so its verdicts compare formulations, not detections;"
           f" its own detection (`assembly_interfaces_numpy`, nmax {CRA_DETECT['nmax']}, tmax"
           f" {CRA_DETECT['tmax']:g} m, amin {CRA_DETECT['amin']:g} m^2) is timed once per scene and"
           " added to its time per check. Verdict: stable when IPOPT succeeds and no vertex carries"

@@ -11,7 +11,7 @@ own venv, see _bench_cra_driver.py):
   interface detection included; tilt capacities with ``tilt_capacity``);
 * the default problem stated in cvxpy (``_cvxpy_rbe.py``), same detection and matrices;
 * compas_cra 0.8.0 ``rbe_solve`` (IPOPT), on the same scenes exported with
-  ``compas_io.save_compas_assembly``;
+  ``rbe_ros.io.compas.save_compas_assembly``;
 * PyBullet at 240 Hz and at 1 kHz, MuJoCo at 1 kHz (``_physics.py``).
 
 Writes docs/BENCHMARKS.md, docs/bench/*.png and docs/bench/results.json. Every number is

@@ -1,6 +1,7 @@
 """The command line: JSON outputs with real values, one-line errors for bad input."""
 import json
 import math
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -43,6 +44,17 @@ def test_check_whole_assembly_json_has_the_documented_fields(capsys):
     assert {"block_a", "block_b", "normal_resultant", "shear_resultant", "centre_of_pressure",
             "tension", "friction_exceeded"} <= set(it)
     assert set(it["shear_resultant"]) == set(it["centre_of_pressure"]) == {"x", "y", "z"}
+
+
+def test_readme_lists_every_key_of_the_json_report(capsys):
+    """The README's key list of `check --json` is the message dict's, no more, no less."""
+    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    text = readme[readme.index("`check --json` prints"):readme.index("With `--sequence`,")]
+    listed = set(re.findall(r'"(\w+)"', text))
+    out = run_json(capsys, "check", str(EXAMPLE), "--json")
+    keys = set(out) | set(out["interfaces"][0]) | set(out["header"]) | {"x", "y", "z"}
+    keys |= {"block_a", "block_b", "gap", "overlap_area"}      # of each near contact
+    assert listed == keys - {"stamp", "frame_id"}
 
 
 def test_check_records_a_bag_that_reads_back(tmp_path, capsys):

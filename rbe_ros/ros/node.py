@@ -141,6 +141,10 @@ PARAMETERS = {
 }
 
 
+class ConfigurationError(Exception):
+    """The node cannot start with its parameters (a bag that cannot be created)."""
+
+
 class RbeNode(Node):
     """A thin ROS shell over :func:`check_scene` and :func:`check_sequence`."""
 
@@ -248,8 +252,12 @@ class RbeNode(Node):
                 k += 1
                 path = path.with_name(f"{stem}_{k}")
         # the options at the start, so that `rbe-ros replay` re-checks the same way
-        self._bag = BagWriter(path,
-                              custom_data={OPTIONS_KEY: options_to_json(self.check_options())})
+        try:
+            self._bag = BagWriter(
+                path, custom_data={OPTIONS_KEY: options_to_json(self.check_options())})
+        except OSError as exc:
+            raise ConfigurationError(f"mcap_path {raw!r}: cannot create the bag {path}: "
+                                     f"{exc.strerror or exc}") from None
         self._bag.add_topic(self.state_topic, "rbe_msgs/msg/AssemblyState")
         self._bag.add_topic(self.report_topic, "rbe_msgs/msg/StabilityReport",
                             transient_local=True)
@@ -609,6 +617,9 @@ def main(args=None) -> None:
         pass
     except ParameterException as exc:  # e.g. -p friction_coefficient:=1 (an integer)
         rclpy.logging.get_logger(NODE_NAME).fatal(f"bad parameter: {exc}")
+        raise SystemExit(2) from None
+    except ConfigurationError as exc:
+        rclpy.logging.get_logger(NODE_NAME).fatal(str(exc))
         raise SystemExit(2) from None
     finally:
         # A second signal during the clean-up exits at once (the bag stays readable).

@@ -16,7 +16,7 @@ from .holds import suggested_holds
 from .incremental import StepChecker
 from .margin import report_margin
 from .options import CheckOptions
-from .steps import final_state, sequence_steps
+from .steps import final_state, sequence_step, step_count
 from .validate import validated_assembly
 from .verdict import check
 
@@ -61,7 +61,7 @@ def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
     """
     start = time.perf_counter()
     options = declared(options, scene)
-    steps = sequence_steps(scene)
+    total = step_count(scene)
     limit = options.solve.time_limit
     try:
         with time_budget(limit):
@@ -71,9 +71,10 @@ def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
     contact_time = time.perf_counter() - start
     checker = StepChecker(options, local=not options.full_solve)
     reports = []
-    for step in steps:
+    for k in range(total):      # one step at a time: making them all costs the size squared
         if cancelled is not None and cancelled():
             break
+        step = sequence_step(scene, k)
         step_start = time.perf_counter()
         try:
             if full is None:
@@ -87,10 +88,10 @@ def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
             report = replace(timeout_report(exc), num_blocks=len(step.present))
         # the step's time, with its share of the contact detection done once for all steps
         report = replace(report, step_index=step.index, block_placed=step.block,
-                         solve_time=time.perf_counter() - step_start + contact_time / len(steps))
+                         solve_time=time.perf_counter() - step_start + contact_time / total)
         reports.append(report)
         if on_step is not None:
-            on_step(report, len(steps))
+            on_step(report, total)
     return reports
 
 
@@ -166,7 +167,7 @@ def check_state(read_scene: Callable[[bool], Scene], sequence: bool,
 
     try:
         scene = read_scene(sequence)
-        total = len(sequence_steps(scene)) if sequence else 1
+        total = step_count(scene) if sequence else 1
         if sequence:
             check_sequence(scene, options, on_step=step, cancelled=cancelled)
         else:

@@ -8,7 +8,9 @@ Interfaces (relative to the node, e.g. ``/rbe_node/report``):
   thread from a single-slot buffer: when states arrive faster than they can be checked, the
   newest replaces the waiting one, and the dropped ones are counted (``dropped_states`` of
   every report, a throttled warning in the log), so memory stays bounded and the newest state
-  is always answered;
+  is always answered. A state that arrives while a sequence is checked supersedes it between
+  two steps: the sequence's last report (SOLVER_FAILED, "superseded: ...") names the first
+  step not checked, and the newer state is checked next;
 * publishes ``~/report`` (rbe_msgs/StabilityReport, reliable, transient_local, depth 1) and
   ``~/markers`` (visualization_msgs/MarkerArray, same QoS: the blocks, forces and verdict,
   :mod:`rbe_ros.io.markers`) for every report the node makes, whatever asked for it (topic,
@@ -60,6 +62,7 @@ from visualization_msgs.msg import MarkerArray
 from ..analysis.option_spec import BY_PARAM, OPTIONS, Option, from_outer
 from ..analysis.options import CheckOptions
 from ..analysis.pipeline import StateCheck, check_state
+from ..analysis.steps import sequence_step
 from ..io import cdr
 from ..io.bag import BagWriter, typestore
 from ..io.inputs import load_design
@@ -433,11 +436,21 @@ class RbeNode(Node):
 
     def check_state(self, state: AssemblyState, raw: bytes | None = None) -> None:
         """Check a state from the topic (as a whole, or every step of its sequence) and
-        publish the reports; never raises. ``raw``: its CDR bytes, recorded as they came."""
+        publish the reports; never raises. ``raw``: its CDR bytes, recorded as they came.
+        A newer state waiting in the slot supersedes a sequence between two steps: its last
+        report says so (:func:`superseded_report`), and the newer state is checked next."""
         try:
-            self.check(state, self._received(state, raw), bool(state.sequence))
+            header = self._received(state, raw)
+            result, _ = self.check(state, header, bool(state.sequence),
+                                   cancelled=self._superseded)
+            if result.error is None and not result.finished and self._superseded():
+                self._publish(result.scene, superseded_report(result), header)
         except Exception as exc:  # publishing itself failed (e.g. during shutdown)
             self.get_logger().error(f"state not handled: {type(exc).__name__}: {exc}")
+
+    def _superseded(self) -> bool:
+        """Whether a newer state (or as-built update) waits for the worker."""
+        return self._slot is not None
 
     # --- design and measured poses (rbe_ros.poses) -------------------------------------------
 
@@ -541,6 +554,17 @@ class RbeNode(Node):
 def _stamp(header: dict) -> str:
     stamp = header["stamp"]
     return f"{stamp['sec']}.{stamp['nanosec']:09d}"
+
+
+def superseded_report(result: StateCheck) -> Report:
+    """The last report of a topic sequence a newer state superseded: the first step not
+    checked, no verdict (SOLVER_FAILED), and why."""
+    done = len(result.reports)
+    step = sequence_step(result.scene, done)
+    return Report(Status.SOLVER_FAILED,
+                  f"superseded: a newer state arrived after {done} of {result.total} steps; "
+                  "the remaining steps were not checked",
+                  step_index=step.index, block_placed=step.block)
 
 
 def _cdr_stamp(data: bytes) -> str:

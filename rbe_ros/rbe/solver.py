@@ -99,8 +99,8 @@ RETRY_REGULARIZATION = 1e-7
 _DEFAULT_REGULARIZATION = clarabel.DefaultSettings().static_regularization_constant
 _INFEASIBLE = {"PrimalInfeasible", "AlmostPrimalInfeasible"}
 #: Clarabel's "auto" switches to faer above some KKT size (the 1021-block wall): there its
-#: ordering fills 1.3x more and each solve costs more, 2.5 s against 1.35 s with QDLDL, the
-#: superlinear jump from 715 to 1021 blocks. Below that size "auto" is QDLDL already. (QDLDL
+#: ordering fills more and each solve costs more than with QDLDL (the cost against size is
+#: in docs/SCALING.md, ``make scaling``). Below that size "auto" is QDLDL already. (QDLDL
 #: panics on an empty KKT system, as when all blocks are supports: "auto" takes those.)
 DIRECT_SOLVE_METHOD = "qdldl"
 # Left at Clarabel's defaults: a looser tol_gap saves an iteration or two on walls only and

@@ -37,6 +37,7 @@ from __future__ import annotations
 import os
 import signal
 import struct
+import json
 import threading
 import time
 from dataclasses import replace
@@ -58,6 +59,7 @@ from rclpy.signals import SignalHandlerOptions
 from rbe_msgs.action import CheckSequence
 from rbe_msgs.msg import AssemblyState, BlockPoses, StabilityReport
 from rbe_msgs.srv import CheckAssembly
+from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
 from ..analysis.option_spec import BY_PARAM, OPTIONS, Option, from_outer
@@ -71,8 +73,8 @@ from ..io.foxglove_scene import SceneServer
 from ..io.markers import MARKER_TYPE, run_markers, step_markers
 from ..io.messages import report_header, report_to_dict, state_to_dict
 from ..io.poses import AsBuilt
-from ..io.replay import (DESIGN, OPTIONS_KEY, POSES, asbuilt_check, merge_message,
-                         options_to_json)
+from ..io.replay import (DESIGN, OPTIONS_KEY, POSES, SETTINGS_TOPIC, SETTINGS_TYPE,
+                         asbuilt_check, merge_message, options_to_json)
 from ..rbe.result import Report, Status
 from ..scene import Scene, SceneError
 from .convert import dict_to_message, message_to_dict, scene_from_msg
@@ -222,6 +224,8 @@ class RbeNode(Node):
         self.poses_topic = self._poses_sub.topic_name
         self.marker_topic = self._marker_pub.topic_name
         self._open_bag()
+        self._record_settings()
+        self.add_post_set_parameters_callback(lambda _params: self._record_settings())
         self.foxglove = None
         if self.get_parameter("foxglove_port").value:
             self.foxglove = SceneServer(self.get_parameter("foxglove_port").value,
@@ -274,6 +278,7 @@ class RbeNode(Node):
                             transient_local=True)
         self._bag.add_topic(self.marker_topic, MARKER_TYPE, transient_local=True)
         # added with their first message: a bag of states alone has only their topics
+        self._bag.add_topic(SETTINGS_TOPIC, SETTINGS_TYPE, transient_local=True)
         self._later_topics = {self.design_topic: ("rbe_msgs/msg/AssemblyState", True),
                               self.poses_topic: ("rbe_msgs/msg/BlockPoses", False)}
         self.bag_path = path
@@ -298,6 +303,15 @@ class RbeNode(Node):
                 self.get_logger().error(f"recording to {self.bag_path} failed, stopped: {exc}")
                 self.health.error(f"recording to {self.bag_path} failed, stopped: {exc}")
                 self._close_bag_locked()
+
+    def _record_settings(self) -> None:
+        """Record the check options and frame_id now in force (at the start and after every
+        parameter change), so that a replay checks each state with what it was checked with."""
+        if self._bag is None:
+            return
+        settings = {"options": json.loads(options_to_json(self.check_options())),
+                    "frame_id": self.get_parameter("frame_id").value}
+        self._record(SETTINGS_TOPIC, String(data=json.dumps(settings, sort_keys=True)))
 
     def _publish_diagnostics(self) -> None:
         self._diagnostics_pub.publish(self.health.message(

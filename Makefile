@@ -18,7 +18,7 @@ demo: setup
 	$(VENV)/bin/rbe-ros view out/demo -o out/demo/report.html
 	@echo "[demo] open out/demo/report.html in a browser (3D view, step slider, table of steps)"
 
-test: setup browser
+test: setup browser ray
 	@echo "[test] ROS_DOMAIN_ID=$(ROS_DOMAIN_ID) ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST"
 	ROS_DOMAIN_ID=$(ROS_DOMAIN_ID) ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST \
 		$(PY) -m pytest tests -q
@@ -44,6 +44,7 @@ bench: setup
 	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements/bench.txt
 	$(PY) -m pip check --disable-pip-version-check
 	$(PY) benchmarks/bench.py $(BENCH_ARGS)
+	$(MAKE) bench-margin
 
 # As-built noise suite: perturbed poses under the declared uncertainty, the design rule with
 # raised tolerances and today's defaults; docs/ASBUILT.md and docs/figures/asbuilt.png
@@ -86,6 +87,27 @@ lock:
 
 # Headless Chromium for the HTML view's browser test (Debian's chromium, chromium-driver;
 # apt-get as root or with sudo; seconds when already installed).
+# Cost of margin_g against a check, Monte Carlo throughput of 2 workers and of a local
+# 2-CPU Ray against one process: docs/MARGIN.md (a few minutes; also run by make bench).
+.PHONY: bench-margin
+bench-margin: ray
+	$(PY) benchmarks/margin.py
+
+# p_stable against placement noise for near-limit families, rbe_ros beside PyBullet at 1 kHz
+# on the same perturbed poses: docs/MARGIN_CHARTS.md, docs/figures/p_stable_near_limit.png.
+.PHONY: bench-margin-charts
+bench-margin-charts: setup
+	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements/bench.txt
+	$(PY) -m pip check --disable-pip-version-check
+	$(PY) benchmarks/margin_charts.py
+
+# Ray for `rbe-ros robust --ray` and its test (tests/test_robust.py): the optional
+# requirements/ray.txt, installed into .venv and checked beside the ROS wheels.
+.PHONY: ray
+ray: setup
+	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements/ray.txt
+	$(PY) -m pip check --disable-pip-version-check
+
 .PHONY: browser screenshot
 browser:
 	bash scripts/setup_browser.sh

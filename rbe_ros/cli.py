@@ -23,19 +23,22 @@ from .analysis.friction import minimum_friction
 from .analysis.option_spec import BY_PATH, OPTIONS, from_outer
 from .analysis.options import CheckOptions
 from .analysis.pipeline import check_scene, check_sequence, first_failing_step
+from .analysis.executors import ProcessPool, ray_cluster
+from .analysis.perturb import PoseNoise
 from .analysis.planning import plan_sequence
+from .analysis.robust import RobustJob, estimate, sample_scene, serial
 from .analysis.tilt import DIRECTIONS, tilt_capacity
 from .analysis.validate import validated_assembly
 from .analysis.verdict import check
 from .analysis.virtual import ANALYSES, virtual_assembly
 from .generators import GENERATORS
 from .io.figures import draw_report
-from .io.messages import header_dict, report_to_dict, state_to_dict
+from .io.messages import header_dict, json_safe, report_json, report_to_dict, state_to_dict
 from .io.replay import (REPORT_TOPIC, STATE_TOPIC, Run, bag_options, default_output,
                         offline_reports, read_runs, replay_bag, step_stamps, write_runs)
-from .io.report import format_table, json_number, report_json
+from .io.table import format_table
 from .io.view import ViewRun, checked_runs, write_html
-from .io.scene_json import scene_to_dict
+from .io.scene_json import load_scene, scene_to_dict
 from .io.inputs import load_design
 from .io.poses import load_poses, scene_at_poses
 from .io.stored_interfaces import compare_interfaces
@@ -133,6 +136,7 @@ def _assembly(args) -> Assembly:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The parser of every rbe-ros command and its options."""
     parser = argparse.ArgumentParser(prog="rbe-ros", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
     check = sub.add_parser("check", help="check an assembly, or every step of its sequence")
@@ -188,7 +192,8 @@ def build_parser() -> argparse.ArgumentParser:
     generate = sub.add_parser("generate", help="write a parametric scene as JSON")
     generate.add_argument("name", choices=sorted(GENERATORS))
     generate.add_argument("-p", "--param", action="append", default=[], metavar="KEY=VALUE",
-                          help="generator parameter (JSON value), e.g. -p n=15 -p thickness_ratio=0.12")
+                          help="generator parameter (JSON value), e.g. -p n=15 "
+                          "-p thickness_ratio=0.12")
     generate.add_argument("-o", "--output", required=True, help="scene JSON file to write")
     generate.set_defaults(run=_run_generate)
 
@@ -208,6 +213,34 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--json", action="store_true", help="print one JSON object")
     _solver_arguments(plan)
     plan.set_defaults(run=_run_plan)
+
+    robust = sub.add_parser("robust", help="probability that the assembly (or each step) "
+                            "stands under Gaussian placement error (Monte Carlo)")
+    robust.add_argument("scene")
+    robust.add_argument("--pose-sigma", type=uncertainty, required=True,
+                        metavar="POS_M[,ANGLE_DEG]",
+                        help="standard deviation of each free block's position per axis (m) "
+                        "and of its rotation about a random axis (deg); samples are checked "
+                        "with the pose uncertainty declared at 3 sigma")
+    robust.add_argument("--samples", type=int, default=400, metavar="N")
+    robust.add_argument("--seed", type=int, default=0, metavar="S",
+                        help="sample k is drawn from the seed (S, k): same numbers whatever "
+                        "the executor")
+    robust.add_argument("--sequence", action="store_true",
+                        help="p_stable of every step too (a sample's step k is its partial "
+                        "assembly)")
+    robust.add_argument("--json", action="store_true", help="print one JSON object")
+    robust.add_argument("-o", "--output", metavar="WORST.json",
+                        help="write the failing sample closest to the design as a scene file")
+    robust.add_argument("--workers", type=int, default=1, metavar="K",
+                        help="local worker processes (default 1: this process)")
+    robust.add_argument("--ray", metavar="ADDRESS",
+                        help="run the batches as Ray tasks on the cluster at ADDRESS ('auto': "
+                        "the local cluster's; README: How sure is a step?)")
+    robust.add_argument("--batch", type=int, default=16, metavar="B",
+                        help="samples per task (default 16)")
+    _solver_arguments(robust)
+    robust.set_defaults(run=_run_robust)
 
     view = sub.add_parser("view", help="write one self-contained HTML report of a scene's "
                           "check or of a bag: 3D view, step slider, table of steps, options")
@@ -256,7 +289,7 @@ def _run_check(args) -> int:
 
         reports = check_sequence(scene, options, on_step=None if args.json else progress)
         out = {"scene": scene.name, "first_failing_step": first_failing_step(reports),
-               "steps": [report_json(r) for r in reports]}
+               "reports": [report_json(r) for r in reports]}
     else:
         reports = [check_scene(scene, options, stored)]
         out = {"scene": scene.name, **report_json(reports[0])}
@@ -276,11 +309,11 @@ def _run_check(args) -> int:
 def _run_tilt(args) -> int:
     result = tilt_capacity(_assembly(args), _options(args),
                            args.direction, args.tol_deg)
-    out = {"direction": result.direction, "tilt_deg": json_number(result.tilt_deg),
-           "multiplier": json_number(result.multiplier),
-           "tilt_deg_multiplier": json_number(result.tilt_deg_multiplier),
-           "bisection_trials": result.trials, "time_bisection": result.time_bisection,
-           "time_multiplier": result.time_multiplier}
+    out = json_safe({"direction": result.direction, "tilt_deg": result.tilt_deg,
+                     "multiplier": result.multiplier,
+                     "tilt_deg_multiplier": result.tilt_deg_multiplier,
+                     "bisection_trials": result.trials, "time_bisection": result.time_bisection,
+                     "time_multiplier": result.time_multiplier})
     if args.json:
         print(json.dumps(out, indent=1))
     elif math.isnan(result.tilt_deg):
@@ -295,7 +328,7 @@ def _run_tilt(args) -> int:
 def _run_min_friction(args) -> int:
     mu = minimum_friction(_assembly(args), _options(args), args.tol)
     if args.json:
-        print(json.dumps({"mu_min": json_number(mu)}))
+        print(json.dumps(json_safe({"mu_min": mu})))
     else:
         print(f"minimum friction coefficient: {mu:.4f}" if math.isfinite(mu)
               else "no friction coefficient makes the assembly stand (it needs tension)")
@@ -322,7 +355,8 @@ def _run_analyse(args) -> int:
 def _run_figure(args) -> int:
     assembly, report = _analysed(args)
     title = f"{args.analysis + ': ' if args.analysis else ''}{report.message}"
-    print(f"figure written to {draw_report(assembly, report, args.output, title=title, view=tuple(args.view))}")
+    path = draw_report(assembly, report, args.output, title=title, view=tuple(args.view))
+    print(f"figure written to {path}")
     return 0
 
 
@@ -347,6 +381,46 @@ def _run_generate(args) -> int:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(scene_to_dict(scene)))
     print(f"{scene.name}: {len(scene.blocks)} blocks written to {path}")
+    return 0
+
+
+def _run_robust(args) -> int:
+    if args.samples < 1 or args.batch < 1:
+        raise ValueError("--samples and --batch must be at least 1")
+    scene = load_scene(args.scene)
+    job = RobustJob(scene, PoseNoise(*args.pose_sigma), args.seed, _options(args), args.sequence)
+    pool = ProcessPool(args.workers) if args.workers > 1 and not args.ray else None
+    executor = ray_cluster(args.ray) if args.ray else pool or serial
+
+    def progress(done: int, total: int) -> None:
+        if not args.json:
+            print(f"  {done}/{total} samples", file=sys.stderr)
+
+    try:
+        result = estimate(job, args.samples, executor, args.batch, progress)
+    finally:
+        if pool is not None:
+            pool.close()
+    out = {"scene": scene.name, "pose_sigma": list(args.pose_sigma), "seed": args.seed,
+           "p_stable": result.p_stable, "interval": list(result.interval),
+           "samples": result.samples, "closest_failing_sample": result.closest_failure}
+    if args.sequence:
+        out["steps"] = result.steps
+    if args.output and result.closest_failure is not None:
+        worst = sample_scene(job, result.closest_failure)
+        Path(args.output).write_text(json.dumps(scene_to_dict(worst)))
+    if args.json:
+        print(json.dumps(out, indent=1))
+        return 0
+    lo, hi = result.interval
+    print(f"p_stable {result.p_stable:.3f} (95% {lo:.3f} .. {hi:.3f}) over {result.samples} "
+          f"samples, seed {args.seed}")
+    for s in result.steps:
+        print(f"  step {s['step']:>3}  {s['block'] or '-':<20} p_stable {s['p_stable']:.3f}"
+              f"  ({s['interval'][0]:.3f} .. {s['interval'][1]:.3f})")
+    if args.output:
+        print(f"closest failing sample ({result.closest_failure}) written to {args.output}"
+              if result.closest_failure is not None else "no sample failed: nothing written")
     return 0
 
 
@@ -399,7 +473,7 @@ def _run_plan(args) -> int:
                "order": plan.order, "failed_step": plan.failed_step, "message": plan.message,
                "holds": scene_to_dict(plan.scene).get("holds", []) if plan.scene else [],
                "search_checks": plan.checks, "time": plan.time,
-               "steps": [{"held": list(r.held_blocks), **report_json(r)} for r in plan.reports]}
+               "reports": [report_json(r) for r in plan.reports]}
         print(json.dumps(out, indent=1))
     else:
         verdict = "feasible" if plan.feasible else f"NOT feasible (step {plan.failed_step})"
@@ -470,6 +544,7 @@ def _run_replay(args) -> int:
 
 
 def main(argv=None) -> int:
+    """Run one command; bad input is one line on stderr and exit status 2."""
     parser = build_parser()
     args = parser.parse_args(argv)
     try:

@@ -52,6 +52,25 @@ SLOW_TESTS = ("test_paper.py::test_dome_tilt_capacity_is_32_deg",
               "test_generators.py::test_dome_stands_under_self_weight",
               "test_generators.py::test_buttressed_arch_tilting_capacity_is_about_12_degrees")
 
+#: Appended to the scratch copy's tests/conftest.py: mutmut forks every mutant from a process
+#: whose caches its first run of the tests filled (rbe_ros.geometry.block._shape), and a
+#: mutated function behind a cache would never run.
+CLEAR_CACHES = """
+
+import sys as _sys
+
+import pytest as _pytest
+
+
+@_pytest.fixture(autouse=True)
+def _clear_rbe_ros_caches():
+    for name, module in list(_sys.modules.items()):
+        if name.startswith("rbe_ros"):
+            for value in list(vars(module).values()):
+                if callable(getattr(value, "cache_clear", None)):
+                    value.cache_clear()
+"""
+
 
 def targets() -> list[str]:
     """The modules to mutate, as they are in this tree now, in the order they are run: the
@@ -70,6 +89,8 @@ def prepare(modules: list[str]) -> None:
     for name in ("rbe_ros", "tests", "examples"):     # some tests read examples/
         shutil.copytree(ROOT / name, WORK / name, dirs_exist_ok=True,
                         ignore=shutil.ignore_patterns("__pycache__", "ros"))
+    with open(WORK / "tests" / "conftest.py", "a") as f:
+        f.write(CLEAR_CACHES)
     tests = [f"tests/{t}" for t in FAST_TESTS if (ROOT / "tests" / t).exists()]
     (WORK / "pyproject.toml").write_text(
         "[tool.mutmut]\n"
@@ -90,9 +111,9 @@ def run(modules: list[str], children: int, sample: float = 1.0) -> None:
     env = {**os.environ, "HYPOTHESIS_PROFILE": "mutation", "OPENBLAS_NUM_THREADS": "1",
            "OMP_NUM_THREADS": "1"}
     mutmut = [str(MUTMUT), "run", "--max-children", str(children)]
-    names = _module_names(modules[-1])
-    if sample < 1.0 and not names:        # the mutants are made by a first run
-        subprocess.run(mutmut + [names_pattern(modules[-1])], cwd=WORK, env=env, check=False,
+    smallest = min(modules, key=lambda m: (ROOT / m).stat().st_size)
+    if sample < 1.0 and not _module_names(smallest):   # the mutants are made by a first run
+        subprocess.run(mutmut + [names_pattern(smallest)], cwd=WORK, env=env, check=False,
                        stdout=subprocess.DEVNULL)
     for module in modules:
         print(f"[mutation] {module}", flush=True)

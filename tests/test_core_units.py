@@ -12,10 +12,11 @@ from rbe_ros.analysis.assembly import Assembly
 from rbe_ros.geometry.kern import kern, kerns
 from rbe_ros.geometry.polygon import ring_widths
 from rbe_ros.rbe.cones import cone_capacity, pyramid_facets
+from rbe_ros.rbe.model import build_model
 from rbe_ros.rbe.result import Status
 from rbe_ros.rbe.solver import SolveOptions
 from rbe_ros.analysis.options import CheckOptions
-from rbe_ros.analysis.verdict import infeasible_report
+from rbe_ros.analysis.verdict import infeasible_report, is_stable, stable_forces
 from rbe_ros.scene import box_block, make_block, make_scene
 
 from helpers import DENSITY, checked, inclined_block, stacked_boxes
@@ -48,7 +49,7 @@ def test_floating_blocks_are_named_in_full_up_to_five():
     assert one.message == "no equilibrium: block f not connected to a support by any contact"
     many = checked(ground(*[box_block(f"f{k}", (1, 1, 1), (3.0 * k, 0, 3.0), density=DENSITY)
                             for k in range(7)]))
-    assert many.unstable_blocks == [f"f{k}" for k in range(7)]
+    assert many.unstable_blocks == tuple(f"f{k}" for k in range(7))
     assert many.message == ("no equilibrium: blocks f0, f1, f2, f3, f4 and 2 more not connected"
                             " to a support by any contact")
 
@@ -76,7 +77,7 @@ def test_exactly_the_sliding_interfaces_are_flagged(mu, sliding):
     assert flags == {("s20_slope", "s20_box"): "s20" in sliding,
                      ("s25_slope", "s25_box"): "s25" in sliding,
                      ("flat_ground", "flat"): False}
-    assert report.unstable_blocks == sorted(f"{s}_box" for s in sliding)
+    assert report.unstable_blocks == tuple(sorted(f"{s}_box" for s in sliding))
 
 
 def test_infeasible_report_explains_only_what_cannot_stand():
@@ -86,13 +87,13 @@ def test_infeasible_report_explains_only_what_cannot_stand():
     stands = Assembly.from_scene(inclined_block(10.0))
     assert infeasible_report(stands, options) is None
     slides = infeasible_report(Assembly.from_scene(inclined_block(20.0)), options)
-    assert slides.status == Status.FRICTION_EXCEEDED and slides.unstable_blocks == ["box"]
+    assert slides.status == Status.FRICTION_EXCEEDED and slides.unstable_blocks == ("box",)
     tips = infeasible_report(Assembly.from_scene(stacked_boxes(0.6)), options)
-    assert tips.status == Status.TENSION_REQUIRED and tips.unstable_blocks == ["b"]
+    assert tips.status == Status.TENSION_REQUIRED and tips.unstable_blocks == ("b",)
     floating = infeasible_report(Assembly.from_scene(make_scene("f", [
         box_block("ground", (4, 4, 0.2), (0, 0, -0.1), support=True, density=DENSITY),
         box_block("f", (1, 1, 1), (0, 0, 3.0), density=DENSITY)])), options)
-    assert floating.status == Status.INFEASIBLE and floating.unstable_blocks == ["f"]
+    assert floating.status == Status.INFEASIBLE and floating.unstable_blocks == ("f",)
 
 
 def test_the_block_that_tips_is_the_upper_one_whichever_is_listed_first():
@@ -103,7 +104,7 @@ def test_the_block_that_tips_is_the_upper_one_whichever_is_listed_first():
                  "top": box_block("top", (1, 1, 1), (0.6, 0, 1.5), density=DENSITY)}
         report = checked(ground(*(boxes[k] for k in order)))
         assert report.status == Status.TENSION_REQUIRED
-        assert report.unstable_blocks == ["top"], order
+        assert report.unstable_blocks == ("top",), order
 
 
 def test_a_block_hanging_under_a_support_is_the_one_that_falls():
@@ -114,7 +115,7 @@ def test_a_block_hanging_under_a_support_is_the_one_that_falls():
         box_block("hanging", (1, 1, 1), (0, 0, 1.5), density=DENSITY)])
     report = checked(scene)
     assert report.status == Status.TENSION_REQUIRED
-    assert report.unstable_blocks == ["hanging"]
+    assert report.unstable_blocks == ("hanging",)
     (it,) = report.interfaces
     assert -it.normal_resultant == pytest.approx(DENSITY * 9.81, rel=1e-6)   # pure tension
 
@@ -168,3 +169,31 @@ def test_a_solver_out_of_time_is_reported_as_failed():
     assert report.status == Status.SOLVER_FAILED
     assert report.message.startswith("solver failed: ")
     assert report.stable is False
+
+
+def test_is_stable_is_the_verdict_without_its_explanation():
+    options = CheckOptions(SolveOptions(mu=0.6))
+    for scene, expected in ((stacked_boxes(0.3), True), (stacked_boxes(0.6), False),
+                            (inclined_block(40.0), False)):
+        assert is_stable(Assembly.from_scene(scene), options) is expected
+    floating = make_scene("f", [
+        box_block("ground", (4, 4, 0.2), (0, 0, -0.1), support=True, density=DENSITY),
+        box_block("f", (1, 1, 1), (0, 0, 3.0), density=DENSITY)])
+    assert is_stable(Assembly.from_scene(floating), options) is False
+
+
+def test_stable_forces_take_the_load_and_the_options_given():
+    """Twice the dead load gives twice the forces; a slope of 20 deg has none at mu 0.3 (the
+    default 0.6 would hold it); friction+ that needs glue to stand is not stable."""
+    assembly = Assembly.from_scene(inclined_block(20.0))
+    model = build_model(assembly.blocks, assembly.interfaces, assembly.gravity)
+    options = CheckOptions(SolveOptions(mu=0.6))
+    once, _ = stable_forces(model, options)
+    twice, results = stable_forces(model, options, 2.0 * model.dead_load)
+    assert np.allclose(twice.forces, 2.0 * once.forces, atol=1e-6 * np.abs(once.forces).max())
+    assert results[0].normal_resultant == pytest.approx(
+        2.0 * DENSITY * 0.5 * 9.81 * math.cos(math.radians(20.0)), rel=1e-6)
+    assert stable_forces(model, CheckOptions(SolveOptions(mu=0.3))) is None
+    tipping = Assembly.from_scene(stacked_boxes(0.6))
+    glued = build_model(tipping.blocks, tipping.interfaces, tipping.gravity)
+    assert stable_forces(glued, CheckOptions(SolveOptions(friction="plus"))) is None

@@ -235,6 +235,8 @@ def free_weights(state: dict | Scene | SceneError) -> dict[int, float]:
 
 @dataclass(frozen=True)
 class Tolerances:
+    """How far a replayed report may be from the recorded one (module docstring)."""
+
     force: float = 1e-6          # share of the step's free weight
     position: float = 1e-6       # m
     ratio: float = 1e-6          # |V|/N, absolute (plus the force tolerance's share)
@@ -512,6 +514,8 @@ def record_bag(path, scenes: list[tuple[Scene, str, int]], options: CheckOptions
 
 @dataclass
 class ReplayResult:
+    """The runs of a bag, their replayed reports and how they differ from the recorded."""
+
     runs: list[Run]
     replayed: list[list[dict]]
     differences: list[Difference]
@@ -527,6 +531,7 @@ class ReplayResult:
 
 
 def default_output(path) -> Path:
+    """Where a replay of the bag at ``path`` is written unless told: beside it, + "_replay"."""
     path = Path(path)
     return path.with_name(path.name + "_replay")
 

@@ -8,10 +8,14 @@ Interfaces (relative to the node, e.g. ``/rbe_node/report``):
   thread from a single-slot buffer: when states arrive faster than they can be checked, the
   newest replaces the waiting one, and the dropped ones are counted (``dropped_states`` of
   every report, a throttled warning in the log), so memory stays bounded and the newest state
-  is always answered;
+  is always answered. A state that arrives while a sequence is checked supersedes it between
+  two steps: the sequence's last report (SOLVER_FAILED, "superseded: ...") names the first
+  step not checked, and the newer state is checked next;
 * publishes ``~/report`` (rbe_msgs/StabilityReport, reliable, transient_local, depth 1) and
-  ``~/markers`` (visualization_msgs/MarkerArray, same QoS) for every report the node makes,
-  whatever asked for it (topic, service or action);
+  ``~/markers`` (visualization_msgs/MarkerArray, same QoS: the blocks, forces and verdict,
+  :mod:`rbe_ros.io.markers`) for every report the node makes, whatever asked for it (topic,
+  service or action); with ``foxglove_port`` the markers also go to Foxglove as SceneUpdates
+  (:mod:`rbe_ros.io.foxglove_scene`);
 * serves ``~/check`` (rbe_msgs/srv/CheckAssembly): the assembly as a whole, sequence ignored;
 * serves the action ``~/check_sequence`` (rbe_msgs/action/CheckSequence): feedback per step,
   all reports and the first failing step as result; cancellable between steps.
@@ -19,11 +23,11 @@ Interfaces (relative to the node, e.g. ``/rbe_node/report``):
 Bad input never stops the node: a state that cannot be checked (outside the limits of
 :class:`rbe_ros.scene.ValidationLimits`, ``max_blocks`` among them) gives a report with status
 INVALID_INPUT and the reason, a solver failure or a solve over ``check_time_limit`` gives
-SOLVER_FAILED naming the solver's status or the stage, and any other error in a callback is logged and gives
-SOLVER_FAILED with the exception text. With ``mcap_path`` set, every checked state and every
-report is recorded (CDR, receive/publish time) in a rosbag2 MCAP bag, each message flushed
-before the report is published (a report seen on DDS is on disk, even after SIGKILL); the bag
-is closed on shutdown (SIGINT, SIGTERM).
+SOLVER_FAILED naming the solver's status or the stage, and any other error in a callback is
+logged and gives SOLVER_FAILED with the exception text. With ``mcap_path`` set, every checked
+state and every report is recorded (CDR, receive/publish time) in a rosbag2 MCAP bag, each
+message flushed before the report is published (a report seen on DDS is on disk, even after
+SIGKILL); the bag is closed on shutdown (SIGINT, SIGTERM).
 
 Run: ``rbe_node --ros-args -p friction_coefficient:=0.5 -p mcap_path:=bags/run``
 (or ``python -m rbe_ros.ros.node``).
@@ -35,9 +39,11 @@ import signal
 import struct
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import rclpy
+from builtin_interfaces.msg import Time
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType, SetParametersResult)
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
@@ -56,6 +62,7 @@ from visualization_msgs.msg import MarkerArray
 from ..analysis.option_spec import BY_PARAM, OPTIONS, Option, from_outer
 from ..analysis.options import CheckOptions
 from ..analysis.pipeline import StateCheck, check_state
+from ..analysis.steps import sequence_step
 from ..io import cdr
 from ..io.bag import BagWriter, typestore
 from ..io.inputs import load_design
@@ -134,6 +141,10 @@ PARAMETERS = {
 }
 
 
+class ConfigurationError(Exception):
+    """The node cannot start with its parameters (a bag that cannot be created)."""
+
+
 class RbeNode(Node):
     """A thin ROS shell over :func:`check_scene` and :func:`check_sequence`."""
 
@@ -167,15 +178,15 @@ class RbeNode(Node):
         self._service_group = MutuallyExclusiveCallbackGroup()
         self._action_group = ReentrantCallbackGroup()
 
-        # reports go out as CDR bytes made from their message dicts (rbe_ros.io.cdr): ~6x faster
-        # than building the rclpy message (an object per Point) and serialising it
+        # reports go out as CDR bytes made from their message dicts (rbe_ros.io.cdr), without
+        # building the rclpy message (an object per Point) and serialising it
         self._encode_report = cdr.encoder(typestore(), "rbe_msgs/msg/StabilityReport")
         self._encode_markers = cdr.encoder(typestore(), MARKER_TYPE)
         self._report_pub = self.create_publisher(StabilityReport, "~/report", LATCHED_QOS)
         self._marker_pub = self.create_publisher(MarkerArray, "~/markers", LATCHED_QOS)
         # raw: the callback gets the CDR bytes; a state is converted to a message only when
-        # the worker checks it (converting a 100-block state costs ~15 ms of the GIL, which
-        # at 100 Hz would starve the checks)
+        # the worker checks it (converting every state that arrives would hold the GIL and
+        # starve the checks at high rates)
         self._state_sub = self.create_subscription(
             AssemblyState, "~/assembly", self._on_state, STATE_QOS,
             callback_group=self._topic_group, raw=True)
@@ -241,7 +252,12 @@ class RbeNode(Node):
                 k += 1
                 path = path.with_name(f"{stem}_{k}")
         # the options at the start, so that `rbe-ros replay` re-checks the same way
-        self._bag = BagWriter(path, custom_data={OPTIONS_KEY: options_to_json(self.check_options())})
+        try:
+            self._bag = BagWriter(
+                path, custom_data={OPTIONS_KEY: options_to_json(self.check_options())})
+        except OSError as exc:
+            raise ConfigurationError(f"mcap_path {raw!r}: cannot create the bag {path}: "
+                                     f"{exc.strerror or exc}") from None
         self._bag.add_topic(self.state_topic, "rbe_msgs/msg/AssemblyState")
         self._bag.add_topic(self.report_topic, "rbe_msgs/msg/StabilityReport",
                             transient_local=True)
@@ -322,7 +338,7 @@ class RbeNode(Node):
         first, so that a report anyone received is in the bag even if the node is killed.
         ``state``: the state of a check that failed, drawn as it came (the blocks at fault
         of invalid input highlighted)."""
-        report.dropped_states = self._dropped
+        report = replace(report, dropped_states=self._dropped)
         data = self._encode_report(report_to_dict(report, header, arrays=True))
         self._record(self.report_topic, data)
         self._report_pub.publish(data)
@@ -428,11 +444,21 @@ class RbeNode(Node):
 
     def check_state(self, state: AssemblyState, raw: bytes | None = None) -> None:
         """Check a state from the topic (as a whole, or every step of its sequence) and
-        publish the reports; never raises. ``raw``: its CDR bytes, recorded as they came."""
+        publish the reports; never raises. ``raw``: its CDR bytes, recorded as they came.
+        A newer state waiting in the slot supersedes a sequence between two steps: its last
+        report says so (:func:`superseded_report`), and the newer state is checked next."""
         try:
-            self.check(state, self._received(state, raw), bool(state.sequence))
+            header = self._received(state, raw)
+            result, _ = self.check(state, header, bool(state.sequence),
+                                   cancelled=self._superseded)
+            if result.error is None and not result.finished and self._superseded():
+                self._publish(result.scene, superseded_report(result), header)
         except Exception as exc:  # publishing itself failed (e.g. during shutdown)
             self.get_logger().error(f"state not handled: {type(exc).__name__}: {exc}")
+
+    def _superseded(self) -> bool:
+        """Whether a newer state (or as-built update) waits for the worker."""
+        return self._slot is not None
 
     # --- design and measured poses (rbe_ros.poses) -------------------------------------------
 
@@ -538,6 +564,17 @@ def _stamp(header: dict) -> str:
     return f"{stamp['sec']}.{stamp['nanosec']:09d}"
 
 
+def superseded_report(result: StateCheck) -> Report:
+    """The last report of a topic sequence a newer state superseded: the first step not
+    checked, no verdict (SOLVER_FAILED), and why."""
+    done = len(result.reports)
+    step = sequence_step(result.scene, done)
+    return Report(Status.SOLVER_FAILED,
+                  f"superseded: a newer state arrived after {done} of {result.total} steps; "
+                  "the remaining steps were not checked",
+                  step_index=step.index, block_placed=step.block)
+
+
 def _cdr_stamp(data: bytes) -> str:
     """``sec.nanosec`` of the header stamp of a CDR-serialised AssemblyState (for the log)."""
     try:
@@ -580,6 +617,9 @@ def main(args=None) -> None:
         pass
     except ParameterException as exc:  # e.g. -p friction_coefficient:=1 (an integer)
         rclpy.logging.get_logger(NODE_NAME).fatal(f"bad parameter: {exc}")
+        raise SystemExit(2) from None
+    except ConfigurationError as exc:
+        rclpy.logging.get_logger(NODE_NAME).fatal(str(exc))
         raise SystemExit(2) from None
     finally:
         # A second signal during the clean-up exits at once (the bag stays readable).

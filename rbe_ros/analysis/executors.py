@@ -1,0 +1,84 @@
+"""Where the batches of a Monte Carlo study run: a local process pool or a Ray cluster.
+
+Both map :func:`rbe_ros.analysis.robust.run_batch` over the batches and yield the results in
+batch order; since every sample is seeded by its index, the numbers are the executor's
+business only in speed. Workers import the ROS-free core only (no rclpy) and run one solver
+thread each: the processes are the parallelism.
+"""
+from __future__ import annotations
+
+import multiprocessing
+import os
+from collections.abc import Iterator
+from concurrent.futures import ProcessPoolExecutor
+from contextlib import contextmanager
+
+from .robust import RobustJob, SampleResult, run_batch
+
+#: Thread pools of numeric libraries capped at one thread per worker process.
+_ONE_THREAD = {k: "1" for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
+                                "RAYON_NUM_THREADS")}
+
+
+@contextmanager
+def _one_thread_env():
+    """Children spawned inside inherit one-thread settings (the parent's are restored)."""
+    saved = {k: os.environ.get(k) for k in _ONE_THREAD}
+    os.environ.update(_ONE_THREAD)
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+class ProcessPool:
+    """An executor of ``workers`` spawned processes (spawn: no state forked from the caller,
+    which may be a ROS node with threads), kept for later studies until :meth:`close`: a
+    spawned worker spends a second or more importing the core before its first sample."""
+
+    def __init__(self, workers: int):
+        if workers < 1:
+            raise ValueError(f"workers must be at least 1, not {workers}")
+        self.pool = ProcessPoolExecutor(max_workers=workers,
+                                        mp_context=multiprocessing.get_context("spawn"))
+
+    def __call__(self, job: RobustJob, parts: list[range]) -> Iterator[list[SampleResult]]:
+        with _one_thread_env():                 # workers are spawned on submission
+            futures = [self.pool.submit(run_batch, job, part) for part in parts]
+        for f in futures:
+            yield f.result()
+
+    def close(self) -> None:
+        self.pool.shutdown(cancel_futures=True)
+
+    def __enter__(self) -> ProcessPool:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def ray_cluster(address: str | None, **init):
+    """An executor sending each batch as a Ray task (one CPU each) to the cluster at
+    ``address`` ("auto": the one this machine belongs to; None: a new local instance, with
+    ``init`` passed to ``ray.init``, e.g. num_cpus=2). Ray is optional:
+    ``pip install -r requirements/ray.txt``."""
+    try:
+        import ray                # optional dependency, only needed on this path
+    except ImportError as exc:
+        raise RuntimeError("--ray needs Ray: pip install -r requirements/ray.txt") from exc
+
+    def run(job: RobustJob, parts: list[range]) -> Iterator[list[SampleResult]]:
+        if not ray.is_initialized():
+            ray.init(address=address, include_dashboard=False, log_to_driver=False,
+                     runtime_env={"env_vars": _ONE_THREAD}, **init)
+        remote = ray.remote(num_cpus=1)(run_batch)
+        job_ref = ray.put(job)
+        refs = [remote.remote(job_ref, part) for part in parts]
+        for ref in refs:
+            yield ray.get(ref)
+    return run

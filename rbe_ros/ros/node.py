@@ -44,6 +44,7 @@ from pathlib import Path
 
 import rclpy
 from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType, SetParametersResult)
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
@@ -75,6 +76,9 @@ from ..io.replay import (DESIGN, OPTIONS_KEY, POSES, asbuilt_check, merge_messag
 from ..rbe.result import Report, Status
 from ..scene import Scene, SceneError
 from .convert import dict_to_message, message_to_dict, scene_from_msg
+from .diagnostics import PERIOD_S as DIAGNOSTICS_PERIOD_S
+from .diagnostics import TOPIC as DIAGNOSTICS_TOPIC
+from .diagnostics import NodeHealth
 
 NODE_NAME = "rbe_node"
 
@@ -205,6 +209,13 @@ class RbeNode(Node):
             cancel_callback=lambda _goal: CancelResponse.ACCEPT,
             callback_group=self._action_group)
 
+        # /diagnostics about once a second, from the counters the node keeps as it works
+        self.health = NodeHealth()
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
+        self._diagnostics_timer = self.create_timer(
+            DIAGNOSTICS_PERIOD_S, self._publish_diagnostics,
+            callback_group=MutuallyExclusiveCallbackGroup())
+
         self.state_topic = self._state_sub.topic_name
         self.report_topic = self._report_pub.topic_name
         self.design_topic = self._design_sub.topic_name
@@ -282,9 +293,15 @@ class RbeNode(Node):
                     msgtype, latched = self._later_topics.pop(topic)
                     self._bag.add_topic(topic, msgtype, transient_local=latched)
                 self._bag.write(topic, data, stamp)
+                self.health.recorded(len(data))
             except Exception as exc:  # a full disk must not stop the checks
                 self.get_logger().error(f"recording to {self.bag_path} failed, stopped: {exc}")
+                self.health.error(f"recording to {self.bag_path} failed, stopped: {exc}")
                 self._close_bag_locked()
+
+    def _publish_diagnostics(self) -> None:
+        self._diagnostics_pub.publish(self.health.message(
+            self.get_fully_qualified_name(), self.get_clock().now().to_msg()))
 
     def _close_bag_locked(self) -> None:
         bag, self._bag = self._bag, None
@@ -339,6 +356,7 @@ class RbeNode(Node):
         ``state``: the state of a check that failed, drawn as it came (the blocks at fault
         of invalid input highlighted)."""
         report = replace(report, dropped_states=self._dropped)
+        self.health.reported(report)
         data = self._encode_report(report_to_dict(report, header, arrays=True))
         self._record(self.report_topic, data)
         self._report_pub.publish(data)

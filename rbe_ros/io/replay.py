@@ -61,10 +61,10 @@ from .messages import (header_stamp_ns, poses_from_dict, report_header, report_t
 from .poses import AsBuilt
 
 OPTIONS_KEY = "rbe_ros.check_options"
-#: What the node checked with from a time on: the check options and frame_id, recorded at the
-#: start and after every parameter change (std_msgs/String, JSON {"options", "frame_id"}), so
-#: that a replay re-checks every state as it was checked, run-time changes included.
-SETTINGS_TOPIC = "/rbe_node/settings"
+#: What the node checked with from a time on (topic ~/settings): the check options and
+#: frame_id, recorded at the start and after every parameter change (std_msgs/String, JSON
+#: {"options", "frame_id"}), so that a replay re-checks every state as it was checked,
+#: run-time changes included.
 SETTINGS_TYPE = "std_msgs/msg/String"
 STATE_TYPE = "rbe_msgs/msg/AssemblyState"
 POSES_TYPE = "rbe_msgs/msg/BlockPoses"
@@ -104,7 +104,7 @@ class Run:
     report_stamps: list[int] = field(default_factory=list)
     report_topic: str = REPORT_TOPIC
     kind: str = STATE                               # STATE, DESIGN or POSES
-    settings: dict | None = None    # the node's settings when it got the state (SETTINGS_TOPIC)
+    settings: dict | None = None    # the node's settings when it got the state (~/settings)
 
     @property
     def key(self) -> tuple[int, int]:
@@ -608,5 +608,5 @@ __all__ = ["DESIGN", "Difference", "OPTIONS_KEY", "POSES", "ReplayResult", "Run"
            "Tolerances", "asbuilt_check", "asbuilt_scenes", "bag_options", "compare_report",
            "compare_runs", "default_output", "free_weights", "merge_message", "offline_reports",
            "options_from_json", "options_to_json", "read_runs", "record_bag", "replay_bag",
-           "replay_run", "run_settings", "SETTINGS_TOPIC", "state_reports", "step_stamps",
+           "replay_run", "run_settings", "SETTINGS_TYPE", "state_reports", "step_stamps",
            "write_runs"]

@@ -73,7 +73,7 @@ from ..io.foxglove_scene import SceneServer
 from ..io.markers import MARKER_TYPE, run_markers, step_markers
 from ..io.messages import report_header, report_to_dict, state_to_dict
 from ..io.poses import AsBuilt
-from ..io.replay import (DESIGN, OPTIONS_KEY, POSES, SETTINGS_TOPIC, SETTINGS_TYPE,
+from ..io.replay import (DESIGN, OPTIONS_KEY, POSES, SETTINGS_TYPE,
                          asbuilt_check, merge_message, options_to_json)
 from ..rbe.result import Report, Status
 from ..scene import Scene, SceneError
@@ -278,7 +278,8 @@ class RbeNode(Node):
                             transient_local=True)
         self._bag.add_topic(self.marker_topic, MARKER_TYPE, transient_local=True)
         # added with their first message: a bag of states alone has only their topics
-        self._bag.add_topic(SETTINGS_TOPIC, SETTINGS_TYPE, transient_local=True)
+        self.settings_topic = f"{self.get_fully_qualified_name()}/settings"
+        self._bag.add_topic(self.settings_topic, SETTINGS_TYPE, transient_local=True)
         self._later_topics = {self.design_topic: ("rbe_msgs/msg/AssemblyState", True),
                               self.poses_topic: ("rbe_msgs/msg/BlockPoses", False)}
         self.bag_path = path
@@ -311,7 +312,7 @@ class RbeNode(Node):
             return
         settings = {"options": json.loads(options_to_json(self.check_options())),
                     "frame_id": self.get_parameter("frame_id").value}
-        self._record(SETTINGS_TOPIC, String(data=json.dumps(settings, sort_keys=True)))
+        self._record(self.settings_topic, String(data=json.dumps(settings, sort_keys=True)))
 
     def _publish_diagnostics(self) -> None:
         self._diagnostics_pub.publish(self.health.message(

@@ -93,6 +93,14 @@ lock:
 bench-margin: ray
 	$(PY) benchmarks/margin.py
 
+# p_stable against placement noise for near-limit families, rbe_ros beside PyBullet at 1 kHz
+# on the same perturbed poses: docs/MARGIN_CHARTS.md, docs/figures/p_stable_near_limit.png.
+.PHONY: bench-margin-charts
+bench-margin-charts: setup
+	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements/bench.txt
+	$(PY) -m pip check --disable-pip-version-check
+	$(PY) benchmarks/margin_charts.py
+
 # Ray for `rbe-ros robust --ray` and its test (tests/test_robust.py): the optional
 # requirements/ray.txt, installed into .venv and checked beside the ROS wheels.
 .PHONY: ray

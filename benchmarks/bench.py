@@ -11,7 +11,7 @@ own venv, see _bench_cra_driver.py):
   interface detection included; tilt capacities with ``tilt_capacity``);
 * the default problem stated in cvxpy (``_cvxpy_rbe.py``), same detection and matrices;
 * compas_cra 0.8.0 ``rbe_solve`` (IPOPT), on the same scenes exported with
-  ``compas_io.save_compas_assembly``;
+  ``rbe_ros.io.compas.save_compas_assembly``;
 * PyBullet at 240 Hz and at 1 kHz, MuJoCo at 1 kHz (``_physics.py``).
 
 Writes docs/BENCHMARKS.md, docs/bench/*.png and docs/bench/results.json. Every number is
@@ -46,7 +46,7 @@ from timing import best_of  # noqa: E402
 from rbe_ros import generators as gen  # noqa: E402
 from rbe_ros.analysis.assembly import Assembly  # noqa: E402
 from rbe_ros.analysis.options import CheckOptions  # noqa: E402
-from rbe_ros.analysis.pipeline import check_scene
+from rbe_ros.analysis.pipeline import check_scene  # noqa: E402
 from rbe_ros.analysis.tilt import horizontal, tilt_capacity  # noqa: E402
 from rbe_ros.geometry.contacts import ContactOptions  # noqa: E402
 from rbe_ros.rbe.model import build_model  # noqa: E402

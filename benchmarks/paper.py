@@ -8,7 +8,6 @@ the same quantities against the paper's values with tolerances.
 """
 from __future__ import annotations
 
-import math
 import sys
 import time
 from pathlib import Path

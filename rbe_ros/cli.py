@@ -33,10 +33,10 @@ from .analysis.verdict import check
 from .analysis.virtual import ANALYSES, virtual_assembly
 from .generators import GENERATORS
 from .io.figures import draw_report
-from .io.messages import header_dict, report_to_dict, state_to_dict
+from .io.messages import header_dict, json_safe, report_json, report_to_dict, state_to_dict
 from .io.replay import (REPORT_TOPIC, STATE_TOPIC, Run, bag_options, default_output,
                         offline_reports, read_runs, replay_bag, step_stamps, write_runs)
-from .io.report import format_table, json_number, report_json
+from .io.table import format_table
 from .io.view import ViewRun, checked_runs, write_html
 from .io.scene_json import load_scene, scene_to_dict
 from .io.inputs import load_design
@@ -136,6 +136,7 @@ def _assembly(args) -> Assembly:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The parser of every rbe-ros command and its options."""
     parser = argparse.ArgumentParser(prog="rbe-ros", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
     check = sub.add_parser("check", help="check an assembly, or every step of its sequence")
@@ -191,7 +192,8 @@ def build_parser() -> argparse.ArgumentParser:
     generate = sub.add_parser("generate", help="write a parametric scene as JSON")
     generate.add_argument("name", choices=sorted(GENERATORS))
     generate.add_argument("-p", "--param", action="append", default=[], metavar="KEY=VALUE",
-                          help="generator parameter (JSON value), e.g. -p n=15 -p thickness_ratio=0.12")
+                          help="generator parameter (JSON value), e.g. -p n=15 "
+                          "-p thickness_ratio=0.12")
     generate.add_argument("-o", "--output", required=True, help="scene JSON file to write")
     generate.set_defaults(run=_run_generate)
 
@@ -215,7 +217,8 @@ def build_parser() -> argparse.ArgumentParser:
     robust = sub.add_parser("robust", help="probability that the assembly (or each step) "
                             "stands under Gaussian placement error (Monte Carlo)")
     robust.add_argument("scene")
-    robust.add_argument("--pose-sigma", type=uncertainty, required=True, metavar="POS_M[,ANGLE_DEG]",
+    robust.add_argument("--pose-sigma", type=uncertainty, required=True,
+                        metavar="POS_M[,ANGLE_DEG]",
                         help="standard deviation of each free block's position per axis (m) "
                         "and of its rotation about a random axis (deg); samples are checked "
                         "with the pose uncertainty declared at 3 sigma")
@@ -286,7 +289,7 @@ def _run_check(args) -> int:
 
         reports = check_sequence(scene, options, on_step=None if args.json else progress)
         out = {"scene": scene.name, "first_failing_step": first_failing_step(reports),
-               "steps": [report_json(r) for r in reports]}
+               "reports": [report_json(r) for r in reports]}
     else:
         reports = [check_scene(scene, options, stored)]
         out = {"scene": scene.name, **report_json(reports[0])}
@@ -306,11 +309,11 @@ def _run_check(args) -> int:
 def _run_tilt(args) -> int:
     result = tilt_capacity(_assembly(args), _options(args),
                            args.direction, args.tol_deg)
-    out = {"direction": result.direction, "tilt_deg": json_number(result.tilt_deg),
-           "multiplier": json_number(result.multiplier),
-           "tilt_deg_multiplier": json_number(result.tilt_deg_multiplier),
-           "bisection_trials": result.trials, "time_bisection": result.time_bisection,
-           "time_multiplier": result.time_multiplier}
+    out = json_safe({"direction": result.direction, "tilt_deg": result.tilt_deg,
+                     "multiplier": result.multiplier,
+                     "tilt_deg_multiplier": result.tilt_deg_multiplier,
+                     "bisection_trials": result.trials, "time_bisection": result.time_bisection,
+                     "time_multiplier": result.time_multiplier})
     if args.json:
         print(json.dumps(out, indent=1))
     elif math.isnan(result.tilt_deg):
@@ -325,7 +328,7 @@ def _run_tilt(args) -> int:
 def _run_min_friction(args) -> int:
     mu = minimum_friction(_assembly(args), _options(args), args.tol)
     if args.json:
-        print(json.dumps({"mu_min": json_number(mu)}))
+        print(json.dumps(json_safe({"mu_min": mu})))
     else:
         print(f"minimum friction coefficient: {mu:.4f}" if math.isfinite(mu)
               else "no friction coefficient makes the assembly stand (it needs tension)")
@@ -352,7 +355,8 @@ def _run_analyse(args) -> int:
 def _run_figure(args) -> int:
     assembly, report = _analysed(args)
     title = f"{args.analysis + ': ' if args.analysis else ''}{report.message}"
-    print(f"figure written to {draw_report(assembly, report, args.output, title=title, view=tuple(args.view))}")
+    path = draw_report(assembly, report, args.output, title=title, view=tuple(args.view))
+    print(f"figure written to {path}")
     return 0
 
 
@@ -469,7 +473,7 @@ def _run_plan(args) -> int:
                "order": plan.order, "failed_step": plan.failed_step, "message": plan.message,
                "holds": scene_to_dict(plan.scene).get("holds", []) if plan.scene else [],
                "search_checks": plan.checks, "time": plan.time,
-               "steps": [{"held": list(r.held_blocks), **report_json(r)} for r in plan.reports]}
+               "reports": [report_json(r) for r in plan.reports]}
         print(json.dumps(out, indent=1))
     else:
         verdict = "feasible" if plan.feasible else f"NOT feasible (step {plan.failed_step})"
@@ -540,6 +544,7 @@ def _run_replay(args) -> int:
 
 
 def main(argv=None) -> int:
+    """Run one command; bad input is one line on stderr and exit status 2."""
     parser = build_parser()
     args = parser.parse_args(argv)
     try:

@@ -149,7 +149,7 @@ def harmonic_stack(n: int = 5, scale: float = 1.0, length: float = 1.0, depth: f
     """
     width = max(2, len(str(n)))
     ids = [f"h{k:0{width}d}" for k in range(1, n + 1)]               # h01 is the top block
-    edge = 0.0                                                      # right edge of the support below
+    edge = 0.0                                                    # right edge of the support below
     blocks = [_box("table", (-2 * length, -depth, -height), (0.0, depth, 0.0),
                    density=density, support=True)]
     for level, k in enumerate(range(n, 0, -1)):                     # bottom (k = n) up
@@ -203,7 +203,8 @@ def buttressed_arch(voussoirs: int = 15, inner_radius: float = 1.0, thickness: f
     """
     if springing not in ("centre", "inner"):
         raise ValueError(f'springing must be "centre" or "inner", not {springing!r}')
-    inner = inner_radius if springing == "inner" else inner_radius + (thickness - buttress_width) / 2
+    inner = (inner_radius if springing == "inner"
+             else inner_radius + (thickness - buttress_width) / 2)
     if inner > inner_radius or inner + buttress_width < inner_radius + thickness:
         raise ValueError("the springing joint must lie on the buttress top")
     h = buttress_height / buttress_courses

@@ -201,24 +201,30 @@ def make_block(block_id, vertices, faces, position=(0, 0, 0), orientation=(0, 0,
         except (TypeError, ValueError):
             raise SceneError(f"{where}: faces must be lists of vertex indices") from None
         if len(face_tuple) < 4:
-            raise SceneError(f"{where}: a closed block needs at least 4 faces, got {len(face_tuple)}")
+            raise SceneError(f"{where}: a closed block needs at least 4 faces, "
+                             f"got {len(face_tuple)}")
         for f in face_tuple:
             if len(f) < 3 or min(f) < 0 or max(f) >= len(verts):
-                raise SceneError(f"{where}: face {list(f)} is not a polygon of existing vertices")
+                raise SceneError(f"{where}: face {list(f)} is not a polygon of existing "
+                                 "vertices")
         pos = finite_array(position, (3,), f"{where}: position")
         quat = finite_array(orientation, (4,), f"{where}: orientation")
         norm = float(np.linalg.norm(quat))
         if abs(norm - 1.0) > 1e-3:
-            raise SceneError(f"{where}: orientation quaternion (x, y, z, w) must have unit norm, has {norm:.6g}")
+            raise SceneError(f"{where}: orientation quaternion (x, y, z, w) must have unit "
+                             f"norm, has {norm:.6g}")
         density, mass = float(density or 0.0), float(mass or 0.0)
         if not (math.isfinite(density) and math.isfinite(mass)) or density < 0 or mass < 0:
             raise SceneError(f"{where}: density and mass must be finite and non-negative")
         if (density > 0) == (mass > 0):
-            raise SceneError(f"{where}: give exactly one of a positive density (kg/m^3) or mass (kg)")
+            raise SceneError(f"{where}: give exactly one of a positive density (kg/m^3) or "
+                             "mass (kg)")
         return Block(name, verts, face_tuple, pos, quat / norm, density, mass, bool(support))
 
 
 def finite_array(value, shape, what: str) -> np.ndarray:
+    """``value`` as a float array of ``shape`` (-1: any length) with finite entries, else a
+    SceneError naming ``what``."""
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):

@@ -20,7 +20,7 @@ import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from mutation import DOC, FAST_TESTS, ROOT, replace_section  # noqa: E402
+from mutation import DOC, FAST_TESTS, ROOT, replace_section
 
 #: name: (what it does, original text, planted text)
 BUGS = {

@@ -1,6 +1,7 @@
 """Bounded checks: the shape analysis of large meshes, and a time limit on the whole check."""
 import math
 import time
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -10,12 +11,14 @@ from rbe_ros import generators as gen
 from rbe_ros.analysis import incremental
 from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.analysis.pipeline import check_scene, check_sequence
+from rbe_ros.analysis.steps import sequence_step, sequence_steps, step_count
 from rbe_ros.deadline import CheckTimeout, checkpoint, stage, time_budget
 from rbe_ros.geometry import block as block_module
 from rbe_ros.geometry.block import ANGLE_TOL, PLANE_TOL, _group_planes, pose_block
 from rbe_ros.geometry.support import projection_extents
 from rbe_ros.rbe.result import Status
 from rbe_ros.rbe.solver import SolveOptions
+from rbe_ros.scene import Hold
 
 from helpers import stacked_boxes
 
@@ -144,3 +147,15 @@ def test_a_time_limit_bounds_each_step_of_a_sequence(monkeypatch):
     assert [r.status for r in reports] == [Status.STABLE, Status.SOLVER_FAILED]
     assert reports[1].message == "solver failed: time limit of 0.2 s exceeded in the solve stage"
     assert reports[1].step_index == 1 and reports[1].block_placed == "b"
+
+
+def test_one_step_is_made_as_the_whole_list_makes_it():
+    """sequence_step(k) (the cost of one step) against sequence_steps()[k], with holds and a
+    release step after the last placement."""
+    wall = gen.running_bond_wall(3, 3)
+    last = wall.sequence[-1]
+    scene = replace(wall, holds=(Hold(last, 0, len(wall.sequence)), Hold(wall.sequence[2], 1, 4)))
+    steps = sequence_steps(scene)
+    assert step_count(scene) == len(steps) == len(wall.sequence) + 1
+    assert [sequence_step(scene, k) for k in range(len(steps))] == steps
+    assert steps[-1].block == "" and last not in steps[-1].held and last in steps[-2].held

@@ -1,6 +1,7 @@
 """The command line: JSON outputs with real values, one-line errors for bad input."""
 import json
 import math
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -9,6 +10,7 @@ import pytest
 
 from rbe_ros.io.bag import read_bag
 from rbe_ros.cli import main
+from rbe_ros.rbe.result import Status
 
 EXAMPLE = Path(__file__).parents[1] / "examples" / "build_sequence.json"
 
@@ -20,28 +22,39 @@ def run_json(capsys, *argv):
 
 def test_check_sequence_json_names_the_failing_step_and_interface(capsys):
     out = run_json(capsys, "check", str(EXAMPLE), "--sequence", "--json")
-    steps = out["steps"]
-    assert [s["block"] for s in steps] == ["pillar_left", "pillar_right", "lintel", "block_left",
+    steps = out["reports"]
+    assert [s["block_placed"] for s in steps] == ["pillar_left", "pillar_right", "lintel", "block_left",
                                            "wedge", "cap"]
     assert [s["stable"] for s in steps] == [True] * 5 + [False]
     assert out["first_failing_step"] == 5
     last = steps[-1]
-    assert last["status"] == "TENSION_REQUIRED" and "lintel|cap" in last["message"]
+    assert last["status"] == Status.TENSION_REQUIRED and "lintel|cap" in last["message"]
     assert last["max_tension"] > 100.0
     flagged = [i for i in last["interfaces"] if i["tension"]]
     assert [(i["block_a"], i["block_b"]) for i in flagged] == [("lintel", "cap")]
     # the lintel (1.2 x 0.2 x 0.2 m, 2000 kg/m^3) and what it carries rest on the pillars
     first = steps[0]["interfaces"][0]
-    assert first["normal_force"] == pytest.approx(0.2 * 0.2 * 0.6 * 2000 * 9.81, rel=1e-6)
+    assert first["normal_resultant"] == pytest.approx(0.2 * 0.2 * 0.6 * 2000 * 9.81, rel=1e-6)
 
 
 def test_check_whole_assembly_json_has_the_documented_fields(capsys):
     out = run_json(capsys, "check", str(EXAMPLE), "--json")
     assert {"stable", "status", "max_tension", "interfaces"} <= set(out)
     it = out["interfaces"][0]
-    assert {"block_a", "block_b", "normal_force", "shear_force", "centre_of_pressure",
+    assert {"block_a", "block_b", "normal_resultant", "shear_resultant", "centre_of_pressure",
             "tension", "friction_exceeded"} <= set(it)
-    assert len(it["shear_force"]) == 3 and len(it["centre_of_pressure"]) == 3
+    assert set(it["shear_resultant"]) == set(it["centre_of_pressure"]) == {"x", "y", "z"}
+
+
+def test_readme_lists_every_key_of_the_json_report(capsys):
+    """The README's key list of `check --json` is the message dict's, no more, no less."""
+    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    text = readme[readme.index("`check --json` prints"):readme.index("With `--sequence`,")]
+    listed = set(re.findall(r'"(\w+)"', text))
+    out = run_json(capsys, "check", str(EXAMPLE), "--json")
+    keys = set(out) | set(out["interfaces"][0]) | set(out["header"]) | {"x", "y", "z"}
+    keys |= {"block_a", "block_b", "gap", "overlap_area"}      # of each near contact
+    assert listed == keys - {"stamp", "frame_id"}
 
 
 def test_check_records_a_bag_that_reads_back(tmp_path, capsys):
@@ -126,9 +139,9 @@ def test_contact_options_from_the_command_line(tmp_path, capsys):
                                box_block("box", (1, 1, 1), (0, 0, 0.505), density=2000)])
     path = tmp_path / "gap.json"
     path.write_text(json.dumps(scene_to_dict(scene)))
-    assert run_json(capsys, "check", str(path), "--json")["status"] == "INFEASIBLE"
+    assert run_json(capsys, "check", str(path), "--json")["status"] == Status.INFEASIBLE
     out = run_json(capsys, "check", str(path), "--json", "--distance-tol", "0.01")
-    assert out["status"] == "STABLE"
-    assert out["interfaces"][0]["normal_force"] == pytest.approx(2000 * 9.81, rel=1e-6)
+    assert out["status"] == Status.STABLE
+    assert out["interfaces"][0]["normal_resultant"] == pytest.approx(2000 * 9.81, rel=1e-6)
     assert main(["check", str(path), "--vertex-tol", "-1"]) == 2
     assert "--vertex-tol" in capsys.readouterr().err

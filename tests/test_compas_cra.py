@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-import compas_compare as cc  # noqa: E402
+import compas_compare as cc
 
 
 SAMPLES = ("cubes", "A", "H", "snake")

@@ -15,12 +15,13 @@ from rbe_ros.cli import main
 from rbe_ros.io.compas import compas_document, compas_scene, interfaces_of
 from rbe_ros.rbe.model import build_model
 from rbe_ros.rbe.solver import SolveOptions, Weights, solve
+from rbe_ros.rbe.result import Status
 from rbe_ros.io.scene_json import read_json
 from rbe_ros.io.stored_interfaces import compare_interfaces, stored_assembly
 from rbe_ros.analysis.assembly import Assembly
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
-from compas_compare import _solve_with_weights  # noqa: E402
+from compas_compare import _solve_with_weights
 
 DATA = Path(__file__).parent / "data"
 CUBES = DATA / "compas_two_cubes.json"
@@ -35,27 +36,27 @@ def run_json(capsys, *argv):
 def test_every_command_takes_a_compas_file(capsys, tmp_path):
     out = run_json(capsys, "check", CUBES, "--json")
     # two unit cubes of 2000 kg/m^3, the top one shifted 0.2 m: its weight on one interface
-    assert out["status"] == "STABLE" and out["num_blocks"] == 2
-    assert out["interfaces"][0]["normal_force"] == pytest.approx(2000 * 9.81, rel=1e-6)
+    assert out["status"] == Status.STABLE and out["num_blocks"] == 2
+    assert out["interfaces"][0]["normal_resultant"] == pytest.approx(2000 * 9.81, rel=1e-6)
     # tips about the base's edge at a tilt of atan(0.3 / 0.5) towards +x
     tilt = run_json(capsys, "tilt", CUBES, "--json")
     assert tilt["tilt_deg"] == pytest.approx(np.degrees(np.arctan(0.3 / 0.5)), abs=0.02)
     assert run_json(capsys, "min-friction", CUBES, "--json")["mu_min"] == pytest.approx(0, abs=1e-3)
     gz = tmp_path / "cubes.json.gz"
     gz.write_bytes(gzip.compress(CUBES.read_bytes()))
-    assert run_json(capsys, "check", gz, "--json")["interfaces"][0]["normal_force"] == \
+    assert run_json(capsys, "check", gz, "--json")["interfaces"][0]["normal_resultant"] == \
         pytest.approx(2000 * 9.81, rel=1e-6)
 
 
 def test_density_applies_where_the_file_gives_none(capsys):
     # the cubes file gives 2000 kg/m^3 per node: kept
     out = run_json(capsys, "check", CUBES, "--density", "1000", "--json")
-    assert out["interfaces"][0]["normal_force"] == pytest.approx(2000 * 9.81, rel=1e-6)
+    assert out["interfaces"][0]["normal_resultant"] == pytest.approx(2000 * 9.81, rel=1e-6)
     # the vault gives none: forces scale with the density (2500 by default)
     a = run_json(capsys, "check", VAULT, "--interfaces", "stored", "--json")
     b = run_json(capsys, "check", VAULT, "--interfaces", "stored", "--density", "1000", "--json")
-    fa = np.array([i["normal_force"] for i in a["interfaces"]])
-    fb = np.array([i["normal_force"] for i in b["interfaces"]])
+    fa = np.array([i["normal_resultant"] for i in a["interfaces"]])
+    fb = np.array([i["normal_resultant"] for i in b["interfaces"]])
     assert fb == pytest.approx(0.4 * fa, rel=1e-5, abs=1e-6 * fa.max())
     # a scene file gives each block's density or mass
     example = Path(__file__).parents[1] / "examples" / "build_sequence.json"
@@ -70,7 +71,7 @@ def test_stored_interfaces_of_the_cubes_are_the_detected_ones(capsys):
     assert (s["block_a"], s["block_b"]) == (d["block_a"], d["block_b"])
     assert s["normal"] == pytest.approx(d["normal"])
     assert s["centre_of_pressure"] == pytest.approx(d["centre_of_pressure"], abs=1e-9)
-    assert s["normal_force"] == pytest.approx(d["normal_force"], rel=1e-9)
+    assert s["normal_resultant"] == pytest.approx(d["normal_resultant"], rel=1e-9)
 
 
 def test_cross_vault_detected_interfaces_match_the_stored_ones(capsys):
@@ -172,7 +173,7 @@ def test_dome_needs_and_stands_with_its_modelling_accuracy_declared(capsys):
     assert (diff["stored"], diff["detected"]) == (1488, 1488)
     assert diff["missing"] == diff["extra"] == diff["area_changes"] == []
     assert diff["detected_area"] == pytest.approx(diff["stored_area"], rel=1e-3)
-    assert out["status"] == "STABLE" and out["num_blocks"] == 527
+    assert out["status"] == Status.STABLE and out["num_blocks"] == 527
 
 
 def test_cross_vault_with_its_modelling_accuracy_declared_finds_every_stored_interface(capsys):
@@ -181,4 +182,4 @@ def test_cross_vault_with_its_modelling_accuracy_declared_finds_every_stored_int
     diff = out["interfaces_compare"]
     assert (diff["stored"], diff["detected"]) == (488, 488) and diff["missing"] == []
     assert diff["detected_area"] == pytest.approx(diff["stored_area"], rel=1e-6)
-    assert out["status"] == "STABLE"
+    assert out["status"] == Status.STABLE

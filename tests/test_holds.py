@@ -77,15 +77,15 @@ def test_held_blocks_make_the_leaning_stack_stand():
     assert [r.status for r in plain] == [Status.STABLE] * 3 + [Status.TENSION_REQUIRED] * 2
     # step 3 tips about the edge of b00: b01-b03 have their centre of mass 0.6 m out (edge 0.5)
     step3 = plain[3]
-    assert step3.held_blocks == [] and len(step3.suggested_holds) == 1
+    assert step3.held_blocks == () and len(step3.suggested_holds) == 1
     assert step3.max_tension > 1e-3 * WEIGHT
-    assert plain[0].suggested_holds == []
+    assert plain[0].suggested_holds == ()
     base = leaning_stack(4)
     held = make_scene(base.name, base.blocks, base.gravity, base.sequence,
                       [Hold(step3.suggested_holds[0], 3)])
     reports = check_sequence(held)
     assert all(r.stable for r in reports), [r.message for r in reports]
-    assert [r.held_blocks for r in reports] == [[]] * 3 + [step3.suggested_holds]
+    assert [r.held_blocks for r in reports] == [()] * 3 + [step3.suggested_holds]
     # the whole check: the state after the last step, with the hold to the end
     whole = check_scene(held)
     assert whole.stable and whole.held_blocks == step3.suggested_holds
@@ -185,7 +185,7 @@ def test_greedy_beyond_the_budget_stands_and_is_minimal_by_inclusion():
 
 def test_suggestions_can_be_switched_off():
     options = CheckOptions(holds=HoldSearch(enabled=False))
-    assert all(r.suggested_holds == [] for r in check_sequence(leaning_stack(), options))
+    assert all(r.suggested_holds == () for r in check_sequence(leaning_stack(), options))
 
 
 def test_cli_check_json_names_the_holds(tmp_path, capsys):
@@ -194,7 +194,7 @@ def test_cli_check_json_names_the_holds(tmp_path, capsys):
     data["holds"] = [{"block": "b02", "from_step": 4}]
     path.write_text(json.dumps(data))
     assert main(["check", str(path), "--sequence", "--json"]) == 0
-    steps = json.loads(capsys.readouterr().out)["steps"]
+    steps = json.loads(capsys.readouterr().out)["reports"]
     assert [s["held_blocks"] for s in steps] == [[]] * 4 + [["b02"]]
     # b03 and b04 (centre of mass 1.05 m out) stand on the held b02 (0.1 .. 1.1 m)
     assert [s["stable"] for s in steps] == [True, True, True, False, True]

@@ -17,6 +17,7 @@ from rbe_ros.analysis.margin import horizontal_directions, stability_margin
 from rbe_ros.cli import main
 from rbe_ros.io.messages import header_dict, report_from_dict, report_to_dict
 from rbe_ros.rbe.solver import SolveOptions
+from rbe_ros.rbe.result import Status
 from rbe_ros.io.scene_json import load_scene
 from rbe_ros.scene import box_block, make_scene
 
@@ -97,11 +98,11 @@ def test_cli_margin_per_step_in_json_and_message_dicts(tmp_path, capsys):
     assert main(["generate", "stack", "-p", "n=3", "-p", "height=2.0", "-o", str(scene)]) == 0
     capsys.readouterr()
     assert main(["check", str(scene), "--sequence", "--margin", "--json"]) == 0
-    steps = json.loads(capsys.readouterr().out)["steps"]
+    steps = json.loads(capsys.readouterr().out)["reports"]
     for k, step in enumerate(steps):
         assert step["margin_g"] == pytest.approx(0.5 / (k + 1), rel=REL)
-        assert abs(step["margin_direction"][0]) == pytest.approx(1.0) or \
-            abs(step["margin_direction"][1]) == pytest.approx(1.0)
+        assert abs(step["margin_direction"]["x"]) == pytest.approx(1.0) or \
+            abs(step["margin_direction"]["y"]) == pytest.approx(1.0)
     report = check_scene(load_scene(scene), CheckOptions(margin_directions=8))
     back = report_from_dict(report_to_dict(report, header_dict("world", 0)))
     assert back.margin_g == report.margin_g == pytest.approx(0.5 / 3, rel=REL)
@@ -112,6 +113,6 @@ def test_cli_margin_per_step_in_json_and_message_dicts(tmp_path, capsys):
     capsys.readouterr()
     assert main(["check", str(tipping), "--margin", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
-    assert out["status"] == "TENSION_REQUIRED" and out["margin_g"] == 0.0
+    assert out["status"] == Status.TENSION_REQUIRED and out["margin_g"] == 0.0
     assert main(["check", str(tipping), "--json"]) == 0
-    assert json.loads(capsys.readouterr().out)["margin_g"] is None      # not computed (-1)
+    assert json.loads(capsys.readouterr().out)["margin_g"] == -1.0      # not computed

@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import textwrap
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -46,7 +47,7 @@ def report():
         shear=np.array([0.4, 0.5, 0.0]), centre_of_pressure=np.array([0.45, 0.37, 0.0]),
         torque=-0.125, kern=square[:3] * 0.5, friction_ratio=math.inf, tension=True,
         friction_exceeded=False)
-    return Report(stable=False, status=Status.TENSION_REQUIRED, message="needs glue",
+    return Report(status=Status.TENSION_REQUIRED, message="needs glue",
                   max_tension=1.25, worst_friction_ratio=0.0177, solve_time=0.004, num_blocks=3,
                   interfaces=[iface], unstable_blocks=["a"], step_index=1, block_placed="a")
 
@@ -125,7 +126,7 @@ def test_report_round_trip():
     assert d["interfaces"][0]["polygon"][2] == {"x": 1.0, "y": 1.0, "z": 0.0}
     assert d["interfaces"][0]["normal_forces"] == [10.0, 20.5, -1.25, 7.0]
     back = messages.report_from_dict(d)
-    assert back.status is Status.TENSION_REQUIRED and back.unstable_blocks == ["a"]
+    assert back.status is Status.TENSION_REQUIRED and back.unstable_blocks == ("a",)
     assert (back.step_index, back.block_placed, back.num_blocks) == (1, "a", 3)
     a, b = r.interfaces[0], back.interfaces[0]
     for name in ("normal", "polygon", "normal_forces", "tangential_forces", "resultant", "shear",
@@ -291,12 +292,11 @@ def test_holds_and_hold_report_fields_round_trip():
         messages.scene_from_state_dict(bad)
     with pytest.raises(SceneError, match="no such block"):
         messages.scene_from_state_dict(dict(d, holds=[{"block": "ghost"}]))
-    r = report()
-    r.held_blocks, r.suggested_holds = ["t"], ["a"]
+    r = replace(report(), held_blocks=("t",), suggested_holds=("a",))
     rd = messages.report_to_dict(r, messages.header_dict("world", 1))
     assert (rd["held_blocks"], rd["suggested_holds"]) == (["t"], ["a"])
     back = messages.report_from_dict(rd)
-    assert (back.held_blocks, back.suggested_holds) == (["t"], ["a"])
+    assert (back.held_blocks, back.suggested_holds) == (("t",), ("a",))
     # through a bag (CDR) and back
     store = bag.typestore()
     raw = cdr.encode(store, "rbe_msgs/msg/AssemblyState", d)
@@ -367,8 +367,8 @@ def test_cdr_of_a_report_in_both_forms():
     """A report as plain message dict and in the numpy form of report_to_dict(arrays=True):
     the same bytes, which rosbags reads back as the plain dict and writes again identically."""
     store = bag.typestore()
-    r = report()
-    r.held_blocks, r.suggested_holds, r.model, r.dropped_states = ["t"], ["a", "g"], "local 3", 4
+    r = replace(report(), held_blocks=("t",), suggested_holds=("a", "g"), model="local 3",
+                dropped_states=4)
     header = messages.header_dict("wörld", 1_500_000_000_123)
     plain = messages.report_to_dict(r, header)
     data = cdr.encode(store, REPORT, plain)
@@ -377,7 +377,7 @@ def test_cdr_of_a_report_in_both_forms():
     obj = store.deserialize_cdr(data, REPORT)
     assert bag.to_dict(store, REPORT, obj) == plain
     assert bytes(store.serialize_cdr(obj, REPORT)) == data
-    empty = messages.report_to_dict(Report(False, Status.INVALID_INPUT, "invalid: ∅"), header)
+    empty = messages.report_to_dict(Report(Status.INVALID_INPUT, "invalid: ∅"), header)
     obj = store.deserialize_cdr(cdr.encode(store, REPORT, empty), REPORT)
     assert bag.to_dict(store, REPORT, obj) == empty and obj.interfaces == []
 

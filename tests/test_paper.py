@@ -12,7 +12,7 @@ from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.analysis.verdict import check
 from rbe_ros.analysis.friction import minimum_friction
 from rbe_ros.analysis.tilt import tilt_capacity
-from rbe_ros.analysis.virtual import ANALYSES, virtual_assembly
+from rbe_ros.analysis.virtual import virtual_assembly
 from rbe_ros.rbe.result import Status
 from rbe_ros.rbe.solver import SolveOptions
 
@@ -99,7 +99,10 @@ def test_buttressed_arch_initial_state_has_buttress_thrust_inside_the_kern():
         u = np.cross(frame_n, [0.0, 1.0, 0.0]) if abs(frame_n[1]) < 0.9 else np.array([1.0, 0, 0])
         u /= np.linalg.norm(u)
         v = np.cross(frame_n, u)
-        to2d = lambda p: np.column_stack(((p - r.polygon[0]) @ u, (p - r.polygon[0]) @ v))
+
+        def to2d(p):
+            return np.column_stack(((p - r.polygon[0]) @ u, (p - r.polygon[0]) @ v))
+
         kern = shapely.Polygon(to2d(r.kern))
         assert kern.buffer(1e-9).contains(shapely.Point(to2d(r.centre_of_pressure[None])[0])), \
             f"resultant outside the kern at {r.block_a}|{r.block_b}"

@@ -7,6 +7,7 @@ from scipy.spatial.transform import Rotation
 
 from rbe_ros import generators as gen
 from rbe_ros.analysis.perturb import PoseNoise, perturb_poses, perturb_scene
+from rbe_ros.scene import BOX_FACES, box_block, box_vertices, make_block, make_scene
 
 
 def test_position_and_angle_distributions():
@@ -45,6 +46,26 @@ def test_scene_noise_is_seeded_and_keeps_supports():
     zero = perturb_scene(scene, PoseNoise(), np.random.default_rng(7))
     assert all(np.allclose(a.position, b.position, atol=0)
                for a, b in zip(scene.blocks, zero.blocks))
+
+
+def test_blocks_turn_about_their_own_centre():
+    """A mesh given in scene coordinates 10 m from its frame origin (as COMPAS files are):
+    the noise turns it about its vertex mean, which stays put without position noise, while
+    its vertices turn by the angle about it."""
+    vertices = box_vertices((0.4, 0.2, 0.1)) + [10.0, 0.0, 0.05]
+    scene = make_scene("far", [box_block("ground", (30, 1, 0.1), (10, 0, -0.05), support=True,
+                                         density=2000.0),
+                               make_block("b", vertices, BOX_FACES, density=2000.0)])
+    noisy = perturb_scene(scene, PoseNoise(0.0, 1.0), np.random.default_rng(2)).blocks[1]
+    world = Rotation.from_quat(noisy.orientation).apply(vertices) + noisy.position
+    assert np.allclose(world.mean(axis=0), [10.0, 0.0, 0.05], atol=1e-12)
+    rotvec = Rotation.from_quat(noisy.orientation).as_rotvec()
+    angle, axis = np.linalg.norm(rotvec), rotvec / np.linalg.norm(rotvec)
+    assert 0 < np.degrees(angle) < 5
+    r = vertices - vertices.mean(axis=0)
+    r_perp = r - np.outer(r @ axis, axis)        # each vertex moves on a circle about the axis
+    assert np.allclose(np.linalg.norm(world - vertices, axis=1),
+                       2 * math.sin(angle / 2) * np.linalg.norm(r_perp, axis=1), atol=1e-12)
 
 
 def test_noise_must_be_finite_and_non_negative():

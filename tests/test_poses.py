@@ -64,7 +64,7 @@ def test_a_measured_offset_gives_the_forces_of_that_geometry(shift):
 
 def test_a_block_measured_beyond_the_edge_tips():
     report = check_scene(scene_at_poses(gen.two_blocks(), {"top": ([0.55, 0, 0.75], IDENTITY)}))
-    assert report.status == Status.TENSION_REQUIRED and report.unstable_blocks == ["top"]
+    assert report.status == Status.TENSION_REQUIRED and report.unstable_blocks == ("top",)
 
 
 def test_as_built_accumulates_updates_and_refuses_a_bad_one_whole():
@@ -103,14 +103,14 @@ def test_cli_check_design_with_poses(tmp_path, capsys):
         "b01": {"position": [0.3, 0.0, 0.75], "orientation": IDENTITY}}}))
     assert main(["check", str(design), "--poses", str(poses), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
-    assert out["status"] == "STABLE" and out["num_blocks"] == 3
+    assert out["status"] == Status.STABLE and out["num_blocks"] == 3
     top = next(i for i in out["interfaces"] if i["block_b"] == "b01" or i["block_a"] == "b01")
     # b01 (1 x 1 x 0.5 m, 2000 kg/m^3) rests on b00 with its centroid 0.3 m out
-    assert top["normal_force"] == pytest.approx(1000 * 9.81, rel=1e-6)
-    assert top["centre_of_pressure"][0] == pytest.approx(0.3, abs=1e-6)
+    assert top["normal_resultant"] == pytest.approx(1000 * 9.81, rel=1e-6)
+    assert top["centre_of_pressure"]["x"] == pytest.approx(0.3, abs=1e-6)
     # per step: the measured blocks in the design's sequence
     assert main(["check", str(design), "--poses", str(poses), "--sequence", "--json"]) == 0
-    assert [s["block"] for s in json.loads(capsys.readouterr().out)["steps"]] == ["b00", "b01"]
+    assert [s["block_placed"] for s in json.loads(capsys.readouterr().out)["reports"]] == ["b00", "b01"]
     poses.write_text(json.dumps({"poses": {"b9": {"position": [0, 0, 0],
                                                   "orientation": IDENTITY}}}))
     assert main(["check", str(design), "--poses", str(poses)]) == 2

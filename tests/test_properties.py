@@ -208,7 +208,7 @@ def test_stack_verdict_is_the_closed_form_one_and_explained(spec, solve):
     if report.status == Status.INFEASIBLE:
         # explained: exactly the boxes above the lowest gap float
         gap = next(k for k, it in enumerate(its) if it.polygon.area == 0)
-        assert report.unstable_blocks == sorted(b.id for b in spec.boxes[gap + 1:])
+        assert report.unstable_blocks == tuple(sorted(b.id for b in spec.boxes[gap + 1:]))
         assert "not connected to a support" in report.message
     elif report.status == Status.TENSION_REQUIRED:
         assert report.max_tension > 1e-5 * free_weight(scene)

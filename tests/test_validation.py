@@ -92,7 +92,7 @@ def test_cli_gives_one_line_and_exit_2(case, tmp_path, capsys):
 
 def test_floating_block_is_a_verdict_not_an_error():
     report = check_scene(scene_from_dict(scene_of(box(), box("f", position=[0, 0, 3]))))
-    assert report.status == Status.INFEASIBLE and report.unstable_blocks == ["f"]
+    assert report.status == Status.INFEASIBLE and report.unstable_blocks == ("f",)
     assert "not connected to a support" in report.message
 
 
@@ -198,6 +198,6 @@ def test_cli_time_limit(tmp_path, capsys):
     capsys.readouterr()
     out = json.loads(capsys.readouterr().out if main(["check", str(path), "--json",
                                                       "--time-limit", "1e-7"]) == 0 else "{}")
-    assert out["status"] == "SOLVER_FAILED" and "time limit of 1e-07 s" in out["message"]
+    assert out["status"] == Status.SOLVER_FAILED and "time limit of 1e-07 s" in out["message"]
     assert main(["check", str(path), "--time-limit", "-1"]) == 2
     assert "--time-limit" in capsys.readouterr().err

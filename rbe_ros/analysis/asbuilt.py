@@ -38,14 +38,14 @@ def declared(options: CheckOptions, scene: Scene) -> CheckOptions:
                                             pose_uncertainty_deg=deg))
 
 
-def annotate_sensitivity(report: Report, assembly: Assembly, options: CheckOptions) -> None:
-    """Fill ``near_contacts`` and ``verdict_sensitive`` of ``report`` (the check of
-    ``assembly``); when sensitive, the message says why (" | sensitive: ...")."""
+def sensitivity(report: Report, assembly: Assembly, options: CheckOptions
+                ) -> tuple[tuple[NearContact, ...], str]:
+    """The ``near_contacts`` of ``report`` (the check of ``assembly``) and, when its verdict
+    is sensitive to the contact tolerance, why (else "")."""
     ids = [b.id for b in assembly.blocks]
-    report.near_contacts = [NearContact(ids[it.a], ids[it.b], it.gap, it.area)
-                            for it in assembly.near]
+    near = tuple(NearContact(ids[it.a], ids[it.b], it.gap, it.area) for it in assembly.near)
     if report.status not in _DECIDED:
-        return
+        return near, ""
     stood = report.stable
     why = []
     if assembly.near:
@@ -60,9 +60,7 @@ def annotate_sensitivity(report: Report, assembly: Assembly, options: CheckOptio
             why.append(f"without the contact{'s' * (len(marginal) > 1)} "
                        f"{_pairs(marginal, ids)}, near the tolerance, it would "
                        f"{_verb(not stood)}")
-    if why:
-        report.verdict_sensitive = True
-        report.message += " | sensitive: " + "; ".join(why)
+    return near, "; ".join(why)
 
 
 def _verb(stand: bool) -> str:

@@ -23,13 +23,12 @@ Beyond that budget, a greedy heuristic: repeatedly hold the candidate that leave
 fewest free blocks in failing components (ties: least tension, then candidate order),
 evaluating up to ``greedy_width`` candidates: first the blocks the failed check names as
 moving (``unstable_blocks``, from the friction+ explanation), then the other blocks of the
-smallest failing component, each group highest first. Finally each held block whose release keeps the
-assembly standing is released (the result is minimal by inclusion, not necessarily in
+smallest failing component, each group highest first. Finally each held block whose release
+keeps the assembly standing is released (the result is minimal by inclusion, not necessarily in
 size). Both parts count checks, not seconds, so results do not depend on the machine.
 """
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -225,19 +224,19 @@ def release_unneeded(oracle: StabilityOracle, held: list[int]) -> list[int]:
     return held
 
 
-def annotate_holds(report: Report, assembly: Assembly, held, options: CheckOptions) -> Report:
-    """Set ``report.held_blocks`` to ``held`` and, when the report is unstable in a way a hold
-    can change, ``report.suggested_holds`` to the smallest set of further blocks to hold
-    (time added to ``solve_time``). ``assembly`` is the checked one (``held`` as supports)."""
-    report.held_blocks = [str(b) for b in held]
+def suggested_holds(report: Report, assembly: Assembly, options: CheckOptions
+                    ) -> tuple[str, ...]:
+    """The smallest set of further blocks to hold so that ``assembly`` (the checked one,
+    its held blocks as supports) stands, when ``report`` is unstable in a way a hold can
+    change and the search is on; else none."""
     free = sum(not b.support for b in assembly.blocks)
     if (options.holds.enabled and not report.stable and report.status in HOLDABLE
             and free <= options.holds.max_free_blocks):
-        start = time.perf_counter()
         result = minimal_holds(assembly, options)
-        report.suggested_holds = list(result.blocks) if result.stands else []
-        report.solve_time += time.perf_counter() - start
-    return report
+        if result.stands:
+            return result.blocks
+    return ()
 
 
-__all__ = ["HoldResult", "StabilityOracle", "annotate_holds", "minimal_holds", "release_unneeded"]
+__all__ = ["HoldResult", "StabilityOracle", "minimal_holds", "release_unneeded",
+           "suggested_holds"]

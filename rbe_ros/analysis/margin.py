@@ -16,7 +16,6 @@ planes for the exact cone on that LP, which wander over degenerate faces without
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -79,12 +78,12 @@ def _multiplier(model, options: SolveOptions, live: np.ndarray) -> float:
     return float(solution.multiplier) if solution.solved else 0.0
 
 
-def annotate_margin(report: Report, assembly: Assembly, options: SolveOptions,
-                    directions: int) -> None:
-    """Set ``report``'s margin_g and margin_direction over ``directions`` directions (0: leave
-    them unset, margin_g NOT_COMPUTED); an assembly that does not stand has margin 0."""
+def report_margin(report: Report, assembly: Assembly, options: SolveOptions,
+                  directions: int) -> Margin | None:
+    """The margin of ``assembly`` (checked in ``report``) over ``directions`` directions
+    (0: None, the report's margin_g stays NOT_COMPUTED); an assembly that does not stand has
+    margin 0."""
     if directions <= 0:
-        return
-    margin = (stability_margin(assembly, options, directions) if report.stable
-              else not_standing(directions, assembly.gravity))
-    report.margin_g, report.margin_direction = margin.margin_g, margin.direction
+        return None
+    return (stability_margin(assembly, options, directions) if report.stable
+            else not_standing(directions, assembly.gravity))

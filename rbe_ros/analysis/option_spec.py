@@ -29,6 +29,8 @@ NONE, INFINITE = "none", "inf"
 
 @dataclass(frozen=True)
 class Option:
+    """One option: where it lives in CheckOptions, its flag, node parameter and range."""
+
     path: str                   # attribute path in CheckOptions; the stored JSON key
     kind: type                  # float, int, bool or str
     help: str

@@ -3,7 +3,8 @@
 One model of measurement error, shared by every study that perturbs poses (the as-built
 noise suite, Monte Carlo margins): each free block's position gets independent Gaussian
 noise per axis, and its orientation a rotation about a uniformly random axis through the
-block's position by a Gaussian angle. Supports stay where they are (the ground, a scaffold
+block's centre (the mean of its vertices, as rbe_ros.geometry.uncertainty takes it) by a
+Gaussian angle. Supports stay where they are (the ground, a scaffold
 are the reference the poses are measured in). Draws come from the caller's numpy Generator
 in a fixed order (all positions, then all axes, then all angles), so a seed gives the same
 scene on every machine. The forces of a perturbed check compare with the design's by block
@@ -36,9 +37,11 @@ class PoseNoise:
 
 
 def perturb_poses(positions: np.ndarray, orientations: np.ndarray, noise: PoseNoise,
-                  rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+                  rng: np.random.Generator, centres: np.ndarray | None = None
+                  ) -> tuple[np.ndarray, np.ndarray]:
     """Noisy copies of ``positions`` (n, 3) and unit quaternions ``orientations`` (n, 4,
-    x y z w): the noise rotation is applied in the scene frame, about each block's position."""
+    x y z w): the noise rotation is applied in the scene frame, about each block's point of
+    ``centres`` (n, 3; default the positions)."""
     positions = np.asarray(positions, dtype=float).reshape(-1, 3)
     orientations = np.asarray(orientations, dtype=float).reshape(-1, 4)
     n = len(positions)
@@ -48,18 +51,24 @@ def perturb_poses(positions: np.ndarray, orientations: np.ndarray, noise: PoseNo
     angle = np.radians(rng.normal(0.0, noise.angle_sigma_deg, size=n))
     if not n:
         return positions.copy(), orientations.copy()
-    turned = Rotation.from_rotvec(axis * angle[:, None]) * Rotation.from_quat(orientations)
-    return positions + shift, turned.as_quat()
+    turn = Rotation.from_rotvec(axis * angle[:, None])
+    centres = positions if centres is None else np.asarray(centres, dtype=float).reshape(-1, 3)
+    moved = centres + turn.apply(positions - centres) + shift
+    return moved, (turn * Rotation.from_quat(orientations)).as_quat()
 
 
 def perturb_scene(scene: Scene, noise: PoseNoise, rng: np.random.Generator) -> Scene:
-    """``scene`` with the pose of every free block perturbed (supports kept exactly)."""
+    """``scene`` with the pose of every free block perturbed about its centre (the mean of
+    its vertices; supports kept exactly)."""
     free = [k for k, b in enumerate(scene.blocks) if not b.support]
     if not free:
         return scene
-    pos, quat = perturb_poses([scene.blocks[k].position for k in free],
-                              [scene.blocks[k].orientation for k in free], noise, rng)
     blocks = list(scene.blocks)
+    positions = np.array([blocks[k].position for k in free])
+    orientations = np.array([blocks[k].orientation for k in free])
+    centres = positions + Rotation.from_quat(orientations).apply(
+        np.array([blocks[k].vertices.mean(axis=0) for k in free]))
+    pos, quat = perturb_poses(positions, orientations, noise, rng, centres)
     for k, p, q in zip(free, pos, quat):
         blocks[k] = replace(blocks[k], position=p, orientation=q)
     return replace(scene, blocks=tuple(blocks))

@@ -5,18 +5,18 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from ..deadline import CheckTimeout, stage, time_budget
 from ..rbe.result import Report, Status
 from ..scene import Scene, SceneError
-from .asbuilt import annotate_sensitivity, declared
+from .asbuilt import declared, sensitivity
 from .assembly import Assembly
-from .holds import annotate_holds
+from .holds import suggested_holds
 from .incremental import StepChecker
-from .margin import annotate_margin
+from .margin import report_margin
 from .options import CheckOptions
-from .steps import final_state, sequence_steps
+from .steps import final_state, sequence_step, step_count
 from .validate import validated_assembly
 from .verdict import check
 
@@ -43,16 +43,10 @@ def check_scene(scene: Scene, options: CheckOptions = CheckOptions(),
                 assembly = assembly.subset(present, held)
             with stage("solve"):
                 report = check(assembly, options)
-            with stage("sensitivity"):
-                annotate_sensitivity(report, assembly, options)
-            with stage("hold search"):
-                annotate_holds(report, assembly, held, options)
-            with stage("margin"):
-                annotate_margin(report, assembly, options.solve, options.margin_directions)
+            report = _completed(report, assembly, held, options)
     except CheckTimeout as exc:
         report = timeout_report(exc)
-    report.solve_time = time.perf_counter() - start
-    return report
+    return replace(report, solve_time=time.perf_counter() - start)
 
 
 def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
@@ -67,7 +61,7 @@ def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
     """
     start = time.perf_counter()
     options = declared(options, scene)
-    steps = sequence_steps(scene)
+    total = step_count(scene)
     limit = options.solve.time_limit
     try:
         with time_budget(limit):
@@ -77,9 +71,10 @@ def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
     contact_time = time.perf_counter() - start
     checker = StepChecker(options, local=not options.full_solve)
     reports = []
-    for step in steps:
+    for k in range(total):      # one step at a time: making them all costs the size squared
         if cancelled is not None and cancelled():
             break
+        step = sequence_step(scene, k)
         step_start = time.perf_counter()
         try:
             if full is None:
@@ -88,39 +83,51 @@ def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
             with time_budget(limit):
                 with stage("solve"):
                     report = checker.check(assembly)
-                with stage("sensitivity"):
-                    annotate_sensitivity(report, assembly, options)
-                with stage("hold search"):
-                    annotate_holds(report, assembly, step.held, options)
-                with stage("margin"):
-                    annotate_margin(report, assembly, options.solve, options.margin_directions)
+                report = _completed(report, assembly, step.held, options)
         except CheckTimeout as exc:
-            report = timeout_report(exc)
-            report.num_blocks = len(step.present)
-            report.solve_time = time.perf_counter() - step_start
-        report.step_index, report.block_placed = step.index, step.block
-        report.solve_time += contact_time / len(steps)
+            report = replace(timeout_report(exc), num_blocks=len(step.present))
+        # the step's time, with its share of the contact detection done once for all steps
+        report = replace(report, step_index=step.index, block_placed=step.block,
+                         solve_time=time.perf_counter() - step_start + contact_time / total)
         reports.append(report)
         if on_step is not None:
-            on_step(report, len(steps))
+            on_step(report, total)
     return reports
 
 
+def _completed(report: Report, assembly: Assembly, held, options: CheckOptions) -> Report:
+    """The verdict of ``assembly`` completed in one place, each part in its stage of the
+    time budget: the near contacts and whether the verdict is sensitive to the contact
+    tolerance (why, in the message), the blocks held, the suggested holds, the margin."""
+    with stage("sensitivity"):
+        near, sensitive = sensitivity(report, assembly, options)
+    with stage("hold search"):
+        suggested = suggested_holds(report, assembly, options)
+    with stage("margin"):
+        found = report_margin(report, assembly, options.solve, options.margin_directions)
+    extra = {} if found is None else {"margin_g": found.margin_g,
+                                      "margin_direction": found.direction}
+    return replace(report, near_contacts=near, verdict_sensitive=bool(sensitive),
+                   message=report.message + (f" | sensitive: {sensitive}" if sensitive else ""),
+                   held_blocks=tuple(held), suggested_holds=suggested, **extra)
+
+
 def first_failing_step(reports: list[Report]) -> int:
+    """The step index of the first report that is not stable; -1 when all are."""
     return next((r.step_index for r in reports if not r.stable), -1)
 
 
 def timeout_report(exc: CheckTimeout) -> Report:
     """The report of a check stopped at its time limit."""
-    return Report(False, Status.SOLVER_FAILED, f"solver failed: {exc}")
+    return Report(Status.SOLVER_FAILED, f"solver failed: {exc}")
 
 
 def error_report(exc: Exception) -> Report:
     """The report of a state that could not be checked: INVALID_INPUT naming the problem
     for bad input, SOLVER_FAILED with the exception for anything else."""
     if isinstance(exc, SceneError):
-        return Report(False, Status.INVALID_INPUT, f"invalid input: {exc}")
-    return Report(False, Status.SOLVER_FAILED, f"check failed: {type(exc).__name__}: {exc}")
+        return Report(Status.INVALID_INPUT, f"invalid input: {exc}")
+    return Report(Status.SOLVER_FAILED, f"check failed: {type(exc).__name__}: {exc}")
 
 
 @dataclass(frozen=True)
@@ -160,7 +167,7 @@ def check_state(read_scene: Callable[[bool], Scene], sequence: bool,
 
     try:
         scene = read_scene(sequence)
-        total = len(sequence_steps(scene)) if sequence else 1
+        total = step_count(scene) if sequence else 1
         if sequence:
             check_sequence(scene, options, on_step=step, cancelled=cancelled)
         else:

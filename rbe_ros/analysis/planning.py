@@ -47,6 +47,8 @@ RESTS_ON = 0.05
 
 @dataclass(frozen=True)
 class PlanOptions:
+    """The planner's search: the holds it may use and the width of its beam."""
+
     max_held: int = 2            # K: blocks held at any step
     beam: int = 1                # partial plans kept per step (1: greedy)
     candidates: int = 8          # candidates tried per partial plan and step, lowest first

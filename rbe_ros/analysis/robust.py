@@ -40,6 +40,8 @@ class RobustJob:
 
 @dataclass(frozen=True)
 class SampleResult:
+    """The verdicts of one perturbed sample."""
+
     index: int
     stands: bool                 # the whole check, or every step
     steps: tuple[bool, ...]      # per step (with sequence); () otherwise
@@ -48,6 +50,8 @@ class SampleResult:
 
 @dataclass(frozen=True)
 class RobustResult:
+    """The probability of standing over the samples, with its interval, per step."""
+
     p_stable: float
     interval: tuple[float, float]
     samples: int
@@ -117,6 +121,7 @@ def run_batch(job: RobustJob, indices: Iterable[int]) -> list[SampleResult]:
 
 
 def batches(samples: int, size: int) -> list[range]:
+    """Sample indices in consecutive batches of ``size``."""
     return [range(i, min(i + size, samples)) for i in range(0, samples, size)]
 
 

@@ -11,6 +11,8 @@ from ..scene import Scene
 
 @dataclass(frozen=True)
 class Step:
+    """One step of a sequence: the block placed and the blocks present and held."""
+
     index: int
     block: str                      # "" at the release step after the last placement
     present: tuple[str, ...]
@@ -52,8 +54,21 @@ def final_state(scene: Scene) -> tuple[tuple[str, ...], tuple[str, ...]]:
 def sequence_steps(scene: Scene) -> list[Step]:
     """The steps of ``scene.sequence`` (all free blocks in scene order when it is empty),
     and a release step (nothing placed) when a hold ends after the last placement."""
-    free = [b.id for b in scene.blocks if not b.support]
-    order = list(scene.sequence) or free
-    release = any(h.until_step == len(order) for h in scene.holds)
-    return [Step(k, order[k] if k < len(order) else "", *step_state(scene, order, k))
-            for k in range(len(order) + release)]
+    return [sequence_step(scene, k) for k in range(step_count(scene))]
+
+
+def _order(scene: Scene) -> list[str]:
+    return list(scene.sequence) or [b.id for b in scene.blocks if not b.support]
+
+
+def step_count(scene: Scene) -> int:
+    """The number of :func:`sequence_steps` (without making them: each costs the scene's
+    size, all of them its square)."""
+    order = _order(scene)
+    return len(order) + any(h.until_step == len(order) for h in scene.holds)
+
+
+def sequence_step(scene: Scene, k: int) -> Step:
+    """Step ``k`` of :func:`sequence_steps` alone."""
+    order = _order(scene)
+    return Step(k, order[k] if k < len(order) else "", *step_state(scene, order, k))

@@ -27,6 +27,8 @@ DIRECTIONS = {"x": (1, 0, 0), "-x": (-1, 0, 0), "y": (0, 1, 0), "-y": (0, -1, 0)
 
 @dataclass(frozen=True)
 class TiltResult:
+    """The tilt capacity by both methods, in one direction."""
+
     direction: str
     tilt_deg: float            # by bisection
     multiplier: float          # lambda of the load-multiplier problem
@@ -50,6 +52,8 @@ def horizontal(direction: str, gravity: np.ndarray) -> np.ndarray:
 
 def tilt_capacity(assembly: Assembly, options: CheckOptions = CheckOptions(),
                   direction: str = "x", tol_deg: float = 0.01) -> TiltResult:
+    """The largest tilt of gravity towards ``direction`` the assembly stands, by bisection
+    to ``tol_deg`` and by the load-multiplier problem."""
     g = np.asarray(assembly.gravity, dtype=float)
     h = horizontal(direction, g)
     down, magnitude = g / np.linalg.norm(g), float(np.linalg.norm(g))

@@ -3,8 +3,9 @@
 :func:`validated_assembly` is the geometry stage of every check with validation on: the
 scene's limits (:func:`rbe_ros.scene.validate_scene`), then the posed blocks (closed,
 positive-volume meshes), the densities implied by given masses, and no two blocks overlapping
-beyond the penetration tolerance plus what a declared pose uncertainty explains. Each problem raises one :class:`SceneError` naming it.
-A block that touches nothing is not invalid: the check's verdict says so (INFEASIBLE).
+beyond the penetration tolerance plus what a declared pose uncertainty explains. Each
+problem raises one :class:`SceneError` naming it. A block that touches nothing is not
+invalid: the check's verdict says so (INFEASIBLE).
 """
 from __future__ import annotations
 

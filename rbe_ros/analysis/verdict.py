@@ -10,7 +10,6 @@ block is connected to a support) shows where tension is needed.
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import replace
 
 from ..rbe.cones import cone_capacity
@@ -24,19 +23,16 @@ from .options import CheckOptions
 
 
 def check(assembly: Assembly, options: CheckOptions = CheckOptions()) -> Report:
-    """Verdict, forces and reason for ``assembly`` under its gravity."""
-    start = time.perf_counter()
-    report = _verdict(assembly, options)
-    report.num_blocks = len(assembly.blocks)
-    report.solve_time = time.perf_counter() - start
-    return report
+    """Verdict, forces and reason for ``assembly`` under its gravity (no time: the pipeline
+    measures the whole check)."""
+    return replace(_verdict(assembly, options), num_blocks=len(assembly.blocks))
 
 
 def _deciding(assembly: Assembly, options: CheckOptions):
     """The report of floating blocks, else (model, solution of the deciding problem)."""
     floating = ContactGraph(assembly).floating_blocks()
     if floating:
-        return Report(False, Status.INFEASIBLE,
+        return Report(Status.INFEASIBLE,
                       f"no equilibrium: {_names(floating)} not connected to a support by any"
                       f" contact", unstable_blocks=floating)
     model = build_model(assembly.blocks, assembly.interfaces, assembly.gravity)
@@ -71,14 +67,14 @@ def _explain(model: EquilibriumModel, options: CheckOptions) -> Report:
     """Why the deciding problem is infeasible: sliding (it stands with unlimited friction),
     or where tension is needed (friction+)."""
     if options.solve.friction == "plus":
-        return Report(False, Status.INFEASIBLE, "no equilibrium even with tension")
+        return Report(Status.INFEASIBLE, "no equilibrium even with tension")
     unlimited = solve(model, replace(options.solve, mu=math.inf, allow_tension=False))
     if unlimited.solved:
         return _report(model, unlimited, options, sliding=True)
     glued = solve(model, replace(options.solve, friction="plus"))
     if not glued.solved:
         return (_failed(glued) if glued.status == "failed" else
-                Report(False, Status.INFEASIBLE, "no equilibrium even with tension"))
+                Report(Status.INFEASIBLE, "no equilibrium even with tension"))
     return _report(model, glued, options)
 
 
@@ -152,8 +148,8 @@ def _report(model, solution, options: CheckOptions, *, sliding: bool = False) ->
         status = Status.STABLE
         message = (f"stable: {len(results)} interface{'s' * (len(results) != 1)} in compression,"
                    f" worst |V|/N {worst:.3f} (mu {mu:.3g})")
-    return Report(status == Status.STABLE, status, message, max_tension, worst, 0.0,
-                  len(model.blocks), results, unstable)
+    return Report(status, message, max_tension, worst, num_blocks=len(model.blocks),
+                  interfaces=results, unstable_blocks=unstable)
 
 
 #: With a declared pose uncertainty, the friction ratio counts (worst_friction_ratio, the
@@ -195,7 +191,7 @@ def _load_direction(model):
 
 
 def _failed(solution) -> Report:
-    return Report(False, Status.SOLVER_FAILED, f"solver failed: {solution.solver_status}")
+    return Report(Status.SOLVER_FAILED, f"solver failed: {solution.solver_status}")
 
 
 def _iface(r: InterfaceResult) -> str:

@@ -4,9 +4,8 @@ The contact vertices of chosen interfaces are moved onto a shrunk copy of the po
 the equilibrium is written on the reduced interface. A thrust that cannot fit shows tension
 in the explanation of the check (friction+), instead of merely failing.
 
-Shrinking by a factor s in (0, 1] maps a vertex p to q + s (p - q), where q is the target:
-the polygon's centroid (``point``), or p's projection on an edge line (``edge``); ``kern``
-replaces the polygon by its kern.
+Shrinking by a factor s in (0, 1] maps a vertex p to q + s (p - q), where q is p's projection
+on an edge line (``edge``); ``kern`` replaces the polygon by its kern.
 """
 from __future__ import annotations
 
@@ -23,12 +22,8 @@ ANALYSES = ("kern-fitting", "inner-base-fitting", "outer-base-fitting", "max-thr
 
 
 def to_kern(it: Interface) -> Interface:
+    """The interface reduced to its kern (resultants there cannot open the joint)."""
     return _with_points(it, it.kern)
-
-
-def towards_point(it: Interface, factor: float, point: np.ndarray | None = None) -> Interface:
-    q = it.frame.origin if point is None else np.asarray(point, dtype=float)
-    return _with_points(it, q + factor * (it.points - q))
 
 
 def towards_edge(it: Interface, factor: float, edge: int) -> Interface:
@@ -65,6 +60,7 @@ def _vertical_axis(assembly: Assembly) -> tuple[np.ndarray, np.ndarray]:
 
 
 def support_interfaces(assembly: Assembly) -> list[int]:
+    """Indices of the interfaces on a support."""
     return [k for k, it in enumerate(assembly.interfaces)
             if assembly.blocks[it.a].support or assembly.blocks[it.b].support]
 

@@ -61,7 +61,6 @@ class PosedBlock:
                                 #      read-only: they do not depend on the pose)
     face_extents: np.ndarray    # (F, 2) min and max of n . x over the block's vertices x
     convex: bool                # every vertex inside every face plane (to 1e-6 of the size)
-    position: np.ndarray        # (3,) origin of the block frame: pose errors turn about it
 
     @cached_property
     def faces(self) -> tuple[Face, ...]:
@@ -135,7 +134,7 @@ def pose_blocks(blocks) -> list[PosedBlock]:
         out.append(PosedBlock(block.id, block.support, world[vb:ve], centroids[k], shape.volume,
                               float(mass), shape.volume ** (1.0 / 3.0), aabb[k], normals[fb:fe],
                               offsets[fb:fe], origins[fb:fe], us[fb:fe], vs[fb:fe],
-                              shape.outlines, extents[fb:fe], shape.convex, pos[k]))
+                              shape.outlines, extents[fb:fe], shape.convex))
     return out
 
 

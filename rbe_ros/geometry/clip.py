@@ -1,9 +1,10 @@
 """Overlaps of convex polygons, many pairs at once (Sutherland-Hodgman in numpy).
 
 Contact detection clips every pair of coplanar, opposed faces; shapely's intersection (a GEOS
-overlay per pair) cost 12-28 us a pair, this 1-2 us. Polygons are stored padded, x and y as
-(m, k) arrays with a vertex count per row (:func:`padded_rings` makes them from ragged
-coordinates), or one after another while they are cut.
+overlay per pair, called from Python) costs a call per pair, this one numpy pass. Polygons
+are stored padded, x and y as (m, k) arrays with a vertex count per row
+(:func:`padded_rings` makes them from ragged coordinates), or one after another while they
+are cut.
 """
 from __future__ import annotations
 
@@ -17,7 +18,8 @@ def padded_rings(coords, index, rows, size):
     the outline of each (as shapely.get_coordinates gives them; the first ring of each is
     read): x and y (m, k), padded by repeating the last vertex (no area, no turn),
     counter-clockwise (rings reversed where clockwise), vertex counts without the closing
-    vertex, and whether each is convex (no clockwise turn beyond rounding, 1e-12 of size^2, and at least 3 vertices)."""
+    vertex, and whether each is convex (no clockwise turn beyond rounding, 1e-12 of size^2,
+    and at least 3 vertices)."""
     count = np.maximum(np.bincount(index, minlength=int(rows.max()) + 1)[rows] - 1, 0)
     start = np.minimum(np.searchsorted(index, rows), len(index) - 1)
     j = np.arange(max(int(count.max()), 1))
@@ -49,9 +51,8 @@ def clip_convex(ax, ay, na, bx, by, nb, eps):
     Returns the rings (counter-clockwise, one after another), their vertex counts, the row
     of each, areas and centroids (shoelace sums about each ring's first vertex).
 
-    Why: shapely's intersection (GEOS overlay) took 12 us per pair on a running-bond wall
-    and 28 us on the armadillo vault, about half of Assembly.from_scene; this takes 1-2 us
-    (from_scene: 117-block wall 11 -> 7 ms, 1066-block wall 99 -> 54, armadillo 55 -> 24)."""
+    Why: shapely's intersection, one GEOS overlay per pair, was about half of
+    Assembly.from_scene."""
     m = len(na)
     valid = np.arange(ax.shape[1]) < na[:, None]
     x, y, cnt = ax[valid], ay[valid], na.copy()

@@ -127,8 +127,8 @@ class Interface:
 
     def between(self, a: int, b: int) -> "Interface":
         """The same contact between blocks renumbered ``a`` and ``b``, sharing the kern
-        (direct construction: dataclasses.replace costs 5x more, and a sequence check
-        renumbers every interface at every step)."""
+        (direct construction, not dataclasses.replace: a sequence check renumbers every
+        interface at every step)."""
         out = Interface(a, b, self.frame, self.points, self.area, self.gap, self.tol)
         out.__dict__["kern"] = self.kern
         return out
@@ -174,8 +174,8 @@ def detect_contacts(blocks: list[PosedBlock], options: ContactOptions = ContactO
     Batched: face pairs of all candidate block pairs are screened in one numpy pass (opposite
     normals, one plane), the survivors' outlines are clipped against each other all at once
     (Sutherland-Hodgman in numpy, :func:`rbe_ros.geometry.clip.clip_convex`; shapely for
-    faces of non-convex blocks), and the overlap polygons are then treated all at once as ragged arrays
-    (vertices one polygon after another): width and vertex filters (see
+    faces of non-convex blocks), and the overlap polygons are then treated all at once as
+    ragged arrays (vertices one polygon after another): width and vertex filters (see
     :class:`ContactOptions`), frames and lifting to 3D. Kerns are left to
     :meth:`Interface.compute_kerns` (batched) or to :attr:`Interface.kern` (on first use).
     With a declared pose uncertainty the tolerances and the interface plane follow

@@ -37,6 +37,8 @@ _BATCH = 4_000_000
 
 
 class Penetration(NamedTuple):
+    """Two blocks that overlap by more than the tolerance."""
+
     a: int          # block indices, a < b
     b: int
     depth: float    # m, the overlap of the projections along the best face normal

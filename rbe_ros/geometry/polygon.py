@@ -7,8 +7,8 @@ import numpy as np
 
 
 def cross(a, b) -> np.ndarray:
-    """Cross product over the last axis (size 3); numpy's np.cross costs ~20x more on the
-    small arrays of per-face and per-interface work."""
+    """Cross product over the last axis (size 3); numpy's np.cross has a large fixed cost on
+    the small arrays of per-face and per-interface work."""
     a, b = np.asarray(a), np.asarray(b)
     return np.stack((a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
                      a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],

@@ -1,11 +1,13 @@
 """Contacts of measured (imperfect) geometry under a declared pose uncertainty.
 
-A pose known to within ``delta`` (m) and ``theta`` (rad) about the block frame's origin puts
-every point of the block within ``delta + theta * R`` of where the pose says, R being the
-point's distance from that origin. Two faces measured apart by a gap g may therefore touch
-when |g| <= tol + allowance(a) + allowance(b), with the block's allowance taken over its
-farthest vertex (``R`` the block's radius about its frame origin), and two blocks overlapping
-by that much are a contact, not an interpenetration. Their normals may be off opposite by the
+A pose known to within ``delta`` (m) and ``theta`` (rad) about the block's centre (the mean
+of its vertices: a measured block turns about itself, whatever the origin of its mesh's frame,
+which for a mesh given in scene coordinates may be metres away) puts every point of the block
+within ``delta + theta * R`` of where the pose says, R being the point's distance from that
+centre. Two faces measured apart by a gap g may therefore touch when
+|g| <= tol + allowance(a) + allowance(b), with the block's allowance taken over its farthest
+vertex (``R`` the block's radius about its centre), and two blocks overlapping by that much
+are a contact, not an interpenetration. Their normals may be off opposite by the
 design angle tolerance plus ``2 theta``.
 
 Such faces are no longer coplanar, so neither face's plane is the interface: as compas_model
@@ -36,11 +38,11 @@ NEAR_FACTOR = 3.0
 def allowances(blocks: list[PosedBlock], pose_uncertainty_m: float,
                pose_uncertainty_deg: float) -> np.ndarray:
     """Per block, how far (m) any point of it may be from where its pose puts it:
-    ``delta + theta R``, R its largest vertex distance from the frame origin (zeros when
-    nothing is declared)."""
+    ``delta + theta R``, R its largest vertex distance from its centre, the vertex mean
+    (zeros when nothing is declared)."""
     if not (pose_uncertainty_m > 0 or pose_uncertainty_deg > 0):
         return np.zeros(len(blocks))
-    radius = np.array([np.sqrt(((b.vertices - b.position) ** 2).sum(axis=1)).max()
+    radius = np.array([np.sqrt(((b.vertices - b.vertices.mean(axis=0)) ** 2).sum(axis=1)).max()
                        for b in blocks])
     return pose_uncertainty_m + math.radians(pose_uncertainty_deg) * radius
 

@@ -40,6 +40,8 @@ _INFINITE = {"sec": 9223372036, "nsec": 854775807}
 
 
 class BagMessage(NamedTuple):
+    """One message of a bag, as a message dict, with its topic, type and log time."""
+
     topic: str
     msgtype: str
     stamp_ns: int

@@ -1,10 +1,10 @@
 """CDR encoding of message dicts, straight to the bytes ROS 2 sends; no rclpy.
 
-Why: an rclpy message costs a Python object per field value (~1 us per Point) before it is
-serialised at all, and a report of a 1000-block wall holds ~50k Points. Here a message dict
+Why: an rclpy message costs a Python object per field value before it is serialised at all,
+and a report of a 1000-block wall holds ~50k Points. Here a message dict
 (:mod:`rbe_ros.io.messages`) becomes bytes directly, and a sequence of Points given as an
-``(n, 3)`` numpy array is one ``tobytes``: ~17 ms for that report, against ~230 ms for
-``serialize_message`` of the rclpy message and ~300 ms through rosbags objects.
+``(n, 3)`` numpy array is one ``tobytes`` (the cost of a report message is in
+docs/SCALING.md, ``make scaling``).
 
 Format: little-endian plain CDR (XCDR1) as ROS 2 (Fast CDR) writes it: the encapsulation
 header ``00 01 00 00``, then the fields in order, each primitive aligned to its size (at
@@ -130,7 +130,7 @@ class _Codecs:
                 "        del buf[start:]",
                 f"    {name}(buf, complete({msgtype!r}, v, {msgtype!r}), False)",
                 ""])
-            exec(compile(source, f"<cdr {msgtype}>", "exec"), self.ns)  # noqa: S102
+            exec(compile(source, f"<cdr {msgtype}>", "exec"), self.ns)
         return self.ns[name]
 
     def _fields(self, msgtype: str, var: str, body: list, run: list) -> None:

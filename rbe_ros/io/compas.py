@@ -204,7 +204,8 @@ def interfaces_of(doc: dict, stem: str) -> list[CompasInterface]:
             raw = attr.get("interfaces") or ([attr["interface"]] if attr.get("interface") else [])
             if not raw and attr.get("interface_points"):             # compas_assembly 1.x
                 raw = [{"points": attr["interface_points"], "size": attr.get("interface_size"),
-                        "frame": attr.get("interface_frame"), "forces": attr.get("interface_forces")}]
+                        "frame": attr.get("interface_frame"),
+                        "forces": attr.get("interface_forces")}]
             out.extend(_interface(str(u), str(v), _unwrap(it)) for it in raw)
     return out
 
@@ -253,13 +254,15 @@ def save_compas_assembly(scene: Scene, path, *, interfaces: bool = True) -> None
             "attributes": {"name": block.id, "node": i},
             "default_vertex_attributes": {"x": 0.0, "y": 0.0, "z": 0.0},
             "default_edge_attributes": {}, "default_face_attributes": {},
-            "vertex": {str(k): dict(zip("xyz", map(float, p))) for k, p in enumerate(posed.vertices)},
+            "vertex": {str(k): dict(zip("xyz", map(float, p)))
+                       for k, p in enumerate(posed.vertices)},
             "face": {str(k): [int(v) for v in f] for k, f in enumerate(block.faces)},
             "facedata": {}, "edgedata": {},
             "max_vertex": len(posed.vertices) - 1, "max_face": len(block.faces) - 1,
         }
         node = {"block": {"dtype": "compas_assembly.datastructures/Block", "data": mesh,
-                          "guid": str(uuid.uuid5(uuid.NAMESPACE_URL, f"rbe_ros/{scene.name}/{block.id}"))},
+                          "guid": str(uuid.uuid5(uuid.NAMESPACE_URL,
+                                                 f"rbe_ros/{scene.name}/{block.id}"))},
                 "is_support": block.support, "name": block.id}
         node["density" if block.density > 0 else "mass"] = block.density or block.mass
         nodes[str(i)] = node

@@ -11,7 +11,8 @@ from ..rbe.result import Report
 
 
 def draw_report(assembly: Assembly, report: Report, path, *, title: str = "",
-                view: tuple[float, float] = (20.0, -60.0), force_scale: float | None = None) -> Path:
+                view: tuple[float, float] = (20.0, -60.0),
+                force_scale: float | None = None) -> Path:
     """Write a PNG of ``report`` on ``assembly``; ``view`` is (elevation, azimuth) in deg.
 
     Nodal force arrows point along the force on block b, with length proportional to the
@@ -31,8 +32,8 @@ def draw_report(assembly: Assembly, report: Report, path, *, title: str = "",
         polys = [f.frame.to_3d(np.asarray(_exterior(f.outline))) for f in b.faces]
         face = (0.55, 0.55, 0.55, 0.25) if b.support else (
             (0.9, 0.3, 0.2, 0.25) if b.id in unstable else (0.85, 0.8, 0.7, 0.18))
-        ax.add_collection3d(Poly3DCollection(polys, facecolors=face, edgecolors=(0.3, 0.3, 0.3, 0.5),
-                                             linewidths=0.4))
+        ax.add_collection3d(Poly3DCollection(polys, facecolors=face,
+                                             edgecolors=(0.3, 0.3, 0.3, 0.5), linewidths=0.4))
     all_pts = np.vstack([b.vertices for b in assembly.blocks])
     size = float(np.ptp(all_pts, axis=0).max())
     forces = [r.normal_forces for r in report.interfaces]
@@ -61,7 +62,8 @@ def draw_report(assembly: Assembly, report: Report, path, *, title: str = "",
     lo, hi = all_pts.min(axis=0), all_pts.max(axis=0)
     centre, half = 0.5 * (lo + hi), 0.5 * size
     ax.set(xlim=(centre[0] - half, centre[0] + half), ylim=(centre[1] - half, centre[1] + half),
-           zlim=(centre[2] - half, centre[2] + half), xlabel="x [m]", ylabel="y [m]", zlabel="z [m]")
+           zlim=(centre[2] - half, centre[2] + half),
+           xlabel="x [m]", ylabel="y [m]", zlabel="z [m]")
     ax.set_box_aspect((1, 1, 1))
     ax.view_init(*view)
     ax.set_title(title or report.message, fontsize=9)

@@ -35,7 +35,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..analysis.options import CheckOptions
-from ..analysis.steps import final_state, sequence_steps
+from ..analysis.steps import final_state, sequence_step, step_count
 from ..analysis.validate import validated_assembly
 from ..rbe.result import Report, Status
 from ..scene import BOX_FACES, Scene, SceneError, box_vertices
@@ -156,8 +156,7 @@ def step_roles(scene: Scene, report: Report) -> dict[str, str]:
     """Role of every block present at the report's step (its ``step_index``; -1: the
     assembly as a whole), in scene order: support, stable, placed, held or unstable."""
     if report.step_index >= 0:
-        steps = sequence_steps(scene)
-        step = steps[min(report.step_index, len(steps) - 1)]
+        step = sequence_step(scene, min(report.step_index, step_count(scene) - 1))
         present, held = step.present, step.held
     else:
         present, held = final_state(scene)

@@ -13,6 +13,7 @@ identity quaternion), exactly as ``set_message_fields`` would leave it.
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 
 import numpy as np
@@ -29,7 +30,7 @@ _XYZW = ("x", "y", "z", "w")
 # --- small helpers ----------------------------------------------------------------------------
 
 # Numbers go through numpy's ``tolist`` (Python floats, the same values as ``float()`` of each
-# element, several times faster): a report of a 1000-block wall holds ~50k vectors.
+# element, in one call): a report of a 1000-block wall holds ~50k vectors.
 
 def _vec(v, keys=_XYZ) -> dict:
     """A Point/Vector3 (or Quaternion with ``keys=_XYZW``) dict from a sequence of numbers."""
@@ -336,10 +337,28 @@ def report_to_dict(report: Report, header: dict, *, arrays: bool = False) -> dic
     }
 
 
+def report_json(report: Report, header: dict | None = None) -> dict:
+    """The message dict of ``report`` as the CLI prints it: the same names and structure as
+    the StabilityReport, made by :func:`report_to_dict` (header: frame "world", stamp 0,
+    unless given), with non-finite numbers as null (JSON has no infinity)."""
+    return json_safe(report_to_dict(report, header or header_dict("world", 0)))
+
+
+def json_safe(value):
+    """``value`` (dicts, lists, numbers) with every non-finite float replaced by None."""
+    if isinstance(value, dict):
+        return {k: json_safe(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [json_safe(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
 def report_from_dict(d: Mapping) -> Report:
     """The :class:`Report` of a StabilityReport dict (header dropped; numpy arrays restored)."""
     return Report(
-        stable=bool(d["stable"]), status=Status(int(d["status"])), message=str(d["message"]),
+        status=Status(int(d["status"])), message=str(d["message"]),
         max_tension=float(d["max_tension"]), worst_friction_ratio=float(d["worst_friction_ratio"]),
         solve_time=float(d["solve_time"]), num_blocks=int(d["num_blocks"]),
         interfaces=[_interface_from_dict(i) for i in d["interfaces"]],
@@ -358,6 +377,6 @@ def report_from_dict(d: Mapping) -> Report:
     )
 
 
-__all__ = ["SOLID_PRIMITIVE_BOX", "header_dict", "header_stamp_ns", "poses_from_dict",
-           "poses_to_dict", "state_to_dict",
-           "scene_from_state_dict", "report_to_dict", "report_from_dict"]
+__all__ = ["SOLID_PRIMITIVE_BOX", "header_dict", "header_stamp_ns", "json_safe", "poses_from_dict",
+           "poses_to_dict", "report_from_dict", "report_header", "report_json", "report_to_dict",
+           "scene_from_state_dict", "state_to_dict"]

@@ -37,6 +37,7 @@ default parameters), unless given.
 """
 from __future__ import annotations
 
+import json
 import math
 import re
 from collections.abc import Callable
@@ -60,6 +61,11 @@ from .messages import (header_stamp_ns, poses_from_dict, report_header, report_t
 from .poses import AsBuilt
 
 OPTIONS_KEY = "rbe_ros.check_options"
+#: What the node checked with from a time on (topic ~/settings): the check options and
+#: frame_id, recorded at the start and after every parameter change (std_msgs/String, JSON
+#: {"options", "frame_id"}), so that a replay re-checks every state as it was checked,
+#: run-time changes included.
+SETTINGS_TYPE = "std_msgs/msg/String"
 STATE_TYPE = "rbe_msgs/msg/AssemblyState"
 POSES_TYPE = "rbe_msgs/msg/BlockPoses"
 REPORT_TYPE = "rbe_msgs/msg/StabilityReport"
@@ -98,6 +104,7 @@ class Run:
     report_stamps: list[int] = field(default_factory=list)
     report_topic: str = REPORT_TOPIC
     kind: str = STATE                               # STATE, DESIGN or POSES
+    settings: dict | None = None    # the node's settings when it got the state (~/settings)
 
     @property
     def key(self) -> tuple[int, int]:
@@ -127,11 +134,15 @@ def read_runs(path) -> list[Run]:
     topics (markers) are not read."""
     runs: list[Run] = []
     by_key: dict[tuple[int, int], list[Run]] = {}
-    for m in read_bag(path, msgtypes={STATE_TYPE, POSES_TYPE, REPORT_TYPE}):
-        if m.msgtype in (STATE_TYPE, POSES_TYPE):
+    settings = None
+    for m in read_bag(path, msgtypes={STATE_TYPE, POSES_TYPE, REPORT_TYPE, SETTINGS_TYPE}):
+        if m.msgtype == SETTINGS_TYPE:
+            if m.topic.endswith("/settings"):
+                settings = json.loads(m.data["data"])
+        elif m.msgtype in (STATE_TYPE, POSES_TYPE):
             kind = POSES if m.msgtype == POSES_TYPE else \
                 DESIGN if m.topic.endswith("/design") else STATE
-            run = Run(m.data, m.stamp_ns, m.topic, kind=kind)
+            run = Run(m.data, m.stamp_ns, m.topic, kind=kind, settings=settings)
             runs.append(run)
             by_key.setdefault(run.key, []).append(run)
         elif m.msgtype == REPORT_TYPE:
@@ -198,9 +209,19 @@ def state_reports(state: dict, options: CheckOptions = CheckOptions()) -> list[R
     return check_state(read, bool(state.get("sequence")), options).reports
 
 
+def run_settings(run: Run, options: CheckOptions) -> tuple[CheckOptions, str]:
+    """The options and frame_id ``run`` was checked with: those the node recorded as its
+    settings then (``run.settings``), else ``options`` and the default frame."""
+    if run.settings is None:
+        return options, "world"
+    return (options_from_json(json.dumps(run.settings["options"]), options),
+            run.settings["frame_id"])
+
+
 def replay_run(run: Run, options: CheckOptions = CheckOptions()) -> list[dict]:
-    """The report dicts of re-checking ``run.state``."""
-    header = report_header(run.state.get("header"))
+    """The report dicts of re-checking ``run.state`` (with the settings it was checked with)."""
+    options, frame_id = run_settings(run, options)
+    header = report_header(run.state.get("header"), frame_id)
     return [report_to_dict(r, header) for r in state_reports(run.state, options)]
 
 
@@ -235,6 +256,8 @@ def free_weights(state: dict | Scene | SceneError) -> dict[int, float]:
 
 @dataclass(frozen=True)
 class Tolerances:
+    """How far a replayed report may be from the recorded one (module docstring)."""
+
     force: float = 1e-6          # share of the step's free weight
     position: float = 1e-6       # m
     ratio: float = 1e-6          # |V|/N, absolute (plus the force tolerance's share)
@@ -512,6 +535,8 @@ def record_bag(path, scenes: list[tuple[Scene, str, int]], options: CheckOptions
 
 @dataclass
 class ReplayResult:
+    """The runs of a bag, their replayed reports and how they differ from the recorded."""
+
     runs: list[Run]
     replayed: list[list[dict]]
     differences: list[Difference]
@@ -527,6 +552,7 @@ class ReplayResult:
 
 
 def default_output(path) -> Path:
+    """Where a replay of the bag at ``path`` is written unless told: beside it, + "_replay"."""
     path = Path(path)
     return path.with_name(path.name + "_replay")
 
@@ -544,9 +570,10 @@ def offline_reports(runs: list[Run], options: CheckOptions,
         if run.kind == STATE:
             replayed.append(replay_run(run, options))
         else:   # a design or poses message the node dropped unchecked is not checked
-            header = report_header(run.state.get("header"))
+            run_options, frame_id = run_settings(run, options)
+            header = report_header(run.state.get("header"), frame_id)
             replayed.append([report_to_dict(r, header) for r in asbuilt_check(
-                asbuilt[i], options).reports] if run.reports else [])
+                asbuilt[i], run_options).reports] if run.reports else [])
         if on_run is not None:
             on_run(i, run)
     return replayed
@@ -581,4 +608,5 @@ __all__ = ["DESIGN", "Difference", "OPTIONS_KEY", "POSES", "ReplayResult", "Run"
            "Tolerances", "asbuilt_check", "asbuilt_scenes", "bag_options", "compare_report",
            "compare_runs", "default_output", "free_weights", "merge_message", "offline_reports",
            "options_from_json", "options_to_json", "read_runs", "record_bag", "replay_bag",
-           "replay_run", "state_reports", "step_stamps", "write_runs"]
+           "replay_run", "run_settings", "SETTINGS_TYPE", "state_reports", "step_stamps",
+           "write_runs"]

@@ -5,7 +5,8 @@ when it is viewed), the data as JSON, and a small script: a 3D view of the assem
 chosen step (the blocks in the colours of :mod:`rbe_ros.io.markers`, the force segments,
 interface outlines and kerns of the same :func:`~rbe_ros.io.markers.line_markers`), a step
 slider, the table of steps (verdict, max tension, worst |V|/N, model, margin_g where the
-report has one: ``--margin``, or a bag recorded with it; reason) and the check options. Why plotly and not three.js: docs/VIEW.md.
+report has one: ``--margin``, or a bag recorded with it; reason) and the check options. Why
+plotly and not three.js: docs/VIEW.md.
 """
 from __future__ import annotations
 
@@ -235,7 +236,9 @@ function build() {
   const options = document.querySelector("#options tbody");
   (function walk(o, prefix) {
     for (const [key, value] of Object.entries(o)) {
-      if (value !== null && typeof value === "object") { walk(value, prefix + key + "."); continue; }
+      if (value !== null && typeof value === "object") {
+        walk(value, prefix + key + "."); continue;
+      }
       const tr = document.createElement("tr");
       cell(tr, prefix + key); cell(tr, JSON.stringify(value));
       options.appendChild(tr);

@@ -54,29 +54,39 @@ class NearContact:
 NOT_COMPUTED = -1.0
 
 
-@dataclass
+@dataclass(frozen=True)
 class Report:
-    """Verdict of one check of an assembly or of one step of a sequence."""
+    """Verdict of one check of an assembly or of one step of a sequence; made once, never
+    changed (:func:`dataclasses.replace` makes a changed copy)."""
 
-    stable: bool
     status: Status
     message: str
     max_tension: float = 0.0
     worst_friction_ratio: float = 0.0
-    solve_time: float = 0.0
+    solve_time: float = 0.0   # s: validation, contacts, solves and hold search of the check
     num_blocks: int = 0
-    interfaces: list[InterfaceResult] = field(default_factory=list)
-    unstable_blocks: list[str] = field(default_factory=list)
+    interfaces: tuple[InterfaceResult, ...] = ()
+    unstable_blocks: tuple[str, ...] = ()
     step_index: int = -1
     block_placed: str = ""
     model: str = "full"   # which model answered: "full", "local N" or "relaxed N"
-    held_blocks: list[str] = field(default_factory=list)      # free blocks held as supports
-    suggested_holds: list[str] = field(default_factory=list)  # smallest set to hold, if unstable
+    held_blocks: tuple[str, ...] = ()       # free blocks held as supports
+    suggested_holds: tuple[str, ...] = ()   # smallest set to hold, if unstable
     dropped_states: int = 0   # node: states on ~/assembly dropped unchecked so far (overload)
-    near_contacts: list[NearContact] = field(default_factory=list)
+    near_contacts: tuple[NearContact, ...] = ()
     verdict_sensitive: bool = False     # the verdict depends on the contact tolerance
     #: Smallest horizontal acceleration (share of g) that topples or slides the checked
     #: assembly over the margin's directions, 0 when it does not stand; NOT_COMPUTED (-1)
     #: when no margin was asked for.
     margin_g: float = NOT_COMPUTED
     margin_direction: np.ndarray = field(default_factory=lambda: np.zeros(3))  # body force, unit
+
+    def __post_init__(self):
+        for name in ("interfaces", "unstable_blocks", "held_blocks", "suggested_holds",
+                     "near_contacts"):
+            object.__setattr__(self, name, tuple(getattr(self, name)))
+
+    @property
+    def stable(self) -> bool:
+        """Whether the assembly (or step) stands: the status says so."""
+        return self.status == Status.STABLE

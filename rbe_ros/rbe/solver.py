@@ -56,6 +56,8 @@ class Weights:
 
 @dataclass(frozen=True)
 class SolveOptions:
+    """The problem solved: objective, friction model and cone, mu, weights, time limit."""
+
     objective: str = "qp"
     friction: str = "net"
     cone: str = "soc"
@@ -97,15 +99,13 @@ RETRY_REGULARIZATION = 1e-7
 _DEFAULT_REGULARIZATION = clarabel.DefaultSettings().static_regularization_constant
 _INFEASIBLE = {"PrimalInfeasible", "AlmostPrimalInfeasible"}
 #: Clarabel's "auto" switches to faer above some KKT size (the 1021-block wall): there its
-#: ordering fills 1.3x more and each solve costs more, 2.5 s against 1.35 s with QDLDL, the
-#: superlinear jump from 715 to 1021 blocks. Below that size "auto" is QDLDL already. (QDLDL
+#: ordering fills more and each solve costs more than with QDLDL (the cost against size is
+#: in docs/SCALING.md, ``make scaling``). Below that size "auto" is QDLDL already. (QDLDL
 #: panics on an empty KKT system, as when all blocks are supports: "auto" takes those.)
 DIRECT_SOLVE_METHOD = "qdldl"
-# Left at Clarabel's defaults, measured on the vault, walls of 400 and 1021 blocks and the dome:
-# tol_gap 1e-7 saves 1-2 of 12 iterations on walls only, and moves the forces 2-5x further from
-# a tightly solved answer (up to 1e-5 of the weight); equilibration off costs the vault a 10th
-# iteration; fewer equilibration steps, presolve off, faer: within the noise or slower; at
-# most one refinement step: nearly the cost of the default.
+# Left at Clarabel's defaults: a looser tol_gap saves an iteration or two on walls only and
+# moves the forces further from a tightly solved answer; equilibration off costs iterations;
+# fewer equilibration steps, presolve off and the faer solver gain nothing measurable.
 
 
 class _Attempt(NamedTuple):
@@ -118,16 +118,17 @@ def _attempts(tension: bool) -> list[_Attempt]:
     """Settings of the successive attempts at one problem, each made only if the one before
     ended in numerical trouble or short of equilibrium (and the first also after MaxIterations).
 
-    The first skips iterative refinement: that takes 20-30% off the solve of the vault, walls
-    and dome (the vault's KKT solves: 84 -> 38 ms) with the same iterations and verdicts, forces
-    as close to a tightly solved answer, and an equilibrium residual still below 1e-10, since
-    Clarabel judges termination on the residuals of its iterates, not on the accuracy of the
-    KKT solves. The second is Clarabel's default (with refinement). Numerical trouble that remains (InsufficientProgress, NumericalError, or
-    AlmostSolved short of equilibrium) hits about one friction+ problem in 300 among random
-    stacks whose top needs glue: the 1e6 tension penalty makes them ill-conditioned (found by
-    the property tests). Then a stronger static regularisation of the KKT system, then the
-    penalty 10x lower (the tension found differs by < 0.1%), then 100x lower (< 0.01% on glued
-    stacks, blocks and the dome; a random stack of the long property run needed it), within
+    The first skips iterative refinement, the larger part of the cost of the KKT solves, with
+    the same iterations and verdicts, forces as close to a tightly solved answer, and an
+    equilibrium residual still below 1e-10, since Clarabel judges termination on the
+    residuals of its iterates, not on the accuracy of the KKT solves. The second is Clarabel's
+    default (with refinement). Numerical trouble that remains (InsufficientProgress,
+    NumericalError, or AlmostSolved short of equilibrium) hits about one friction+ problem in
+    300 among random stacks whose top needs glue: the 1e6 tension penalty makes them
+    ill-conditioned (found by the property tests). Then a stronger static regularisation of
+    the KKT system, then the penalty 10x lower (the tension found differs by < 0.1%), then
+    100x lower (< 0.01% on glued stacks, blocks and the dome; a random stack of the long
+    property run needed it), within
     what is left of the time limit."""
     return ([_Attempt(False, None, 1.0), _Attempt(True, None, 1.0),
              _Attempt(True, RETRY_REGULARIZATION, 1.0)]
@@ -237,8 +238,7 @@ def _accept(model: EquilibriumModel, v: _Variables, x: np.ndarray, p, live_load,
 def _constraints(model: EquilibriumModel, options: SolveOptions, v: _Variables, p, live_load):
     """A, b and the cones of A x + s = b, s in K, in Clarabel's order: zero cone, nonnegative
     cone, second-order cones. The equilibrium rows are taken as columns of model.a_eq's CSC
-    arrays and stacked on the other rows, not rebuilt through coordinates: with the conversion
-    for Clarabel (_Csc), 11 -> 4.4 ms on the vault."""
+    arrays and stacked on the other rows, not rebuilt through coordinates (no sort)."""
     nv = v.nv
     neq = model.a_eq.shape[0]
     rows = _Rows(v.count, neq)
@@ -367,7 +367,7 @@ class _Csc:
     """A CSC matrix as Clarabel's constructor reads it: any object with data, indices, indptr,
     shape and has_canonical_format. Clarabel copies each array element by element through the
     Python sequence protocol, and numpy arrays make a scalar object per element: array.array
-    fields halve that copy (the vault's A, 255k entries: 35 ms -> 17 ms)."""
+    fields give it plain numbers."""
 
     has_canonical_format = True
 

@@ -1,9 +1,10 @@
 """Live replay: play recorded states into a running ``rbe_node`` and collect its reports.
 
-:func:`live_recheck` is what :func:`rbe_ros.io.replay.replay_bag` takes as ``recheck``. The node is started here
-(``python -m rbe_ros.ros.node`` under a unique node name, with the parameters of the bag's
-check options, in the ROS_DOMAIN_ID of the environment) or, with ``node_name``, the running
-node of that name is used as it is (its parameters must match the bag's options).
+:func:`live_recheck` is what :func:`rbe_ros.io.replay.replay_bag` takes as ``recheck``. The
+node is started here (``python -m rbe_ros.ros.node`` under a unique node name, with the
+parameters of the bag's check options, in the ROS_DOMAIN_ID of the environment) or, with
+``node_name``, the running node of that name is used as it is (its parameters must match the
+bag's options).
 
 States are sent one at a time, each after the previous one is answered (the node checks the
 newest state on its topic and drops a waiting one under load): a state with a sequence as a

@@ -8,10 +8,14 @@ Interfaces (relative to the node, e.g. ``/rbe_node/report``):
   thread from a single-slot buffer: when states arrive faster than they can be checked, the
   newest replaces the waiting one, and the dropped ones are counted (``dropped_states`` of
   every report, a throttled warning in the log), so memory stays bounded and the newest state
-  is always answered;
+  is always answered. A state that arrives while a sequence is checked supersedes it between
+  two steps: the sequence's last report (SOLVER_FAILED, "superseded: ...") names the first
+  step not checked, and the newer state is checked next;
 * publishes ``~/report`` (rbe_msgs/StabilityReport, reliable, transient_local, depth 1) and
-  ``~/markers`` (visualization_msgs/MarkerArray, same QoS) for every report the node makes,
-  whatever asked for it (topic, service or action);
+  ``~/markers`` (visualization_msgs/MarkerArray, same QoS: the blocks, forces and verdict,
+  :mod:`rbe_ros.io.markers`) for every report the node makes, whatever asked for it (topic,
+  service or action); with ``foxglove_port`` the markers also go to Foxglove as SceneUpdates
+  (:mod:`rbe_ros.io.foxglove_scene`);
 * serves ``~/check`` (rbe_msgs/srv/CheckAssembly): the assembly as a whole, sequence ignored;
 * serves the action ``~/check_sequence`` (rbe_msgs/action/CheckSequence): feedback per step,
   all reports and the first failing step as result; cancellable between steps.
@@ -19,11 +23,11 @@ Interfaces (relative to the node, e.g. ``/rbe_node/report``):
 Bad input never stops the node: a state that cannot be checked (outside the limits of
 :class:`rbe_ros.scene.ValidationLimits`, ``max_blocks`` among them) gives a report with status
 INVALID_INPUT and the reason, a solver failure or a solve over ``check_time_limit`` gives
-SOLVER_FAILED naming the solver's status or the stage, and any other error in a callback is logged and gives
-SOLVER_FAILED with the exception text. With ``mcap_path`` set, every checked state and every
-report is recorded (CDR, receive/publish time) in a rosbag2 MCAP bag, each message flushed
-before the report is published (a report seen on DDS is on disk, even after SIGKILL); the bag
-is closed on shutdown (SIGINT, SIGTERM).
+SOLVER_FAILED naming the solver's status or the stage, and any other error in a callback is
+logged and gives SOLVER_FAILED with the exception text. With ``mcap_path`` set, every checked
+state and every report is recorded (CDR, receive/publish time) in a rosbag2 MCAP bag, each
+message flushed before the report is published (a report seen on DDS is on disk, even after
+SIGKILL); the bag is closed on shutdown (SIGINT, SIGTERM).
 
 Run: ``rbe_node --ros-args -p friction_coefficient:=0.5 -p mcap_path:=bags/run``
 (or ``python -m rbe_ros.ros.node``).
@@ -33,11 +37,15 @@ from __future__ import annotations
 import os
 import signal
 import struct
+import json
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import rclpy
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType, SetParametersResult)
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
@@ -51,11 +59,13 @@ from rclpy.signals import SignalHandlerOptions
 from rbe_msgs.action import CheckSequence
 from rbe_msgs.msg import AssemblyState, BlockPoses, StabilityReport
 from rbe_msgs.srv import CheckAssembly
+from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
 from ..analysis.option_spec import BY_PARAM, OPTIONS, Option, from_outer
 from ..analysis.options import CheckOptions
 from ..analysis.pipeline import StateCheck, check_state
+from ..analysis.steps import sequence_step
 from ..io import cdr
 from ..io.bag import BagWriter, typestore
 from ..io.inputs import load_design
@@ -63,11 +73,14 @@ from ..io.foxglove_scene import SceneServer
 from ..io.markers import MARKER_TYPE, run_markers, step_markers
 from ..io.messages import report_header, report_to_dict, state_to_dict
 from ..io.poses import AsBuilt
-from ..io.replay import (DESIGN, OPTIONS_KEY, POSES, asbuilt_check, merge_message,
-                         options_to_json)
+from ..io.replay import (DESIGN, OPTIONS_KEY, POSES, SETTINGS_TYPE,
+                         asbuilt_check, merge_message, options_to_json)
 from ..rbe.result import Report, Status
 from ..scene import Scene, SceneError
 from .convert import dict_to_message, message_to_dict, scene_from_msg
+from .diagnostics import PERIOD_S as DIAGNOSTICS_PERIOD_S
+from .diagnostics import TOPIC as DIAGNOSTICS_TOPIC
+from .diagnostics import NodeHealth
 
 NODE_NAME = "rbe_node"
 
@@ -134,6 +147,10 @@ PARAMETERS = {
 }
 
 
+class ConfigurationError(Exception):
+    """The node cannot start with its parameters (a bag that cannot be created)."""
+
+
 class RbeNode(Node):
     """A thin ROS shell over :func:`check_scene` and :func:`check_sequence`."""
 
@@ -167,15 +184,15 @@ class RbeNode(Node):
         self._service_group = MutuallyExclusiveCallbackGroup()
         self._action_group = ReentrantCallbackGroup()
 
-        # reports go out as CDR bytes made from their message dicts (rbe_ros.io.cdr): ~6x faster
-        # than building the rclpy message (an object per Point) and serialising it
+        # reports go out as CDR bytes made from their message dicts (rbe_ros.io.cdr), without
+        # building the rclpy message (an object per Point) and serialising it
         self._encode_report = cdr.encoder(typestore(), "rbe_msgs/msg/StabilityReport")
         self._encode_markers = cdr.encoder(typestore(), MARKER_TYPE)
         self._report_pub = self.create_publisher(StabilityReport, "~/report", LATCHED_QOS)
         self._marker_pub = self.create_publisher(MarkerArray, "~/markers", LATCHED_QOS)
         # raw: the callback gets the CDR bytes; a state is converted to a message only when
-        # the worker checks it (converting a 100-block state costs ~15 ms of the GIL, which
-        # at 100 Hz would starve the checks)
+        # the worker checks it (converting every state that arrives would hold the GIL and
+        # starve the checks at high rates)
         self._state_sub = self.create_subscription(
             AssemblyState, "~/assembly", self._on_state, STATE_QOS,
             callback_group=self._topic_group, raw=True)
@@ -194,12 +211,21 @@ class RbeNode(Node):
             cancel_callback=lambda _goal: CancelResponse.ACCEPT,
             callback_group=self._action_group)
 
+        # /diagnostics about once a second, from the counters the node keeps as it works
+        self.health = NodeHealth()
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
+        self._diagnostics_timer = self.create_timer(
+            DIAGNOSTICS_PERIOD_S, self._publish_diagnostics,
+            callback_group=MutuallyExclusiveCallbackGroup())
+
         self.state_topic = self._state_sub.topic_name
         self.report_topic = self._report_pub.topic_name
         self.design_topic = self._design_sub.topic_name
         self.poses_topic = self._poses_sub.topic_name
         self.marker_topic = self._marker_pub.topic_name
         self._open_bag()
+        self._record_settings()
+        self.add_post_set_parameters_callback(lambda _params: self._record_settings())
         self.foxglove = None
         if self.get_parameter("foxglove_port").value:
             self.foxglove = SceneServer(self.get_parameter("foxglove_port").value,
@@ -241,12 +267,19 @@ class RbeNode(Node):
                 k += 1
                 path = path.with_name(f"{stem}_{k}")
         # the options at the start, so that `rbe-ros replay` re-checks the same way
-        self._bag = BagWriter(path, custom_data={OPTIONS_KEY: options_to_json(self.check_options())})
+        try:
+            self._bag = BagWriter(
+                path, custom_data={OPTIONS_KEY: options_to_json(self.check_options())})
+        except OSError as exc:
+            raise ConfigurationError(f"mcap_path {raw!r}: cannot create the bag {path}: "
+                                     f"{exc.strerror or exc}") from None
         self._bag.add_topic(self.state_topic, "rbe_msgs/msg/AssemblyState")
         self._bag.add_topic(self.report_topic, "rbe_msgs/msg/StabilityReport",
                             transient_local=True)
         self._bag.add_topic(self.marker_topic, MARKER_TYPE, transient_local=True)
         # added with their first message: a bag of states alone has only their topics
+        self.settings_topic = f"{self.get_fully_qualified_name()}/settings"
+        self._bag.add_topic(self.settings_topic, SETTINGS_TYPE, transient_local=True)
         self._later_topics = {self.design_topic: ("rbe_msgs/msg/AssemblyState", True),
                               self.poses_topic: ("rbe_msgs/msg/BlockPoses", False)}
         self.bag_path = path
@@ -266,9 +299,24 @@ class RbeNode(Node):
                     msgtype, latched = self._later_topics.pop(topic)
                     self._bag.add_topic(topic, msgtype, transient_local=latched)
                 self._bag.write(topic, data, stamp)
+                self.health.recorded(len(data))
             except Exception as exc:  # a full disk must not stop the checks
                 self.get_logger().error(f"recording to {self.bag_path} failed, stopped: {exc}")
+                self.health.error(f"recording to {self.bag_path} failed, stopped: {exc}")
                 self._close_bag_locked()
+
+    def _record_settings(self) -> None:
+        """Record the check options and frame_id now in force (at the start and after every
+        parameter change), so that a replay checks each state with what it was checked with."""
+        if self._bag is None:
+            return
+        settings = {"options": json.loads(options_to_json(self.check_options())),
+                    "frame_id": self.get_parameter("frame_id").value}
+        self._record(self.settings_topic, String(data=json.dumps(settings, sort_keys=True)))
+
+    def _publish_diagnostics(self) -> None:
+        self._diagnostics_pub.publish(self.health.message(
+            self.get_fully_qualified_name(), self.get_clock().now().to_msg()))
 
     def _close_bag_locked(self) -> None:
         bag, self._bag = self._bag, None
@@ -322,7 +370,8 @@ class RbeNode(Node):
         first, so that a report anyone received is in the bag even if the node is killed.
         ``state``: the state of a check that failed, drawn as it came (the blocks at fault
         of invalid input highlighted)."""
-        report.dropped_states = self._dropped
+        report = replace(report, dropped_states=self._dropped)
+        self.health.reported(report)
         data = self._encode_report(report_to_dict(report, header, arrays=True))
         self._record(self.report_topic, data)
         self._report_pub.publish(data)
@@ -428,11 +477,21 @@ class RbeNode(Node):
 
     def check_state(self, state: AssemblyState, raw: bytes | None = None) -> None:
         """Check a state from the topic (as a whole, or every step of its sequence) and
-        publish the reports; never raises. ``raw``: its CDR bytes, recorded as they came."""
+        publish the reports; never raises. ``raw``: its CDR bytes, recorded as they came.
+        A newer state waiting in the slot supersedes a sequence between two steps: its last
+        report says so (:func:`superseded_report`), and the newer state is checked next."""
         try:
-            self.check(state, self._received(state, raw), bool(state.sequence))
+            header = self._received(state, raw)
+            result, _ = self.check(state, header, bool(state.sequence),
+                                   cancelled=self._superseded)
+            if result.error is None and not result.finished and self._superseded():
+                self._publish(result.scene, superseded_report(result), header)
         except Exception as exc:  # publishing itself failed (e.g. during shutdown)
             self.get_logger().error(f"state not handled: {type(exc).__name__}: {exc}")
+
+    def _superseded(self) -> bool:
+        """Whether a newer state (or as-built update) waits for the worker."""
+        return self._slot is not None
 
     # --- design and measured poses (rbe_ros.poses) -------------------------------------------
 
@@ -538,6 +597,17 @@ def _stamp(header: dict) -> str:
     return f"{stamp['sec']}.{stamp['nanosec']:09d}"
 
 
+def superseded_report(result: StateCheck) -> Report:
+    """The last report of a topic sequence a newer state superseded: the first step not
+    checked, no verdict (SOLVER_FAILED), and why."""
+    done = len(result.reports)
+    step = sequence_step(result.scene, done)
+    return Report(Status.SOLVER_FAILED,
+                  f"superseded: a newer state arrived after {done} of {result.total} steps; "
+                  "the remaining steps were not checked",
+                  step_index=step.index, block_placed=step.block)
+
+
 def _cdr_stamp(data: bytes) -> str:
     """``sec.nanosec`` of the header stamp of a CDR-serialised AssemblyState (for the log)."""
     try:
@@ -580,6 +650,9 @@ def main(args=None) -> None:
         pass
     except ParameterException as exc:  # e.g. -p friction_coefficient:=1 (an integer)
         rclpy.logging.get_logger(NODE_NAME).fatal(f"bad parameter: {exc}")
+        raise SystemExit(2) from None
+    except ConfigurationError as exc:
+        rclpy.logging.get_logger(NODE_NAME).fatal(str(exc))
         raise SystemExit(2) from None
     finally:
         # A second signal during the clean-up exits at once (the bag stays readable).

@@ -18,8 +18,8 @@ os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 
 def _ros_missing() -> str | None:
     try:
-        import rbe_msgs.action  # noqa: F401
-        import rbe_msgs.msg  # noqa: F401
+        import rbe_msgs.action
+        import rbe_msgs.msg
         import rbe_msgs.srv  # noqa: F401
         import rclpy  # noqa: F401
         import visualization_msgs.msg  # noqa: F401

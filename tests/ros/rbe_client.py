@@ -86,7 +86,9 @@ class Client:
     its own executor thread. Keeps every report and marker array it receives and every state
     it sends, for the comparison with the node's bag."""
 
-    def __init__(self, context):
+    def __init__(self, context, markers: bool = True):
+        """``markers``: subscribe to ~/markers too (the arrays of a large scene are slow to
+        take in, and a reliable reader that lags holds the node back)."""
         self.node = Node("rbe_test_client", context=context)
         self.lock = threading.Condition()
         self.reports: list[StabilityReport] = []      # from ~/report
@@ -98,8 +100,9 @@ class Client:
         self.state_pub = self.node.create_publisher(AssemblyState, f"{NODE}/assembly", reliable)
         self.node.create_subscription(StabilityReport, f"{NODE}/report",
                                       self._keep(self.reports), reliable)
-        self.node.create_subscription(MarkerArray, f"{NODE}/markers",
-                                      self._keep(self.markers), reliable)
+        if markers:
+            self.node.create_subscription(MarkerArray, f"{NODE}/markers",
+                                          self._keep(self.markers), reliable)
         self.check = self.node.create_client(CheckAssembly, f"{NODE}/check")
         self.action = ActionClient(self.node, CheckSequence, f"{NODE}/check_sequence")
         # One executor thread, and every ActionClient request is made from it (see

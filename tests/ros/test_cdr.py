@@ -90,8 +90,8 @@ def _reports() -> dict[str, Report]:
         "holds": dataclasses.replace(unstable, held_blocks=["a"], suggested_holds=["b", "a"],
                                      step_index=2, block_placed="b", model="local 2",
                                      dropped_states=7),
-        "error": Report(False, Status.INVALID_INPUT, "invalid input: no blocks"),
-        "unicode": Report(False, Status.FRICTION_EXCEEDED, "glisse: ä ≠ 石 🧱", max_tension=0.5,
+        "error": Report(Status.INVALID_INPUT, "invalid input: no blocks"),
+        "unicode": Report(Status.FRICTION_EXCEEDED, "glisse: ä ≠ 石 🧱", max_tension=0.5,
                           num_blocks=3, unstable_blocks=["石", "🧱x"], interfaces=[
                               _interface("Stein-ä", "石", [[0, 0, 0], [1, 0, 0], [0, 1, 0]]),
                               _interface("🧱x", "b", [], kern=[[0.5, 0.5, 0.0]]),

@@ -279,12 +279,15 @@ def test_bag_holds_every_state_and_report(rbe):
         topics = {c.topic: c.msgtype for c in reader.connections}
         assert topics == {"/rbe_node/assembly": "rbe_msgs/msg/AssemblyState",
                           "/rbe_node/report": "rbe_msgs/msg/StabilityReport",
-                          "/rbe_node/markers": "visualization_msgs/msg/MarkerArray"}
+                          "/rbe_node/markers": "visualization_msgs/msg/MarkerArray",
+                          "/rbe_node/settings": "std_msgs/msg/String"}
         markers = 0
         for conn, stamp, raw in reader.messages():
             assert rbe.start_ns - 60e9 < stamp <= end_ns
             if conn.topic == "/rbe_node/markers":
                 markers += 1        # one array per report (record_markers: true)
+                continue
+            if conn.topic == "/rbe_node/settings":   # tests/ros/test_settings_replay.py
                 continue
             d = bag.to_dict(reader.typestore, conn.msgtype, reader.deserialize(raw, conn.msgtype))
             (states if conn.topic == "/rbe_node/assembly" else reports).append(d)

@@ -135,6 +135,8 @@ def test_unexpected_errors_become_solver_failed_reports(make_node, tmp_path, mon
     node.check_state(state)          # the per-step path fails the same way, node unharmed
     node.destroy_node()
     recorded = list(bag.read_bag(tmp_path / "bag"))
+    settings, recorded = recorded[0], recorded[1:]       # the node's settings at the start
+    assert settings.topic == "/rbe_unit_test/rbe_node/settings"
     assert [m.topic for m in recorded] == ["/rbe_unit_test/rbe_node/assembly",
                                            "/rbe_unit_test/rbe_node/report",
                                            "/rbe_unit_test/rbe_node/markers"] * 2
@@ -188,4 +190,5 @@ def test_record_markers_false_keeps_a_lean_bag(make_node, tmp_path):
                           CheckAssembly.Response()).report.stable
     node.destroy_node()
     assert [m.topic for m in bag.read_bag(tmp_path / "bag")] == [
-        "/rbe_unit_test/rbe_node/assembly", "/rbe_unit_test/rbe_node/report"]
+        "/rbe_unit_test/rbe_node/settings", "/rbe_unit_test/rbe_node/assembly",
+        "/rbe_unit_test/rbe_node/report"]

@@ -17,7 +17,6 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rbe_client import NodeProcess, wait_until
 from rbe_ros import generators as gen
 from rbe_ros.analysis.pipeline import check_scene
-from rbe_ros.cli import main
 from rbe_ros.io.bag import read_bag
 from rbe_ros.io.messages import poses_to_dict, state_to_dict
 from rbe_ros.io.poses import scene_at_poses
@@ -25,6 +24,7 @@ from rbe_ros.io.scene_json import scene_to_dict
 from rbe_ros.io.testing import assert_bag_replays
 from rbe_ros.rbe.result import Status
 from rbe_ros.ros.convert import dict_to_message
+from rbe_ros.ros.live import live_recheck
 
 RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.VOLATILE)
@@ -141,10 +141,11 @@ def test_design_then_100_pose_updates_at_10_hz(rclpy_context, tmp_path):
     assert topics.count("/rbe_node/design") == 1
     assert topics.count("/rbe_node/poses") == len(updates)
     assert topics.count("/rbe_node/report") == len(reports)
+    # replayed as `rbe-ros replay --compare` (and `--live`) does, without writing a bag
     result = assert_bag_replays(bag)
     assert sum(len(r) for r in result.replayed) == len(reports)
-    out = tmp_path / "live"
-    assert main(["replay", str(bag), "--live", "--compare", "-o", str(out)]) == 0
+    live = assert_bag_replays(bag, recheck=live_recheck(context=rclpy_context))
+    assert sum(len(r) for r in live.replayed) == len(reports)
     print(json.dumps({"answered": len(reports), "dropped": reports[-1].dropped_states,
                       "check_s": max(r.solve_time for r in reports)}))
 

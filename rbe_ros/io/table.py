@@ -1,0 +1,36 @@
+"""Reports as an aligned table for people; for machines, the message dict
+(:func:`rbe_ros.io.messages.report_json`)."""
+from __future__ import annotations
+
+import math
+
+from ..rbe.result import Report
+
+
+def hold_note(r: Report) -> str:
+    """" | held: a, b | to stand, also hold: c" (empty when nothing is held or suggested)."""
+    note = f" | held: {', '.join(r.held_blocks)}" if r.held_blocks else ""
+    if r.suggested_holds:
+        also = "also " if r.held_blocks else ""
+        note += f" | to stand, {also}hold: {', '.join(r.suggested_holds)}"
+    return note
+
+
+def format_table(reports: list[Report]) -> str:
+    """One row per report: step, block, verdict, max tension, worst |V|/N, time and reason;
+    the reason notes the blocks held at the step and, when unstable, the ones to hold."""
+    margin = any(r.margin_g >= 0 for r in reports)
+    head = ("step", "block", "verdict", "max tension N", "worst |V|/N", "solve ms") \
+        + ("margin g",) * margin + ("reason",)
+    rows = [head]
+    for r in reports:
+        ratio = f"{r.worst_friction_ratio:.3f}" if math.isfinite(r.worst_friction_ratio) else "inf"
+        rows.append((str(r.step_index) if r.step_index >= 0 else "-", r.block_placed or "-",
+                     r.status.name, f"{r.max_tension:.1f}", ratio, f"{1e3 * r.solve_time:.1f}")
+                    + (f"{r.margin_g:.3f}",) * margin + (r.message + hold_note(r),))
+    widths = [max(len(row[i]) for row in rows) for i in range(len(head) - 1)]
+    lines = ["  ".join(c.ljust(w) if i < 3 else c.rjust(w)
+                       for i, (c, w) in enumerate(zip(row, widths)))
+             + "  " + row[-1] for row in rows]
+    lines.insert(1, "-" * max(len(line) for line in lines))
+    return "\n".join(lines)

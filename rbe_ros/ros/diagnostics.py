@@ -1,0 +1,78 @@
+"""``/diagnostics`` of rbe_node (diagnostic_msgs/DiagnosticArray, about once a second): what
+a cell supervisor watches, as the ROS diagnostics tools (rqt_robot_monitor, the diagnostic
+aggregator) expect it.
+
+Levels: ERROR when recording to the bag failed or a check raised an unexpected error (the
+node goes on, but a log is lost or a report is not a verdict); WARN when states were dropped
+under overload since the last message, or the last report had no verdict (SOLVER_FAILED: a
+solver failure, the time limit, a superseded sequence); OK otherwise.
+"""
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass, field
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+from ..rbe.result import Report, Status
+
+TOPIC = "/diagnostics"
+PERIOD_S = 1.0
+
+
+@dataclass
+class NodeHealth:
+    """Counters the node updates as it works (thread-safe)."""
+
+    checks: int = 0                 # reports published
+    last_duration_s: float = 0.0    # of the last report's check
+    last_status: str = ""
+    dropped: int = 0                # states dropped unchecked so far
+    bag_bytes: int = 0              # message bytes written to the bag
+    last_error: str = ""
+    failed: bool = False            # an unexpected error or a recording failure happened
+    _dropped_seen: int = 0
+    _lock: threading.Lock = field(default_factory=threading.Lock)
+
+    def reported(self, report: Report) -> None:
+        with self._lock:
+            self.checks += 1
+            self.last_duration_s = report.solve_time
+            self.last_status = report.status.name
+            self.dropped = max(self.dropped, report.dropped_states)
+            if report.status == Status.SOLVER_FAILED:
+                self.last_error = report.message
+                self.failed |= report.message.startswith("check failed")
+
+    def recorded(self, size: int) -> None:
+        with self._lock:
+            self.bag_bytes += size
+
+    def error(self, text: str) -> None:
+        """An error that is not a report (recording stopped)."""
+        with self._lock:
+            self.last_error, self.failed = text, True
+
+    def message(self, name: str, stamp) -> DiagnosticArray:
+        """The DiagnosticArray of now (``stamp``: builtin_interfaces/Time)."""
+        with self._lock:
+            newly_dropped = self.dropped > self._dropped_seen
+            self._dropped_seen = self.dropped
+            if self.failed:
+                level, summary = DiagnosticStatus.ERROR, f"error: {self.last_error}"
+            elif newly_dropped or self.last_status == Status.SOLVER_FAILED.name:
+                level = DiagnosticStatus.WARN
+                summary = "states dropped under overload" if newly_dropped else \
+                    f"last check without a verdict: {self.last_error}"
+            else:
+                level, summary = DiagnosticStatus.OK, "ok"
+            values = {"checks done": str(self.checks),
+                      "last check duration s": f"{self.last_duration_s:.6f}",
+                      "last status": self.last_status, "dropped states": str(self.dropped),
+                      "bag bytes written": str(self.bag_bytes), "last error": self.last_error}
+        status = DiagnosticStatus(level=level, name=name, message=summary,
+                                  hardware_id="rbe_ros",
+                                  values=[KeyValue(key=k, value=v) for k, v in values.items()])
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = stamp
+        return array

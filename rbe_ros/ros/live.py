@@ -12,7 +12,9 @@ newest state on its topic and drops a waiting one under load): a state with a se
 ``~/assembly`` topic, answered by the report on ``~/report`` with its header stamp; a design
 on ``~/design`` and measured poses on ``~/poses`` likewise (the node merges each into its
 as-built state; one it dropped unchecked when recorded is answered now, and the answer left
-out).
+out). Before a state whose recorded settings (``~/settings``: check options and frame_id)
+differ from those last set, the node's parameters are set to them through its parameter
+service, so a bag with run-time parameter changes replays with the settings of each state.
 """
 from __future__ import annotations
 
@@ -32,12 +34,14 @@ from rbe_msgs.msg import AssemblyState, BlockPoses, StabilityReport
 from rclpy.action import ActionClient
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
 from ..analysis.option_spec import node_parameters
 from ..analysis.options import CheckOptions
-from ..io.replay import DESIGN, POSES, STATE
+from ..io.replay import DESIGN, POSES, STATE, Run, run_settings
 from .convert import dict_to_message, message_to_dict
 
 
@@ -113,6 +117,7 @@ class _Client:
             POSES: (self.node.create_publisher(BlockPoses, f"{base}/poses", qos), BlockPoses)}
         self.node.create_subscription(StabilityReport, f"{base}/report", self._on_report, qos)
         self.action = ActionClient(self.node, CheckSequence, f"{base}/check_sequence")
+        self.parameters = AsyncParameterClient(self.node, base)
         self.base = base
         self.executor = SingleThreadedExecutor(context=context)
         self.executor.add_node(self.node)
@@ -155,6 +160,19 @@ class _Client:
                                    "in this ROS_DOMAIN_ID?)")
             time.sleep(0.05)
 
+    def set_parameters(self, values: dict[str, object], timeout: float) -> None:
+        """Set the node's parameters to ``values`` (RuntimeError naming those it refused)."""
+        if not self.parameters.wait_for_services(timeout):
+            raise TimeoutError(f"no parameter service of {self.base} within {timeout:g} s")
+        params = [Parameter(k, value=v) for k, v in values.items()]
+        response = self._wait(self._in_executor(
+            lambda: self.parameters.set_parameters(params), timeout, "set_parameters"),
+            timeout, "set_parameters response")
+        refused = [f"{p.name}: {r.reason}" for p, r in zip(params, response.results)
+                   if not r.successful]
+        if refused:
+            raise RuntimeError(f"{self.base} refused the recorded settings: {'; '.join(refused)}")
+
     def check_sequence(self, state, timeout: float) -> list[dict]:
         future = self._in_executor(lambda: self.action.send_goal_async(
             CheckSequence.Goal(assembly=state)), timeout, "goal response")
@@ -184,6 +202,12 @@ class _Client:
                 self.lock.wait(left)
 
 
+def settings_parameters(run: Run, options: CheckOptions) -> dict[str, object]:
+    """rbe_node parameters of the settings ``run`` was checked with (from the option table)."""
+    run_options, frame_id = run_settings(run, options)
+    return {**node_parameters(run_options), "frame_id": frame_id}
+
+
 def live_reports(runs, options: CheckOptions, *, node_name: str | None = None, context=None,
                  timeout: float = 120.0, on_run=None) -> list[list[dict]]:
     """The reports a live rbe_node returns for each run's state (message dicts)."""
@@ -206,7 +230,11 @@ def live_reports(runs, options: CheckOptions, *, node_name: str | None = None, c
         client = _Client(context, node_name)
         client.wait_ready(60.0 if process is not None else 30.0, alive)
         out = []
+        settings = None
         for i, run in enumerate(runs):
+            if run.settings is not None and run.settings != settings:
+                client.set_parameters(settings_parameters(run, options), timeout)
+                settings = run.settings
             state = dict_to_message(run.state, client.publishers[run.kind][1])
             if run.kind == STATE and run.state.get("sequence"):
                 out.append(client.check_sequence(state, timeout))
@@ -235,4 +263,5 @@ def live_recheck(node_name: str | None = None, context=None, timeout: float = 12
     return recheck
 
 
-__all__ = ["NodeProcess", "live_recheck", "live_reports", "node_parameters"]
+__all__ = ["NodeProcess", "live_recheck", "live_reports", "node_parameters",
+           "settings_parameters"]

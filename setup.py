@@ -23,6 +23,7 @@ setup(
     entry_points={
         'console_scripts': [
             'rbe_node = rbe_ros.ros.node:main',
+            'rbe_lifecycle_node = rbe_ros.ros.lifecycle_node:main',
             'rbe-ros = rbe_ros.cli:main',
         ],
     },

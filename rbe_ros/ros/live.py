@@ -54,15 +54,16 @@ def _ros_value(value) -> str:
 
 
 class NodeProcess:
-    """``python -m rbe_ros.ros.node --ros-args *ros_args`` as a process, its output in ``log``
-    (a temporary file, removed at :meth:`stop`, if not given)."""
+    """``python -m module --ros-args *ros_args`` as a process (default: rbe_node), its output
+    in ``log`` (a temporary file, removed at :meth:`stop`, if not given)."""
 
-    def __init__(self, ros_args: list[str], log: Path | None = None):
+    def __init__(self, ros_args: list[str], log: Path | None = None,
+                 module: str = "rbe_ros.ros.node"):
         self._temporary = log is None
         self.log = Path(tempfile.mkstemp(prefix="rbe_node_", suffix=".log")[1]) if log is None \
             else Path(log)
         self._out = self.log.open("wb")
-        self.proc = subprocess.Popen([sys.executable, "-m", "rbe_ros.ros.node", "--ros-args",
+        self.proc = subprocess.Popen([sys.executable, "-m", module, "--ros-args",
                                       *ros_args], stdout=self._out, stderr=subprocess.STDOUT,
                                      env=dict(os.environ))
 

@@ -44,7 +44,6 @@ from dataclasses import replace
 from pathlib import Path
 
 import rclpy
-from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType, SetParametersResult)
@@ -151,14 +150,17 @@ class ConfigurationError(Exception):
     """The node cannot start with its parameters (a bag that cannot be created)."""
 
 
-class RbeNode(Node):
-    """A thin ROS shell over :func:`check_scene` and :func:`check_sequence`."""
+class RbeChecks:
+    """What the plain and the managed node share (mixed into an rclpy Node): parameters,
+    publishers, recording, and the check interfaces that :meth:`_start_interfaces` opens and
+    :meth:`_stop_interfaces` closes; the checks themselves."""
 
-    def __init__(self, **kwargs):
-        super().__init__(NODE_NAME, **kwargs)
+    def _setup(self) -> None:
+        """Declare the parameters; the state, publishers and diagnostics of the node."""
         self._closing = False
         self._destroyed = False
         self._action = None
+        self._interfaces: list = []     # subscriptions and service, while open
         self._bag = None
         self._bag_lock = threading.Lock()
         self._later_topics: dict[str, tuple[str, bool]] = {}   # bag topics not added yet
@@ -172,6 +174,7 @@ class RbeNode(Node):
         # the design and the poses measured so far (~/design, ~/poses): updated in the
         # callbacks, so that no measurement is lost when its check is dropped under overload
         self._asbuilt = AsBuilt()
+        self.foxglove = None
 
         self.add_on_set_parameters_callback(self._validate_parameters)
         for name, (value, descriptor) in PARAMETERS.items():
@@ -190,26 +193,6 @@ class RbeNode(Node):
         self._encode_markers = cdr.encoder(typestore(), MARKER_TYPE)
         self._report_pub = self.create_publisher(StabilityReport, "~/report", LATCHED_QOS)
         self._marker_pub = self.create_publisher(MarkerArray, "~/markers", LATCHED_QOS)
-        # raw: the callback gets the CDR bytes; a state is converted to a message only when
-        # the worker checks it (converting every state that arrives would hold the GIL and
-        # starve the checks at high rates)
-        self._state_sub = self.create_subscription(
-            AssemblyState, "~/assembly", self._on_state, STATE_QOS,
-            callback_group=self._topic_group, raw=True)
-        self._design_sub = self.create_subscription(
-            AssemblyState, "~/design", self._on_design, LATCHED_QOS,
-            callback_group=self._topic_group, raw=True)
-        # deep: each update carries measurements that later checks build on
-        self._poses_sub = self.create_subscription(
-            BlockPoses, "~/poses", self._on_poses, POSES_QOS,
-            callback_group=self._topic_group, raw=True)
-        self._service = self.create_service(
-            CheckAssembly, "~/check", self._on_check, callback_group=self._service_group)
-        self._action = ActionServer(
-            self, CheckSequence, "~/check_sequence", execute_callback=self._execute_sequence,
-            goal_callback=lambda _goal: GoalResponse.ACCEPT,
-            cancel_callback=lambda _goal: CancelResponse.ACCEPT,
-            callback_group=self._action_group)
 
         # /diagnostics about once a second, from the counters the node keeps as it works
         self.health = NodeHealth()
@@ -218,26 +201,65 @@ class RbeNode(Node):
             DIAGNOSTICS_PERIOD_S, self._publish_diagnostics,
             callback_group=MutuallyExclusiveCallbackGroup())
 
-        self.state_topic = self._state_sub.topic_name
+        self.state_topic = self.resolve_topic_name("~/assembly")
         self.report_topic = self._report_pub.topic_name
-        self.design_topic = self._design_sub.topic_name
-        self.poses_topic = self._poses_sub.topic_name
+        self.design_topic = self.resolve_topic_name("~/design")
+        self.poses_topic = self.resolve_topic_name("~/poses")
         self.marker_topic = self._marker_pub.topic_name
-        self._open_bag()
-        self._record_settings()
         self.add_post_set_parameters_callback(lambda _params: self._record_settings())
-        self.foxglove = None
+
+    def _start_foxglove(self) -> None:
         if self.get_parameter("foxglove_port").value:
             self.foxglove = SceneServer(self.get_parameter("foxglove_port").value,
                                         self.get_parameter("foxglove_host").value, NODE_NAME)
             self.get_logger().info(f"Foxglove WebSocket server on port {self.foxglove.port}")
+
+    def _start_interfaces(self) -> None:
+        """Subscribe the state topics, serve ~/check and ~/check_sequence, start the worker."""
+        self._closing = False
+        # raw: the callback gets the CDR bytes; a state is converted to a message only when
+        # the worker checks it (converting every state that arrives would hold the GIL and
+        # starve the checks at high rates)
+        self._interfaces = [
+            self.create_subscription(AssemblyState, "~/assembly", self._on_state, STATE_QOS,
+                                     callback_group=self._topic_group, raw=True),
+            self.create_subscription(AssemblyState, "~/design", self._on_design, LATCHED_QOS,
+                                     callback_group=self._topic_group, raw=True),
+            # deep: each update carries measurements that later checks build on
+            self.create_subscription(BlockPoses, "~/poses", self._on_poses, POSES_QOS,
+                                     callback_group=self._topic_group, raw=True),
+            self.create_service(CheckAssembly, "~/check", self._on_check,
+                                callback_group=self._service_group)]
+        self._action = ActionServer(
+            self, CheckSequence, "~/check_sequence", execute_callback=self._execute_sequence,
+            goal_callback=lambda _goal: GoalResponse.ACCEPT,
+            cancel_callback=lambda _goal: CancelResponse.ACCEPT,
+            callback_group=self._action_group)
         self._worker = threading.Thread(target=self._work, name="rbe_state_worker", daemon=True)
         self._worker.start()
-        if self.get_parameter("design_file").value:
-            self._load_design_file(self.get_parameter("design_file").value)
         self.get_logger().info(
             f"ready: {self.state_topic} -> {self.report_topic}, service "
-            f"{self._service.service_name}, mu {self.get_parameter('friction_coefficient').value}")
+            f"{self._interfaces[-1].service_name}, "
+            f"mu {self.get_parameter('friction_coefficient').value}")
+
+    def _stop_interfaces(self) -> None:
+        """Stop the worker (a running check ends after its current step) and close what
+        :meth:`_start_interfaces` opened. Idempotent."""
+        self.stop()
+        worker, self._worker = self._worker, None
+        if worker is not None and worker is not threading.current_thread():
+            worker.join(timeout=10.0)
+            if worker.is_alive():
+                self.get_logger().warning("the state worker is still checking; closing anyway")
+        for entity in self._interfaces:
+            if hasattr(entity, "srv_type"):
+                self.destroy_service(entity)
+            else:
+                self.destroy_subscription(entity)
+        self._interfaces = []
+        if self._action is not None:
+            self._action.destroy()
+            self._action = None
 
     # --- parameters -------------------------------------------------------------------------
 
@@ -333,26 +355,24 @@ class RbeNode(Node):
         with self._slot_cond:
             self._slot_cond.notify_all()
 
-    def destroy_node(self):
-        """Close the bag, destroy the action server (not done by Node), then the node.
-        Idempotent."""
-        self.stop()
-        worker, self._worker = self._worker, None
-        if worker is not None and worker is not threading.current_thread():
-            worker.join(timeout=10.0)       # a running check ends after its current step
-            if worker.is_alive():
-                self.get_logger().warning("the state worker is still checking; closing anyway")
+    def close_bag(self) -> None:
         with self._bag_lock:
             self._close_bag_locked()
+
+    def _close_outputs(self) -> None:
+        """Close the bag and the Foxglove server. Idempotent."""
+        self.close_bag()
         server, self.foxglove = self.foxglove, None
         if server is not None:
             server.stop()
+
+    def destroy_node(self):
+        """Close the interfaces, the bag and the Foxglove server, then the node. Idempotent."""
+        self._stop_interfaces()
+        self._close_outputs()
         if self._destroyed:
             return
         self._destroyed = True
-        if self._action is not None:
-            self._action.destroy()
-            self._action = None
         super().destroy_node()
 
     # --- checks -----------------------------------------------------------------------------
@@ -531,19 +551,16 @@ class RbeNode(Node):
             dict_to_message(state_to_dict(result.scene), AssemblyState)
         self._publish(None, result.error, header, state)
 
-    def _load_design_file(self, path: str) -> None:
-        """The design of ``design_file``, sent through :meth:`_on_design` as the message a
-        pipeline would send (so that it is recorded, and replayed, like one)."""
-        frame = self.get_parameter("frame_id").value
-        stamp = self.get_clock().now().nanoseconds
-        try:
-            scene, _ = load_design(path)
-            state = dict_to_message(state_to_dict(scene, frame, stamp), AssemblyState)
-        except SceneError as exc:
-            self.get_logger().error(f"design_file {path!r}: {exc}")
-            state = AssemblyState()
-            state.header.frame_id, state.header.stamp = frame, Time(
-                sec=stamp // 1_000_000_000, nanosec=stamp % 1_000_000_000)
+    def design_message(self, path: str) -> AssemblyState:
+        """The design of ``design_file`` as the message a pipeline would send on ~/design
+        (SceneError if it cannot be read)."""
+        scene, _ = load_design(path)
+        return dict_to_message(state_to_dict(scene, self.get_parameter("frame_id").value,
+                                             self.get_clock().now().nanoseconds),
+                               AssemblyState)
+
+    def _send_design(self, state: AssemblyState) -> None:
+        """Through :meth:`_on_design`, so that it is recorded, and replayed, like one sent."""
         self._on_design(serialize_message(state))
 
     def _on_check(self, request: CheckAssembly.Request, response: CheckAssembly.Response):
@@ -592,6 +609,28 @@ class RbeNode(Node):
         return result
 
 
+class RbeNode(RbeChecks, Node):
+    """The plain node: checking from the start until shut down."""
+
+    def __init__(self, **kwargs):
+        super().__init__(NODE_NAME, **kwargs)
+        self._setup()
+        self._open_bag()
+        self._record_settings()
+        self._start_foxglove()
+        self._start_interfaces()
+        path = self.get_parameter("design_file").value
+        if path:
+            try:
+                state = self.design_message(path)
+            except SceneError as exc:   # answered as an empty design: INVALID_INPUT
+                self.get_logger().error(f"design_file {path!r}: {exc}")
+                state = AssemblyState()
+                state.header.frame_id = self.get_parameter("frame_id").value
+                state.header.stamp = self.get_clock().now().to_msg()
+            self._send_design(state)
+
+
 def _stamp(header: dict) -> str:
     stamp = header["stamp"]
     return f"{stamp['sec']}.{stamp['nanosec']:09d}"
@@ -627,7 +666,13 @@ def _exit_now(signum, _frame):
 
 
 def main(args=None) -> None:
-    """Run the node until SIGINT/SIGTERM (or an external shutdown), then close everything.
+    """Run :class:`RbeNode` (see :func:`spin`)."""
+    spin(RbeNode, args)
+
+
+def spin(node_class, args=None) -> None:
+    """Run a node of ``node_class`` until SIGINT/SIGTERM (or an external shutdown), then close
+    everything.
 
     rclpy's own signal handling is off: its handler thread triggers the executor's guard
     condition and races with the executor's destruction at shutdown (a segfault in
@@ -641,7 +686,7 @@ def main(args=None) -> None:
     node = None
     executor = None
     try:
-        node = RbeNode()
+        node = node_class()
         executor = MultiThreadedExecutor(num_threads=max(4, os.cpu_count() or 1))
         executor.add_node(node)
         while rclpy.ok():

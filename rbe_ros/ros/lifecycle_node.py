@@ -1,0 +1,75 @@
+"""``rbe_lifecycle_node``: :mod:`rbe_ros.ros.node` as a managed (lifecycle) node.
+
+The same parameters, topics, service and action as ``rbe_node``, under the standard lifecycle
+(``ros2 lifecycle set /rbe_node configure``, then ``activate``), so that a cell's launch
+system brings the checks up only once the rest is ready:
+
+* configure: the parameters are validated, the bag of ``mcap_path`` opened and the design of
+  ``design_file`` read; a bad one fails the transition with one error line (the node stays
+  unconfigured);
+* activate: ``~/assembly``, ``~/design``, ``~/poses``, ``~/check`` and ``~/check_sequence``
+  open (the design of ``design_file`` is sent on, as by ``rbe_node``); deactivate closes them
+  (a running check ends after its current step);
+* cleanup: the bag is closed; shutdown: everything is closed.
+
+Run: ``rbe_lifecycle_node --ros-args -p mcap_path:=bags/run`` (or
+``python -m rbe_ros.ros.lifecycle_node``).
+"""
+from __future__ import annotations
+
+from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
+
+from ..scene import SceneError
+from .node import NODE_NAME, ConfigurationError, RbeChecks, spin
+
+
+class RbeLifecycleNode(RbeChecks, LifecycleNode):
+    """The checks of ``rbe_node`` behind the lifecycle transitions."""
+
+    def __init__(self, **kwargs):
+        super().__init__(NODE_NAME, **kwargs)
+        self._setup()
+        self._design = None
+
+    def on_configure(self, state) -> TransitionCallbackReturn:
+        path = self.get_parameter("design_file").value
+        try:
+            self.check_options()
+            self._open_bag()
+            self._design = self.design_message(path) if path else None
+        except (ConfigurationError, SceneError, ValueError) as exc:
+            self.close_bag()
+            self.get_logger().error(f"configure failed: {exc}")
+            return TransitionCallbackReturn.FAILURE
+        self._record_settings()
+        self._start_foxglove()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state) -> TransitionCallbackReturn:
+        self._start_interfaces()
+        if self._design is not None:
+            self._send_design(self._design)
+        return super().on_activate(state)
+
+    def on_deactivate(self, state) -> TransitionCallbackReturn:
+        self._stop_interfaces()
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state) -> TransitionCallbackReturn:
+        self._close_outputs()
+        self._design = None
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state) -> TransitionCallbackReturn:
+        self._stop_interfaces()
+        self._close_outputs()
+        return TransitionCallbackReturn.SUCCESS
+
+
+def main(args=None) -> None:
+    """Run :class:`RbeLifecycleNode` (unconfigured until told to configure)."""
+    spin(RbeLifecycleNode, args)
+
+
+if __name__ == "__main__":
+    main()

@@ -145,13 +145,14 @@ fi
 
 # --- 5. rbe_ros, editable -------------------------------------------------------------
 PKG_HASH="$(hash_files setup.py setup.cfg package.xml resource/rbe_ros)"
-if stamp_ok rbe_ros "$PKG_HASH" && [ -x "$VENV/bin/rbe-ros" ] && [ -x "$VENV/bin/rbe_node" ]; then
+if stamp_ok rbe_ros "$PKG_HASH" && [ -x "$VENV/bin/rbe-ros" ] && [ -x "$VENV/bin/rbe_node" ] \
+    && [ -x "$VENV/bin/rbe_lifecycle_node" ]; then
   log "rbe_ros: up to date (editable)"
 else
   log "rbe_ros: pip install -e . (no deps)"
   # setuptools comes pinned from the lock files: no build isolation, nothing downloaded.
   "$VPY" -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation -e .
-  for s in rbe-ros rbe_node; do
+  for s in rbe-ros rbe_node rbe_lifecycle_node; do
     [ -x "$VENV/bin/$s" ] || die "console script .venv/bin/$s was not installed"
   done
   stamp_set rbe_ros "$PKG_HASH"

@@ -41,7 +41,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 from machine import machine_summary  # noqa: E402
 
 from rbe_ros import generators as gen  # noqa: E402
-from rbe_ros.analysis.asbuilt import annotate_sensitivity  # noqa: E402
+from rbe_ros.analysis.asbuilt import sensitivity  # noqa: E402
 from rbe_ros.analysis.options import CheckOptions, HoldSearch  # noqa: E402
 from rbe_ros.analysis.perturb import PoseNoise, perturb_scene, resultant_error  # noqa: E402
 from rbe_ros.analysis.pipeline import check_scene  # noqa: E402
@@ -163,14 +163,14 @@ def design_speed(rounds: int, repeat: int) -> dict:
 
 def sensitivity_cost(repeat: int = 20) -> dict:
     """Best time (s) of the as-built stage of a check (near contacts and verdict_sensitive,
-    :func:`annotate_sensitivity`) on design geometry, per scene of :func:`design_speed`."""
+    :func:`rbe_ros.analysis.asbuilt.sensitivity`) on design geometry, per scene of :func:`design_speed`."""
     options = CheckOptions(holds=HoldSearch(enabled=False))
     out = {}
     for name, scene in (("wall 6x5", gen.running_bond_wall()),
                         ("wall 20x15", gen.running_bond_wall(20, 15)), ("dome 14x10", gen.dome())):
         assembly = validated_assembly(scene, options.limits, options.contact)
         report = check(assembly, options)
-        out[name] = min(_timed(lambda: annotate_sensitivity(report, assembly, options))
+        out[name] = min(_timed(lambda: sensitivity(report, assembly, options))
                         for _ in range(repeat))
     return out
 

@@ -30,8 +30,8 @@ BUGS = {
         'np.argmax(r) if side == "inner" else np.argmin(r)'),
     "centroid-vertex-mean": (
         "block centroid taken as the mean of the vertices",
-        "    volume, centroid = _volume_centroid(_centre_fans(vertices, faces))\n",
-        "    volume, centroid = _volume_centroid(_centre_fans(vertices, faces))\n"
+        "    volume, centroid = _volume_centroid(_centre_fans(vertices, ragged, centres))\n",
+        "    volume, centroid = _volume_centroid(_centre_fans(vertices, ragged, centres))\n"
         "    centroid = vertices.mean(axis=0)\n"),
     "cone-0.9-mu": (
         "exact friction cone built with 0.9 mu",

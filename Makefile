@@ -61,10 +61,10 @@ asbuilt: setup
 mutation: setup
 	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements/mutation.txt
 	$(PY) -m pip check --disable-pip-version-check
-	nice -n 10 $(PY) scripts/mutation.py $(MUTATION_ARGS)
+	nice -n 19 $(PY) scripts/mutation.py $(MUTATION_ARGS)
 
 planted-bugs: setup
-	nice -n 10 $(PY) scripts/planted_bugs.py
+	nice -n 19 $(PY) scripts/planted_bugs.py
 
 # Re-record the regression bags of bags/ (deterministic: same code, same files; ~30 s).
 bags: setup

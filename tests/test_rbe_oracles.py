@@ -1,15 +1,22 @@
 """The equilibrium model, the solver and the verdict's rules against closed forms, written for
-mutants that survived the rest of the suite (docs/MUTATION.md): known wrenches on a box."""
+mutants that survived the rest of the suite (docs/MUTATION.md): known wrenches on a box,
+sliding boxes on slopes (tan alpha), the sliding flags and a failed solve."""
+import math
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from rbe_ros.analysis.assembly import Assembly
 from rbe_ros.analysis.options import CheckOptions
-from rbe_ros.analysis.verdict import stable_forces
+from rbe_ros.analysis.verdict import _flag_sliding, infeasible_report, stable_forces
 from rbe_ros.rbe.model import build_model
+from rbe_ros.rbe.result import Status
+from rbe_ros.rbe.solver import SolveOptions
 from rbe_ros.scene import box_block, make_scene
 
-from helpers import DENSITY
+from helpers import DENSITY, checked, inclined_block
+from test_core_units import slopes_and_flat
 
 G = 9.81
 
@@ -41,3 +48,35 @@ def test_a_known_wrench_moves_the_resultant_by_its_moment_over_the_normal_force(
                        rtol=0, atol=1e-7)
     assert by_block["a"].normal_resultant == pytest.approx(weight, rel=1e-7)
     assert np.allclose(by_block["a"].centre_of_pressure, [-1.5, 0.0, 0.0], rtol=0, atol=1e-7)
+
+
+def test_sliding_flags_every_interface_over_the_cone_even_under_a_higher_threshold():
+    """Boxes on 20 and 25 deg slopes need mu >= tan 20 = 0.364 and tan 25 = 0.466: at
+    mu 0.3 both slide, and both are flagged although the post-check threshold (2) flags
+    neither; the box on flat ground is not."""
+    report = checked(slopes_and_flat(), CheckOptions(SolveOptions(mu=0.3), mu_threshold=2.0))
+    assert report.status == Status.FRICTION_EXCEEDED
+    flags = {r.block_b: r.friction_exceeded for r in report.interfaces}
+    assert flags == {"s20_box": True, "s25_box": True, "flat": False}
+    ratios = {r.block_b: r.friction_ratio for r in report.interfaces}
+    assert ratios["s20_box"] == pytest.approx(math.tan(math.radians(20)), rel=1e-6)
+    assert ratios["s25_box"] == pytest.approx(math.tan(math.radians(25)), rel=1e-6)
+
+
+def test_sliding_through_torsion_alone_flags_the_highest_ratio():
+    """When the vertex cones fail while no resultant exceeds the capacity (torsion), the
+    interface asking most friction is the one flagged; none for no interfaces."""
+    results = [r for r in checked(slopes_and_flat()).interfaces]
+    ratios = [0.2, 0.5, 0.1]
+    results = [replace(r, friction_ratio=q, friction_exceeded=False)
+               for r, q in zip(results, ratios)]
+    flagged = _flag_sliding(results, 0.6)
+    assert [r.friction_exceeded for r in flagged] == [False, True, False]
+    assert [r.friction_exceeded for r in _flag_sliding(results, 0.15)] == [True, True, False]
+    assert _flag_sliding([], 0.6) == []
+
+
+def test_a_failed_solve_is_no_infeasibility_to_explain():
+    """A solve out of time is a failure, not a proof that the assembly cannot stand."""
+    options = CheckOptions(SolveOptions(time_limit=1e-9))
+    assert infeasible_report(Assembly.from_scene(inclined_block(10.0)), options) is None

@@ -1,21 +1,24 @@
 """The equilibrium model, the solver and the verdict's rules against closed forms, written for
 mutants that survived the rest of the suite (docs/MUTATION.md): known wrenches on a box,
-sliding boxes on slopes (tan alpha), the sliding flags and a failed solve."""
+sliding boxes on slopes (tan alpha), the sliding flags, failed solves, the names of
+floating blocks and the CSC helper."""
 import math
 from dataclasses import replace
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
+from rbe_ros.analysis import verdict
 from rbe_ros.analysis.assembly import Assembly
 from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.analysis.verdict import _flag_sliding, infeasible_report, stable_forces
 from rbe_ros.rbe.model import build_model
 from rbe_ros.rbe.result import Status
-from rbe_ros.rbe.solver import SolveOptions
+from rbe_ros.rbe.solver import Solution, SolveOptions, _Csc
 from rbe_ros.scene import box_block, make_scene
 
-from helpers import DENSITY, checked, inclined_block
+from helpers import DENSITY, checked, inclined_block, stacked_boxes
 from test_core_units import slopes_and_flat
 
 G = 9.81
@@ -80,3 +83,48 @@ def test_a_failed_solve_is_no_infeasibility_to_explain():
     """A solve out of time is a failure, not a proof that the assembly cannot stand."""
     options = CheckOptions(SolveOptions(time_limit=1e-9))
     assert infeasible_report(Assembly.from_scene(inclined_block(10.0)), options) is None
+
+
+def test_a_glued_solve_that_fails_is_reported_as_failed(monkeypatch):
+    """Boxes that tip (no equilibrium without tension, none with unlimited friction): when
+    the glued friction+ solve that would show where fails, the report is SOLVER_FAILED with
+    the solver's status, not a verdict."""
+    real = verdict.solve
+
+    def glue_fails(model, options, **kwargs):
+        if options.friction == "plus":
+            return Solution("failed", "MaxTime", np.zeros((4, model.num_vertices)), 0.0)
+        return real(model, options, **kwargs)
+
+    monkeypatch.setattr(verdict, "solve", glue_fails)
+    report = infeasible_report(Assembly.from_scene(stacked_boxes(0.6)), CheckOptions())
+    assert report.status == Status.SOLVER_FAILED
+    assert report.message == "solver failed: MaxTime"
+
+
+@pytest.mark.parametrize("mu, stands", [(0.3, False), (0.4, True)])
+def test_stable_forces_solve_with_the_options_mu(mu, stands):
+    """A box on a 20 deg slope needs mu >= tan 20 = 0.364, whatever the post-check threshold
+    (2 here) would let through."""
+    assembly = Assembly.from_scene(inclined_block(20.0))
+    model = build_model(assembly.blocks, assembly.interfaces, assembly.gravity)
+    found = stable_forces(model, CheckOptions(SolveOptions(mu=mu), mu_threshold=2.0))
+    assert (found is not None) is stands
+    if stands:
+        assert found[1][0].friction_ratio == pytest.approx(math.tan(math.radians(20)), rel=1e-6)
+
+
+@pytest.mark.parametrize("count, shown", [(5, "blocks f0, f1, f2, f3, f4 not"),
+                                          (6, "blocks f0, f1, f2, f3, f4 and 1 more not")])
+def test_five_floating_blocks_are_named_in_full_and_a_sixth_is_counted(count, shown):
+    report = checked(make_scene("s", [
+        box_block("ground", (20, 20, 0.2), (0, 0, -0.1), support=True, density=DENSITY),
+        *[box_block(f"f{k}", (1, 1, 1), (3.0 * k, 0, 3.0), density=DENSITY)
+          for k in range(count)]]))
+    assert report.message == f"no equilibrium: {shown} connected to a support by any contact"
+
+
+def test_a_diagonal_with_trailing_zeros_keeps_its_shape():
+    d = np.array([1.0, 0.0, 2.0, 0.0])
+    csc = _Csc.diagonal(d).tocsc()
+    assert csc.shape == (4, 4) and (csc != sp.diags(d).tocsc()).nnz == 0

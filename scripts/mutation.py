@@ -152,14 +152,16 @@ def run(modules: list[str] | None, children: int, sample: float, rerun: bool) ->
     """mutmut over the mutants not run yet: all of them, those of ``modules``, or with
     ``sample`` < 1 that share of each module's mutants, drawn with a fixed seed (a
     stratified sample: an unbiased estimate of each module's score); with ``rerun`` the
-    mutants run and not killed, again (after new tests)."""
+    mutants run, not killed and not listed as equivalent, again (after new tests)."""
     prepare()
     if not results():                      # the mutants and the stats are made by a first run
         mutmut([names_pattern(min(targets(), key=lambda m: (ROOT / m).stat().st_size))],
                "(mutants made)", children)
     status = results()
     if rerun:
-        chosen = sorted(k for k, v in status.items() if v not in ("killed", "not checked"))
+        equiv, wanted = equivalents(), {dotted(m) for m in modules or targets()}
+        chosen = sorted(k for k, v in status.items() if v not in ("killed", "not checked")
+                        and k not in equiv and module_of(k) in wanted)
         what = f"rerun of {len(chosen)} not killed"
     elif sample < 1.0:
         chosen = []

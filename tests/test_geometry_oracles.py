@@ -10,6 +10,7 @@ from scipy.spatial import ConvexHull
 from scipy.spatial.transform import Rotation
 
 from rbe_ros.analysis.assembly import Assembly
+from rbe_ros.geometry.contacts import _shapely_overlaps
 from rbe_ros.geometry.kern import kerns, kerns_ragged
 from rbe_ros.geometry.overlap import _inscribed_radius, find_penetration
 from rbe_ros.geometry.polygon import tangent_basis
@@ -223,3 +224,23 @@ def test_mid_frame_is_halfway_between_tilted_planes_on_the_bisector():
         assert np.allclose([u[k], v[k]], [du, dv], rtol=0, atol=1e-15)
         assert np.allclose(np.cross(u[k], v[k]), n[k], rtol=0, atol=1e-15)
     assert n[1][0] == 0.9                     # on the limit of the design frame's helper axis
+
+
+def test_overlaps_of_non_convex_outlines_are_their_polygon_pieces_counter_clockwise():
+    """A U (3 x 2, notch 1 wide and 1 deep from the top) against: a bar across both arms
+    (two 1 x 0.5 pieces), a square sitting in the notch (touching along lines only: no
+    piece), a far square (nothing); the bar given clockwise. Each piece: its ring counter-
+    clockwise (shoelace area positive), its area and centroid in closed form, its pair."""
+    u_shape = shapely.Polygon([(0, 0), (3, 0), (3, 2), (2, 2), (2, 1), (1, 1), (1, 2), (0, 2)])
+    bar = shapely.Polygon([(-1, 1.5), (-1, 2), (4, 2), (4, 1.5)])                  # clockwise
+    notch = shapely.box(1, 1, 2, 2)
+    far = shapely.box(10, 10, 11, 11)
+    ring, counts, owner, area, centroid = _shapely_overlaps(
+        np.array([u_shape, u_shape, u_shape, u_shape]), np.array([bar, notch, far, bar]),
+        np.array([4, 7, 9, 11]))
+    assert owner.tolist() == [4, 4, 11, 11] and counts.tolist() == [4, 4, 4, 4]
+    assert np.allclose(area, 0.5)
+    assert np.allclose(sorted(centroid[:2].tolist()), [[0.5, 1.75], [2.5, 1.75]])
+    for k, start in enumerate(np.cumsum(counts) - counts):
+        x, y = ring[start:start + counts[k]].T
+        assert 0.5 * (x @ np.roll(y, -1) - np.roll(x, -1) @ y) == pytest.approx(0.5)

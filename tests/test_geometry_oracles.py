@@ -244,3 +244,35 @@ def test_overlaps_of_non_convex_outlines_are_their_polygon_pieces_counter_clockw
     for k, start in enumerate(np.cumsum(counts) - counts):
         x, y = ring[start:start + counts[k]].T
         assert 0.5 * (x @ np.roll(y, -1) - np.roll(x, -1) @ y) == pytest.approx(0.5)
+
+
+def _wedge(block_id: str, x: float, z: float):
+    """A right triangle (legs 1, in x and z) extruded 0.125 along y: 6 vertices, 5 faces,
+    volume 1/16, so size (the cube root of the volume) 0.397; its base at height z."""
+    tri = np.array([[0, 0], [1, 0], [0, 1]], dtype=float)
+    vertices = np.vstack([np.column_stack((tri[:, 0], np.full(3, y), tri[:, 1]))
+                          for y in (-0.0625, 0.0625)])
+    return make_block(block_id, vertices, prism_faces(vertices), (x, 0, z), density=DENSITY)
+
+
+def test_the_deepest_penetration_is_found_with_the_smaller_blocks_tolerance():
+    """Two wedges sunk into the top of a 2 m cube by 0.02 and 0.01 (the cube 8 vertices,
+    a wedge 6: padded to one count): the deeper is reported, with the tolerance of the smaller
+    block of its pair (1 % of the wedge's size, 0.004, not of the cube's, 0.02), and only
+    two blocks suffice; the wedge's pose allowance adds to the tolerance."""
+    size = (1 / 16) ** (1 / 3)
+    cube = box_block("cube", (2, 2, 2), (0, 0, 1), density=DENSITY)
+    blocks = list(Assembly.from_scene(make_scene("sunk", [
+        box_block("g", (9, 9, 0.2), (0, 0, -0.1), support=True, density=DENSITY), cube,
+        _wedge("w1", -0.8, 2 - 0.01), _wedge("w2", 0.2, 2 - 0.02)])).blocks)
+    hit = find_penetration(blocks, 0.01)
+    assert (hit.a, hit.b) == (1, 3)
+    assert hit.depth == pytest.approx(0.02, rel=1e-9) and hit.tol == pytest.approx(0.01 * size)
+    for pair in (blocks[1:3], blocks[2:0:-1]):
+        hit = find_penetration(pair, 0.01)
+        assert (hit.a, hit.b) == (0, 1) and hit.depth == pytest.approx(0.01, rel=1e-9)
+        assert hit.tol == pytest.approx(0.01 * size)
+    assert find_penetration(blocks[1:3], 0.01, allowance=np.array([0.0, 0.007])) is None
+    assert find_penetration(blocks[1:3], 0.01, allowance=np.array([0.007, 0.0])) is None
+    assert find_penetration(blocks[1:3], 0.01, allowance=np.array([0.0, 0.005])).tol \
+        == pytest.approx(0.01 * size + 0.005)

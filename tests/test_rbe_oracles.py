@@ -12,7 +12,9 @@ import scipy.sparse as sp
 from rbe_ros.analysis import verdict
 from rbe_ros.analysis.assembly import Assembly
 from rbe_ros.analysis.options import CheckOptions
+from rbe_ros.analysis.pipeline import check_scene
 from rbe_ros.analysis.verdict import _flag_sliding, infeasible_report, stable_forces
+from rbe_ros.geometry.contacts import ContactOptions
 from rbe_ros.rbe.model import build_model
 from rbe_ros.rbe.result import Status
 from rbe_ros.rbe.solver import Solution, SolveOptions, _Csc
@@ -128,3 +130,117 @@ def test_a_diagonal_with_trailing_zeros_keeps_its_shape():
     d = np.array([1.0, 0.0, 2.0, 0.0])
     csc = _Csc.diagonal(d).tocsc()
     assert csc.shape == (4, 4) and (csc != sp.diags(d).tocsc()).nnz == 0
+
+
+def test_interfaces_count_for_friction_from_a_hundredth_of_the_mean_free_weight():
+    """With a declared pose uncertainty, |V|/N counts on interfaces carrying at least 1 % of
+    the mean free block's weight (m g of the unit boxes, from their density); all count on
+    design geometry and when nothing is free."""
+    assembly = Assembly.from_scene(two_boxes_on_the_ground())
+    model = build_model(assembly.blocks, assembly.interfaces, assembly.gravity)
+    least = 0.01 * DENSITY * G
+    results = [replace(r, normal_resultant=n) for r, n in
+               zip(checked(two_boxes_on_the_ground()).interfaces * 2,
+                   [least * 0.999, least, least * 1.001, 0.0])]
+    uncertain = CheckOptions(contact=ContactOptions(pose_uncertainty_m=0.002))
+    assert verdict._loaded(model, results, uncertain) == [False, True, True, False]
+    assert verdict._loaded(model, results, CheckOptions()) == [True] * 4
+    held = replace(model, free=model.free[:0])
+    assert verdict._loaded(held, results, uncertain) == [True] * 4
+
+
+@pytest.mark.parametrize("scene, message", [
+    (lambda: make_scene("one", two_boxes_on_the_ground().blocks[:2]), "stable: 1 interface in"),
+    (two_boxes_on_the_ground, "stable: 2 interfaces in")])
+def test_the_stable_message_counts_its_interfaces(scene, message):
+    assert checked(scene()).message.startswith(message + " compression, worst |V|/N 0.000")
+
+
+def test_the_friction_message_names_the_cone_or_the_threshold():
+    """Sliding beyond the cone (mu 0.3: both slopes slide) names the cone and mu; a
+    solution within the cone over the threshold (mu 0.6, threshold 0.4) names the
+    threshold; the worst interface is the 25 deg slope's (|V|/N = tan 25)."""
+    slides = checked(slopes_and_flat(), CheckOptions(SolveOptions(mu=0.3)))
+    assert slides.message == ("friction exceeded: |V|/N = 0.466 at interface s25_slope|s25_box,"
+                              " more than the soc cone allows with mu 0.3 (blocks s20_box,"
+                              " s25_box would slide)")
+    over = checked(slopes_and_flat(), CheckOptions(mu_threshold=0.4))
+    assert over.message == ("friction exceeded: |V|/N = 0.466 at interface s25_slope|s25_box,"
+                            " more than the threshold 0.4 (block s25_box would slide)")
+    assert over.worst_friction_ratio == pytest.approx(math.tan(math.radians(25)), rel=1e-6)
+
+
+def test_sliding_on_a_pyramid_cone_is_judged_against_its_capacity():
+    """The inscribed 8-sided pyramid holds mu cos(pi/8) = 0.342 at mu 0.37: the 20 deg slope
+    (tan 20 = 0.364) exceeds it, so both slopes are flagged (mu / cos(pi/8) would spare it)."""
+    report = checked(slopes_and_flat(), CheckOptions(SolveOptions(mu=0.37, cone="pyramid8"),
+                                                     mu_threshold=2.0))
+    assert report.status == Status.FRICTION_EXCEEDED
+    assert {r.block_b for r in report.interfaces if r.friction_exceeded} == {"s20_box",
+                                                                            "s25_box"}
+
+
+def test_a_failed_primary_solve_is_reported_with_the_solvers_status(monkeypatch):
+    """Only the first (deciding) solve fails: the report is that failure, not an
+    explanation from the solves after it; it counts the blocks as any other (set by check,
+    and by the explained reports too)."""
+    real, calls = verdict.solve, []
+
+    def first_fails(model, options, **kwargs):
+        calls.append(options)
+        if len(calls) == 1:
+            return Solution("failed", "NumericalError", np.zeros((4, model.num_vertices)), 0.0)
+        return real(model, options, **kwargs)
+
+    monkeypatch.setattr(verdict, "solve", first_fails)
+    report = verdict.check(Assembly.from_scene(two_boxes_on_the_ground()), CheckOptions())
+    assert report.status == Status.SOLVER_FAILED and len(calls) == 1
+    assert report.message == "solver failed: NumericalError" and report.num_blocks == 3
+    monkeypatch.undo()
+    tips = infeasible_report(Assembly.from_scene(stacked_boxes(0.6)), CheckOptions())
+    assert tips.num_blocks == 3 and tips.status == Status.TENSION_REQUIRED
+
+
+def test_only_supports_are_stable_with_nothing_to_carry():
+    report = check_scene(make_scene("bare", two_boxes_on_the_ground().blocks[:1]))
+    assert report.status == Status.STABLE and report.interfaces == ()
+    assert report.max_tension == 0.0 and report.worst_friction_ratio == 0.0
+    assert report.message == "stable: 0 interfaces in compression, worst |V|/N 0.000 (mu 0.6)"
+
+
+def test_unloaded_interfaces_do_not_decide_friction_under_a_pose_uncertainty(monkeypatch):
+    """Two boxes on the ground, their results replaced: a's base carries its weight at
+    |V|/N 0.1, b's next to nothing (below 1 % of the mean free weight) at 0.9, flagged by
+    the threshold 0.6. Declared poses: stable, b's flag cleared, worst ratio a's 0.1;
+    design poses: b's flag decides (FRICTION_EXCEEDED, worst 0.9); a's own flag (at 0.7)
+    stands either way."""
+    assembly = Assembly.from_scene(two_boxes_on_the_ground())
+    model = build_model(assembly.blocks, assembly.interfaces, assembly.gravity)
+    solution = verdict.solve(model)
+    base = {r.block_b: r for r in checked(two_boxes_on_the_ground()).interfaces}
+    crafted = [replace(base["a"], friction_ratio=0.1),
+               replace(base["b"], normal_resultant=1.0, friction_ratio=0.9,
+                       friction_exceeded=True)]
+    monkeypatch.setattr(verdict, "interface_results", lambda *args, **kwargs: crafted)
+    uncertain = CheckOptions(contact=ContactOptions(pose_uncertainty_m=0.002))
+    report = verdict._report(model, solution, uncertain)
+    assert report.status == Status.STABLE and report.worst_friction_ratio == 0.1
+    assert [r.friction_exceeded for r in report.interfaces] == [False, False]
+    design = verdict._report(model, solution, CheckOptions())
+    assert design.status == Status.FRICTION_EXCEEDED and design.worst_friction_ratio == 0.9
+    assert [r.friction_exceeded for r in design.interfaces] == [False, True]
+    crafted[0] = replace(crafted[0], friction_ratio=0.7, friction_exceeded=True)
+    loaded = verdict._report(model, solution, uncertain)      # a's own flag stands
+    assert loaded.status == Status.FRICTION_EXCEEDED and loaded.worst_friction_ratio == 0.7
+    assert [r.friction_exceeded for r in loaded.interfaces] == [True, False]
+
+
+def test_the_tension_message_names_the_interface_needing_most():
+    """Two overhanging stacks, 0.6 and 0.8 of the lower box's width: the upper boxes tip,
+    the message's interface is the one of the larger overhang."""
+    blocks = [*stacked_boxes(0.6).blocks,
+              *[replace(b, id=f"{b.id}2", position=b.position + [5.0, 0, 0])
+                for b in stacked_boxes(0.8).blocks]]
+    report = checked(make_scene("two stacks", blocks))
+    assert report.status == Status.TENSION_REQUIRED
+    assert " at interface a2|b2 (" in report.message

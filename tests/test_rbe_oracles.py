@@ -16,6 +16,7 @@ from rbe_ros.analysis.pipeline import check_scene
 from rbe_ros.analysis.verdict import _flag_sliding, infeasible_report, stable_forces
 from rbe_ros.geometry.contacts import ContactOptions
 from rbe_ros.rbe.model import build_model
+from rbe_ros.rbe.resultants import interface_results
 from rbe_ros.rbe.result import Status
 from rbe_ros.rbe.solver import Solution, SolveOptions, _Csc
 from rbe_ros.scene import box_block, make_scene
@@ -244,3 +245,53 @@ def test_the_tension_message_names_the_interface_needing_most():
     report = checked(make_scene("two stacks", blocks))
     assert report.status == Status.TENSION_REQUIRED
     assert " at interface a2|b2 (" in report.message
+
+
+@pytest.mark.parametrize("field, value, message", [
+    ("objective", "ls", "objective must be one of qp, lp, not 'ls'"),
+    ("friction", "glue", "friction must be one of net, plus, not 'glue'"),
+    ("cone", "cube", "cone must be one of soc, pyramid8, pyramid8-outer, pyramid4, not 'cube'"),
+    ("mu", 0.0, "friction coefficient mu must be positive, not 0.0"),
+    ("mu", -0.5, "friction coefficient mu must be positive, not -0.5")])
+def test_invalid_solve_options_name_the_field_and_the_choices(field, value, message):
+    with pytest.raises(ValueError) as raised:
+        SolveOptions(**{field: value})
+    assert str(raised.value) == message
+    assert SolveOptions(mu=0.5).mu == 0.5 and SolveOptions(mu=1.5).mu == 1.5
+
+
+def test_a_box_on_a_slope_carries_tan_alpha_and_slides_against_a_smaller_mu():
+    """A box on a 20 deg slope solved at mu 0.6: N = m g cos 20, |V| = m g sin 20; no
+    tension even with a zero tolerance; read against mu 0.1 it slides (sin 20 > 0.1 cos 20
+    by far more than the 1e-9 margin), against mu 0.4 it does not."""
+    assembly = Assembly.from_scene(inclined_block(20.0))
+    model = build_model(assembly.blocks, assembly.interfaces, assembly.gravity)
+    solution = verdict.solve(model)
+    weight = sum(b.mass for b in assembly.blocks if not b.support) * G
+    [r] = interface_results(model, solution, mu_threshold=math.inf, tension_tol=0.0, mu=0.1)
+    assert r.normal_resultant == pytest.approx(weight * math.cos(math.radians(20)), rel=1e-7)
+    assert np.linalg.norm(r.shear) == pytest.approx(weight * math.sin(math.radians(20)), rel=1e-6)
+    assert r.tension is False and r.friction_exceeded is True
+    [r] = interface_results(model, solution, mu_threshold=math.inf, tension_tol=1e-5, mu=0.4)
+    assert r.friction_exceeded is False
+
+
+
+def test_the_model_scales_are_the_free_weight_and_the_assembly_extent():
+    """W: the free blocks' weight (m g of each unit box); L: the larger of the spread of the
+    block centroids (3 m between the boxes, 1.5 m from a box to the ground's centre) and the
+    largest block size (the ground's, the cube root of 6 x 2 x 0.2); a free 0.1 m box of
+    0.1 kg weighs 0.981 N; held alone, it has its own size; 1 and 1 for nothing."""
+    blocks = two_boxes_on_the_ground().blocks
+    pebble = box_block("pebble", (0.1, 0.1, 0.1), (0, 0, 0.05), density=100.0)
+    for scene_blocks, weight, length in ((blocks, 2 * DENSITY * G, 3.0),
+                                         (blocks[:2], DENSITY * G, 1.5),
+                                         (blocks[:1], 1.0, 2.4 ** (1 / 3)),
+                                         ([blocks[0], pebble], 0.1 * G, 2.4 ** (1 / 3)),
+                                         ([replace(pebble, support=True)], 1.0, 0.1)):
+        assembly = Assembly.from_scene(make_scene("s", scene_blocks))
+        model = build_model(assembly.blocks, assembly.interfaces, assembly.gravity)
+        assert model.force_scale == pytest.approx(weight, rel=1e-12)
+        assert model.length_scale == pytest.approx(length, rel=1e-12)
+    empty = build_model((), (), [0.0, 0.0, -G])
+    assert (empty.force_scale, empty.length_scale) == (1.0, 1.0)

@@ -10,7 +10,7 @@ from scipy.spatial import ConvexHull
 from scipy.spatial.transform import Rotation
 
 from rbe_ros.analysis.assembly import Assembly
-from rbe_ros.geometry.contacts import _shapely_overlaps
+from rbe_ros.geometry.contacts import ContactOptions, _overlaps, _shapely_overlaps, detect_interfaces
 from rbe_ros.geometry.kern import kerns, kerns_ragged
 from rbe_ros.geometry.overlap import _inscribed_radius, find_penetration
 from rbe_ros.geometry.polygon import tangent_basis
@@ -276,3 +276,21 @@ def test_the_deepest_penetration_is_found_with_the_smaller_blocks_tolerance():
     assert find_penetration(blocks[1:3], 0.01, allowance=np.array([0.007, 0.0])) is None
     assert find_penetration(blocks[1:3], 0.01, allowance=np.array([0.0, 0.005])).tol \
         == pytest.approx(0.01 * size + 0.005)
+
+
+def test_detected_interfaces_follow_the_distance_tolerance():
+    """A unit cube 2 mm above another (1 x 1 faces): no interface within the default 1e-3 of
+    the size, one of area 1 within 3e-3; the near contacts are another list."""
+    blocks = list(Assembly.from_scene(make_scene("gap", [
+        box_block("g", (1, 1, 1), (0, 0, 0.5), support=True, density=DENSITY),
+        box_block("c", (1, 1, 1), (0, 0, 1.502), density=DENSITY)])).blocks)
+    assert detect_interfaces(blocks) == []
+    [it] = detect_interfaces(blocks, ContactOptions(distance_tol=3e-3))
+    assert (it.a, it.b) == (0, 1) and it.area == pytest.approx(1.0, rel=1e-12)
+
+
+def test_no_outline_pairs_have_no_overlaps():
+    ring, counts, rows, area, centroid = _overlaps(None, None, None, None, None, None, None,
+                                                   None, np.zeros(0, dtype=np.intp))
+    assert ring.shape == (0, 2) and centroid.shape == (0, 2)
+    assert counts.shape == area.shape == rows.shape == (0,) and counts.dtype == np.intp

@@ -139,7 +139,8 @@ def mutmut(args: list[str], what: str, children: int) -> None:
         done = subprocess.run([str(MUTMUT), "run", "--max-children", str(children), *args],
                               cwd=WORK, env=env, stdout=log, stderr=subprocess.STDOUT)
     seconds = time.monotonic() - start
-    ran = len(args) if args else sum(v != "not checked" for v in results().values()) - before
+    named = args and not any("*" in a for a in args)
+    ran = len(args) if named else sum(v != "not checked" for v in results().values()) - before
     runs = json.loads(RUNS.read_text()) if RUNS.exists() else []
     runs.append({"date": time.strftime("%Y-%m-%d %H:%M"), "what": what, "children": children,
                  "mutants": ran, "seconds": round(seconds)})
@@ -150,8 +151,8 @@ def mutmut(args: list[str], what: str, children: int) -> None:
 
 def run(modules: list[str] | None, children: int, sample: float, rerun: bool) -> None:
     """mutmut over the mutants not run yet: all of them, those of ``modules``, or with
-    ``sample`` < 1 that share of each module's mutants, drawn with a fixed seed (a
-    stratified sample: an unbiased estimate of each module's score); with ``rerun`` the
+    ``sample`` < 1 that share of each module's mutants not run yet, drawn with a fixed seed
+    (a stratified sample: an unbiased estimate of each module's score); with ``rerun`` the
     mutants run, not killed and not listed as equivalent, again (after new tests)."""
     prepare()
     if not results():                      # the mutants and the stats are made by a first run
@@ -166,10 +167,9 @@ def run(modules: list[str] | None, children: int, sample: float, rerun: bool) ->
     elif sample < 1.0:
         chosen = []
         for module in modules or targets():
-            mine = sorted(k for k in status if module_of(k) == dotted(module))
-            todo = [k for k in mine if status[k] == "not checked"]
-            want = max(0, math.ceil(sample * len(mine)) - (len(mine) - len(todo)))
-            chosen += random.Random(f"{SEED}:{module}").sample(todo, min(want, len(todo)))
+            todo = sorted(k for k, v in status.items()
+                          if module_of(k) == dotted(module) and v == "not checked")
+            chosen += random.Random(f"{SEED}:{module}").sample(todo, math.ceil(sample * len(todo)))
         what = f"sample {sample:g} (seed {SEED})"
     elif modules:
         chosen = [k for k, v in status.items()
@@ -280,10 +280,11 @@ def report() -> tuple[int, int]:
         "",
         f"**Killed: {killed} of {scored} non-equivalent mutants ({100 * killed / max(scored, 1):.1f} %)**;"
         f" {total['equivalent']} equivalent; "
-        + (f"{total['not checked']} not run: the score is over the mutants run (a fixed-seed"
-           f" sample, `--sample`, or a run cut short), Wilson 95 % interval"
-           f" {100 * low:.1f}-{100 * high:.1f} %." if total["not checked"]
-           else "every mutant run."),
+        + (f"{total['not checked']} not run: the score is over the mutants run, Wilson 95 %"
+           f" interval {100 * low:.1f}-{100 * high:.1f} %. A module with mutants not run was not"
+           " run in full: a run cut short (mutmut runs the mutants with the fastest tests"
+           " first), and a fixed-seed random share of its remaining mutants (`--sample`, seed"
+           f" {SEED}; see the runs below)." if total["not checked"] else "every mutant run."),
         "",
         "| module | mutants | killed | survived | no tests | timeout | equivalent | not run | score |",
         "|---|---|---|---|---|---|---|---|---|",
@@ -322,7 +323,7 @@ def main() -> int:
     parser.add_argument("--report", action="store_true", help="only write docs/MUTATION.md")
     parser.add_argument("--children", type=int, default=2, help="parallel mutant runs")
     parser.add_argument("--sample", type=float, default=1.0,
-                        help=f"run this share of each module's mutants (seed {SEED})")
+                        help=f"run this share of each module's mutants not run yet (seed {SEED})")
     parser.add_argument("--rerun", action="store_true",
                         help="run the mutants not killed again (after new tests)")
     args = parser.parse_args()

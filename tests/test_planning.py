@@ -124,6 +124,21 @@ def test_cli_plan_json_and_exit_status(tmp_path, capsys):
     assert "NOT feasible (step 5)" in text and "order: v00, v06, v01, v02, v03" in text
 
 
+def test_planned_scene_keeps_the_pose_uncertainty_it_was_planned_under(tmp_path, capsys):
+    """The scene file's declaration is written back; a command-line one wins over it."""
+    arch = generators.semicircular_arch(7)
+    scene = tmp_path / "arch.json"
+    scene.write_text(json.dumps(scene_to_dict(make_scene(
+        arch.name, arch.blocks, arch.gravity, pose_uncertainty=(0.001, 0.2)))))
+    out_scene = tmp_path / "planned.json"
+    assert main(["plan", str(scene), "--max-held", "2", "-o", str(out_scene)]) == 0
+    assert json.loads(out_scene.read_text())["pose_uncertainty"] == [0.001, 0.2]
+    assert main(["plan", str(scene), "--max-held", "2", "--pose-uncertainty", "0.002,0.5",
+                 "-o", str(out_scene)]) == 0
+    assert json.loads(out_scene.read_text())["pose_uncertainty"] == [0.002, 0.5]
+    capsys.readouterr()
+
+
 @pytest.mark.parametrize("bad", [["--max-held", "-1"], ["--max-held", "1", "--beam", "0"]])
 def test_cli_plan_bad_options(tmp_path, capsys, bad):
     scene = tmp_path / "arch.json"

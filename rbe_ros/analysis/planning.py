@@ -228,7 +228,8 @@ class _Planner:
         keep = [h for h in self.base.holds if h.until_step is None or h.until_step <= n]
         try:
             scene = make_scene(self.scene.name, [b for b in self.scene.blocks if b.id in placed],
-                               self.scene.gravity, order, [*keep, *holds]) if order else None
+                               self.scene.gravity, order, [*keep, *holds],
+                               _planned_under(self.options)) if order else None
         except SceneError:
             scene = None
         reports = check_sequence(scene, self.options) if scene is not None else []
@@ -237,6 +238,14 @@ class _Planner:
             feasible, failed = False, bad.step_index
             message = f"the plan does not re-check stable at step {failed}: {bad.message}"
         return Plan(feasible, order, held, message, failed, scene, reports, self.checks)
+
+
+def _planned_under(options: CheckOptions) -> tuple[float, float] | None:
+    """The pose uncertainty the plan was checked under, for the planned scene to keep (a scene
+    file's, or the command line's, which wins over it)."""
+    contact = options.contact
+    return ((contact.pose_uncertainty_m, contact.pose_uncertainty_deg) if contact.uncertain
+            else None)
 
 
 def plan_sequence(scene: Scene, max_held: int = 2, options: CheckOptions = CheckOptions(), *,

@@ -7,11 +7,12 @@ import shutil
 from pathlib import Path
 
 import pytest
+import shapely
 from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 from ruamel.yaml import YAML
 
-from oracles import plane_blocks
+from oracles import plane_blocks, stacks
 from rbe_ros.io import bag
 from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.cli import main
@@ -82,7 +83,15 @@ def unstable(run):
 def test_stack_tips_at_step_3(runs):
     seq, whole = runs["stack_tips"]
     assert steps(seq) == [(k, f"b{k:02d}") for k in range(5)]
-    assert unstable(seq) == [3, 4]
+    # derived by the overhang rule (tests/oracles/stacks.py) from the bag's documented
+    # stack: five 1 x 1 x 0.5 m boxes, each 0.3 m further along x, on a wide ground
+    boxes = [stacks.StackBox("ground", shapely.box(-5, -5, 5, 5), (0, 0, -0.25), -0.5, 0.0)]
+    boxes += [stacks.StackBox(f"b{k:02d}", shapely.box(0.3 * k - 0.5, -0.5, 0.3 * k + 0.5, 0.5),
+                              (0.3 * k, 0.0, 0.5 * k + 0.25), 0.5 * k, 1000.0) for k in range(5)]
+    derived = [k for k in range(5)
+               if stacks.verdicts(boxes[:k + 2], (0, 0, -9.81), 0.6, "soc", "net")
+               != {"STABLE"}]
+    assert unstable(seq) == derived == [3, 4]
     tip = seq.reports[3]
     assert tip["status"] == 1 and "b00|b01" in tip["message"]       # TENSION_REQUIRED
     assert len(tip["suggested_holds"]) == 1 and tip["max_tension"] > 10.0

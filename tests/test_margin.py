@@ -13,10 +13,11 @@ from rbe_ros import generators as gen
 from rbe_ros.analysis.assembly import Assembly
 from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.analysis.pipeline import check_scene
-from rbe_ros.analysis.margin import horizontal_directions, stability_margin
+from rbe_ros.analysis.margin import horizontal_directions, hull_bounds, stability_margin
 from rbe_ros.cli import main
 from rbe_ros.io.messages import header_dict, report_from_dict, report_to_dict
-from rbe_ros.rbe.solver import SolveOptions
+from rbe_ros.rbe.model import build_model
+from rbe_ros.rbe.solver import LoadMultipliers, SolveOptions, solve
 from rbe_ros.rbe.result import Status
 from rbe_ros.io.scene_json import load_scene
 from rbe_ros.scene import box_block, make_scene
@@ -42,7 +43,7 @@ def _box_on_ground(sx, sy, sz, yaw_deg):
 ])
 def test_box_margin_is_min_of_half_width_over_height_and_mu(sx, sy, sz, mu, yaw):
     assembly = Assembly.from_scene(_box_on_ground(sx, sy, sz, yaw))
-    margin = stability_margin(assembly, SolveOptions(mu=mu))
+    margin = stability_margin(assembly, SolveOptions(mu=mu), every_direction=True)
     rel = ANGLES - math.radians(yaw)
     with np.errstate(divide="ignore"):
         b = np.minimum(sx / 2 / np.abs(np.cos(rel)), sy / 2 / np.abs(np.sin(rel)))
@@ -82,13 +83,64 @@ def test_block_on_incline_slides_at_the_closed_form(incline, mu):
     """Downhill the closed form is tan(atan(mu) - alpha); every direction of the eight
     against the quadratic of the sliding condition."""
     assembly = Assembly.from_scene(gen.two_blocks(incline_deg=incline))
-    margin = stability_margin(assembly, SolveOptions(mu=mu))
+    margin = stability_margin(assembly, SolveOptions(mu=mu), every_direction=True)
     alpha = math.radians(incline)
     expected = np.array([_incline_sliding(alpha, mu, t) for t in ANGLES])
     np.testing.assert_allclose(margin.per_direction, expected, rtol=REL)
     assert margin.margin_g == pytest.approx(math.tan(math.atan(mu) - alpha), rel=REL)
     np.testing.assert_allclose(margin.direction, [-1.0, 0.0, 0.0], atol=1e-12)
 
+
+def test_hull_bounds_of_a_square_and_a_rectangle():
+    """Points on the axes at 1: a diagonal ray leaves the square's hull at 1 / sqrt(2).
+    At (0.6, 0.1) the diagonal meets x / 0.6 + y / 0.1 = 1 at x = y = 0.6 / 7."""
+    square = np.array([1.0, np.nan, 1.0, np.nan, 1.0, np.nan, 1.0, np.nan])
+    np.testing.assert_allclose(hull_bounds(square)[1::2], 1 / math.sqrt(2))
+    np.testing.assert_array_equal(hull_bounds(square)[::2], 1.0)
+    wall = np.array([0.6, np.nan, 0.1, np.nan, 0.6, np.nan, 0.1, np.nan])
+    np.testing.assert_allclose(hull_bounds(wall)[1::2], math.sqrt(2) * 0.6 / 7)
+    one_side = np.array([1.0, np.nan, 1.0, np.nan, np.nan, np.nan, np.nan, np.nan])
+    np.testing.assert_allclose(hull_bounds(one_side)[[1, 3, 4, 5, 6, 7]],
+                               [1 / math.sqrt(2), 0, 0, 0, 0, 0])
+
+
+@pytest.mark.parametrize("scene, solved", [
+    (_box_on_ground(0.4, 1.0, 2.0, 0.0), 4),           # tips along x (0.2), y: 0.5
+    (gen.running_bond_wall(10, 8), 4),                 # out of plane 0.2, in plane 0.6
+    (gen.two_blocks(incline_deg=10.0), 6),             # uphill far from the minimum downhill
+    (gen.stack(3), 8),                                 # slides at mu: a circle, every one
+])
+def test_skipped_directions_cannot_hold_the_minimum(scene, solved):
+    """The margin with directions skipped by the hull bound equals the smallest of all eight
+    solved one by one; every skipped direction's margin is at least that minimum."""
+    assembly = Assembly.from_scene(scene)
+    every = stability_margin(assembly, every_direction=True)
+    fast = stability_margin(assembly)
+    assert fast.margin_g == pytest.approx(every.per_direction.min(), rel=1e-9)
+    np.testing.assert_array_equal(fast.direction, every.direction)
+    skipped = np.isnan(fast.per_direction)
+    assert np.count_nonzero(~skipped) == solved
+    assert (every.per_direction[skipped] >= fast.margin_g).all()
+    np.testing.assert_allclose(fast.per_direction[~skipped], every.per_direction[~skipped])
+
+
+@pytest.mark.parametrize("cone", ["soc", "pyramid4", "pyramid8"])
+def test_load_multipliers_equal_the_lambda_form(cone):
+    """LoadMultipliers (s = 1 / lambda, the live load on the right-hand side, one solver for
+    every load) against the load-multiplier problem stated with lambda, one solve per load:
+    the same lambda and loads carried in equilibrium."""
+    assembly = Assembly.from_scene(gen.running_bond_wall(4, 3))
+    model = build_model(assembly.blocks, assembly.interfaces, assembly.gravity)
+    options = SolveOptions(cone=cone, mu=0.5)
+    multipliers = LoadMultipliers(model, options)
+    for d in horizontal_directions(assembly.gravity, 5):
+        live = model.load(9.81 * d)
+        ours, reference = multipliers(live), solve(model, options, live_load=live)
+        assert ours.solved and reference.solved
+        assert ours.multiplier == pytest.approx(reference.multiplier, rel=1e-5)
+        residual = model.a_eq @ (ours.forces / model.force_scale).ravel() + model.dead_load \
+            + ours.multiplier * live
+        assert np.abs(residual).max() < 1e-6
 
 
 def test_cli_margin_per_step_in_json_and_message_dicts(tmp_path, capsys):

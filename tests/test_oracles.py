@@ -24,7 +24,7 @@ from rbe_ros.rbe.solver import SolveOptions
 from rbe_ros.scene import box_block, make_block, make_scene
 
 from helpers import DENSITY, assert_physical
-from oracles import arch_limit
+from oracles import arch_limit, plane_blocks
 from test_mass_properties import extrude, prism_faces
 
 MU = 0.6
@@ -39,6 +39,20 @@ def test_arch_minimum_thickness_is_the_thrust_line_limit_to_0_1_percent(n):
     assert above.status == Status.STABLE, above.message
     assert below.status == Status.TENSION_REQUIRED, below.message
     assert_physical(gen.semicircular_arch(n, t_min * 1.001), above, MU)
+
+
+@pytest.mark.parametrize("n, mu", [(7, 0.6), (9, math.inf), (12, 0.6)])
+def test_the_two_arch_oracles_agree_on_the_minimum_thickness(n, mu):
+    """The plane rigid-block LP (joint end forces, every voussoir's equilibrium) and the
+    thrust-line LP (one symmetric thrust) are two formulations of the same arch: their
+    minimum t/R agree to 1e-4 (bisection)."""
+    lo, hi = 0.01, 0.5
+    while hi - lo > 1e-5:
+        mid = (lo + hi) / 2
+        blocks, joints, supports = plane_blocks.semicircular_arch(n, mid)
+        lo, hi = (lo, mid) if plane_blocks.stands(blocks, joints, set(blocks), supports,
+                                                  mu) else (mid, hi)
+    assert hi == pytest.approx(arch_limit.minimum_thickness(n, mu), abs=1e-4)
 
 
 @pytest.mark.parametrize("n", [15, 16])

@@ -6,6 +6,7 @@ import json
 
 import pytest
 
+from oracles import plane_blocks
 from rbe_ros import generators
 from rbe_ros.analysis.assembly import Assembly
 from rbe_ros.analysis.options import CheckOptions, HoldSearch
@@ -77,17 +78,38 @@ def test_the_papers_dome_is_planned_with_at_most_two_holds():
     assert sum(bool(s.held) for s in steps) > 0
 
 
-def test_arch_with_two_holds_and_the_step_where_one_is_not_enough():
+def _holds_needed(plan, supports, blocks, joints):
+    """Every step of ``plan`` stands with its holds and needs each of them, by the plane
+    rigid-block LP built from the arch's dimensions (tests/oracles/plane_blocks.py)."""
+    for step in sequence_steps(plan.scene):
+        present = set(step.present) | supports
+        assert plane_blocks.stands(blocks, joints, present, supports | set(step.held))
+        for h in step.held:
+            assert not plane_blocks.stands(blocks, joints, present,
+                                           supports | set(step.held) - {h})
+
+
+def test_arch_with_one_hold_and_the_step_where_none_is_enough():
+    """The arch of 7 voussoirs is built holding one block at a time (the key-stone's
+    neighbour v04 only touches the crown: placed held), and no block can be placed at step 2
+    without a hold: each step and hold, and the failing step, against the plane oracle."""
     arch = generators.semicircular_arch(7)
-    plan = plan_sequence(arch, 2)
-    recheck(plan, arch, 2)
-    assert plan.max_held == 2 and plan.order[-1] == "v03"      # the key-stone last
-    one = plan_sequence(arch, 1)
-    assert not one.feasible and one.failed_step == 5
-    assert one.order == ["v00", "v06", "v01", "v02", "v03"]
-    assert "at step 5" in one.message and "needs 2 held blocks" in one.message
+    blocks, joints, supports = plane_blocks.semicircular_arch(7)
+    for k in (1, 2):
+        plan = plan_sequence(arch, k)
+        recheck(plan, arch, k)
+        _holds_needed(plan, supports, blocks, joints)
+    assert plan_sequence(arch, 1).max_held == 1
+    none = plan_sequence(arch, 0)
+    assert not none.feasible and none.failed_step == 2 and none.order == ["v00", "v06"]
+    placed = {"v00", "v06"} | supports
+    assert plane_blocks.stands(blocks, joints, placed, supports)
+    for candidate in set(blocks) - placed:
+        smallest = plane_blocks.smallest_holds(blocks, joints, placed | {candidate}, supports)
+        assert smallest and all(len(h) == 1 for h in smallest)
+    assert "at step 2" in none.message and "needs 1 held block (v01)" in none.message
     # the partial plan stands up to the step that fails
-    assert len(one.reports) == 5 and all(r.stable for r in one.reports)
+    assert len(none.reports) == 2 and all(r.stable for r in none.reports)
 
 
 def test_a_finished_assembly_that_does_not_stand_has_no_plan():
@@ -119,9 +141,24 @@ def test_cli_plan_json_and_exit_status(tmp_path, capsys):
     planned = json.loads(out_scene.read_text())
     assert planned["sequence"] == out["order"] and planned["holds"] == out["holds"]
     assert {"block": "v05", "from_step": 3, "until_step": 5} in planned["holds"]
-    assert main(["plan", str(scene), "--max-held", "1"]) == 1
+    assert main(["plan", str(scene), "--max-held", "0"]) == 1
     text = capsys.readouterr().out
-    assert "NOT feasible (step 5)" in text and "order: v00, v06, v01, v02, v03" in text
+    assert "NOT feasible (step 2)" in text and "order: v00, v06" in text
+
+
+def test_planned_scene_keeps_the_pose_uncertainty_it_was_planned_under(tmp_path, capsys):
+    """The scene file's declaration is written back; a command-line one wins over it."""
+    arch = generators.semicircular_arch(7)
+    scene = tmp_path / "arch.json"
+    scene.write_text(json.dumps(scene_to_dict(make_scene(
+        arch.name, arch.blocks, arch.gravity, pose_uncertainty=(0.001, 0.2)))))
+    out_scene = tmp_path / "planned.json"
+    assert main(["plan", str(scene), "--max-held", "2", "-o", str(out_scene)]) == 0
+    assert json.loads(out_scene.read_text())["pose_uncertainty"] == [0.001, 0.2]
+    assert main(["plan", str(scene), "--max-held", "2", "--pose-uncertainty", "0.002,0.5",
+                 "-o", str(out_scene)]) == 0
+    assert json.loads(out_scene.read_text())["pose_uncertainty"] == [0.002, 0.5]
+    capsys.readouterr()
 
 
 @pytest.mark.parametrize("bad", [["--max-held", "-1"], ["--max-held", "1", "--beam", "0"]])

@@ -115,3 +115,25 @@ def test_cli_check_design_with_poses(tmp_path, capsys):
                                                   "orientation": IDENTITY}}}))
     assert main(["check", str(design), "--poses", str(poses)]) == 2
     assert "not in the design" in capsys.readouterr().err
+
+
+def test_cli_design_file_declaration_applies_to_measured_poses(tmp_path, capsys):
+    """A 1 mm penetration among measured poses: no verdict of standing under the design rule,
+    a contact under the design file's declared pose uncertainty (3 mm, 0.15 deg), which
+    --poses keeps."""
+    stack = gen.stack(2)
+    poses = tmp_path / "poses.json"
+    poses.write_text(json.dumps({"poses": {
+        "b00": {"position": [0.0, 0.0, 0.25], "orientation": IDENTITY},
+        "b01": {"position": [0.0, 0.0, 0.749], "orientation": IDENTITY}}}))
+    design = tmp_path / "design.json"
+    design.write_text(json.dumps(scene_to_dict(stack)))
+    assert main(["check", str(design), "--poses", str(poses), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["status"] != Status.STABLE
+    declared = scene_to_dict(stack) | {"pose_uncertainty": [0.003, 0.15]}
+    design.write_text(json.dumps(declared))
+    assert main(["check", str(design), "--poses", str(poses), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["status"] == Status.STABLE
+    top = next(i for i in out["interfaces"] if "b01" in (i["block_a"], i["block_b"]))
+    assert top["normal_resultant"] == pytest.approx(1000 * 9.81, rel=1e-6)

@@ -7,10 +7,12 @@ import shutil
 from pathlib import Path
 
 import pytest
+import shapely
 from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 from ruamel.yaml import YAML
 
+from oracles import plane_blocks, stacks
 from rbe_ros.io import bag
 from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.cli import main
@@ -81,7 +83,15 @@ def unstable(run):
 def test_stack_tips_at_step_3(runs):
     seq, whole = runs["stack_tips"]
     assert steps(seq) == [(k, f"b{k:02d}") for k in range(5)]
-    assert unstable(seq) == [3, 4]
+    # derived by the overhang rule (tests/oracles/stacks.py) from the bag's documented
+    # stack: five 1 x 1 x 0.5 m boxes, each 0.3 m further along x, on a wide ground
+    boxes = [stacks.StackBox("ground", shapely.box(-5, -5, 5, 5), (0, 0, -0.25), -0.5, 0.0)]
+    boxes += [stacks.StackBox(f"b{k:02d}", shapely.box(0.3 * k - 0.5, -0.5, 0.3 * k + 0.5, 0.5),
+                              (0.3 * k, 0.0, 0.5 * k + 0.25), 0.5 * k, 1000.0) for k in range(5)]
+    derived = [k for k in range(5)
+               if stacks.verdicts(boxes[:k + 2], (0, 0, -9.81), 0.6, "soc", "net")
+               != {"STABLE"}]
+    assert unstable(seq) == derived == [3, 4]
     tip = seq.reports[3]
     assert tip["status"] == 1 and "b00|b01" in tip["message"]       # TENSION_REQUIRED
     assert len(tip["suggested_holds"]) == 1 and tip["max_tension"] > 10.0
@@ -105,10 +115,20 @@ def test_arch_centring_release_step_and_holds(runs):
     # one step earlier is too early: the half arches fall
     assert {h["until_step"] for h in early.state["holds"]} == {13} and unstable(early) == [13]
     assert early.reports[13]["status"] == 1
-    # without centring the half arches fail from the fourth voussoir on; before the
-    # key-stone a robot has to hold the two voussoirs next to it
-    assert bare.state["holds"] == [] and unstable(bare) == list(range(6, 14))
-    assert bare.reports[13]["suggested_holds"] == ["v06", "v08"]
+    # without centring: the steps that fail and the smallest holds, derived by the plane
+    # rigid-block LP from the arch's dimensions (tests/oracles/plane_blocks.py): the half
+    # arches fail from the fourth voussoir on (steps 6-13); before the key-stone a robot has
+    # to hold the two voussoirs next to it, and no other pair (nor one block) will do
+    blocks, joints, supports = plane_blocks.buttressed_arch()
+    order = plane_blocks.key_order(15)
+    buttresses = set(blocks) - set(order)
+    derived = [k for k in range(15)
+               if not plane_blocks.stands(blocks, joints, buttresses | set(order[:k + 1]),
+                                          supports)]
+    assert bare.state["holds"] == [] and unstable(bare) == derived == list(range(6, 14))
+    smallest = plane_blocks.smallest_holds(blocks, joints, buttresses | set(order[:14]),
+                                           supports)
+    assert [set(bare.reports[13]["suggested_holds"])] == smallest == [{"v06", "v08"}]
     assert bare.reports[14]["stable"] and bare.reports[14]["suggested_holds"] == []
     # holding what the reports suggest at every step, every step stands
     assert unstable(held) == []

@@ -7,12 +7,21 @@ the tilting test). For direction d the margin is the largest lambda with the loa
 p_dead + lambda p_d carried without tension: the load-multiplier problem of the tilting test.
 A box of half-width b along d, centroid height h above a flat support: min(b / h, mu).
 
-The N directions share the constraint matrix and differ only in the load. Each is one
-load-multiplier solve (Clarabel, exact for every cone). Two ways to make the N solves cheaper
-were tried and measured slower on the dome and wall (docs/MARGIN.md): HiGHS's dual simplex
-kept warm across right-hand sides (with s = 1 / lambda the directions differ only in the
-right-hand side), whose cold start on the degenerate LP of a dome takes minutes; and cutting
-planes for the exact cone on that LP, which wander over degenerate faces without converging.
+Two things keep the N directions cheap (docs/MARGIN.md has the measurements):
+
+* one solver for all of them (rbe.solver.LoadMultipliers): stated with s = 1 / lambda, the
+  directions differ only in the right-hand side, and Clarabel keeps its factorisation's
+  ordering and symbolic analysis across them;
+* convexity: the horizontal accelerations an assembly withstands form a convex set that
+  holds 0 (it stands) and every solved point lambda_i d_i, so the convex hull of the solved
+  points bounds every other direction's margin from below. A direction whose bound already
+  reaches the smallest margin found cannot be the minimum and is not solved: a wall needs
+  its four axis directions only.
+
+Tried and dropped (docs/MARGIN.md): HiGHS's dual simplex kept warm across right-hand sides on
+the pyramid LP (thousands of pivots per direction on the degenerate LP of a dome), SCS with
+warm starts and its factorisation kept (thousands of iterations per direction), and cutting
+planes for the exact cone (they wander over degenerate faces).
 """
 from __future__ import annotations
 
@@ -22,7 +31,7 @@ import numpy as np
 
 from ..rbe.model import build_model
 from ..rbe.result import Report
-from ..rbe.solver import SolveOptions, solve
+from ..rbe.solver import LoadMultipliers, SolveOptions
 from .assembly import Assembly
 
 DEFAULT_DIRECTIONS = 8
@@ -35,7 +44,7 @@ class Margin:
     margin_g: float                 # fraction of g; 0 when the assembly does not stand
     direction: np.ndarray           # (3,) unit horizontal body-force direction of the minimum
     directions: np.ndarray          # (N, 3)
-    per_direction: np.ndarray       # (N,) margins
+    per_direction: np.ndarray       # (N,) margins; NaN where convexity proved it >= margin_g
 
 
 def horizontal_directions(gravity, count: int = DEFAULT_DIRECTIONS) -> np.ndarray:
@@ -47,8 +56,12 @@ def horizontal_directions(gravity, count: int = DEFAULT_DIRECTIONS) -> np.ndarra
     e1 = e1 - (e1 @ down) * down
     e1 /= np.linalg.norm(e1)
     e2 = np.cross(-down, e1)
-    angles = 2 * np.pi * np.arange(count) / count
+    angles = _angles(count)
     return np.cos(angles)[:, None] * e1 + np.sin(angles)[:, None] * e2
+
+
+def _angles(count: int) -> np.ndarray:
+    return 2 * np.pi * np.arange(count) / count
 
 
 def not_standing(count: int = DEFAULT_DIRECTIONS, gravity=(0.0, 0.0, -9.81)) -> Margin:
@@ -57,22 +70,66 @@ def not_standing(count: int = DEFAULT_DIRECTIONS, gravity=(0.0, 0.0, -9.81)) -> 
 
 
 def stability_margin(assembly: Assembly, options: SolveOptions = SolveOptions(),
-                     directions: int = DEFAULT_DIRECTIONS) -> Margin:
+                     directions: int = DEFAULT_DIRECTIONS, every_direction: bool = False
+                     ) -> Margin:
     """Margin of ``assembly``, which stands (the check's verdict says so), under ``options``'
-    friction cone and mu (no tension allowed).
+    friction cone and mu (no tension allowed). Directions that cannot hold the minimum are
+    skipped (NaN in per_direction) unless ``every_direction``.
 
-    Only for a standing assembly is the set of s >= 0 that carry the load unbounded above, so
-    that its smallest element is the margin; the verdict comes from the check, not from here."""
+    Only for a standing assembly does 0 belong to the set of accelerations it withstands, and
+    with it the hull bound; the verdict comes from the check, not from here."""
     dirs = horizontal_directions(assembly.gravity, directions)
     model = build_model(assembly.blocks, assembly.interfaces, assembly.gravity)
-    loads = [model.load(float(np.linalg.norm(assembly.gravity)) * d) for d in dirs]
-    margins = np.array([_multiplier(model, options, p) for p in loads])
-    k = int(np.argmin(margins))
+    multipliers = LoadMultipliers(model, options)
+    g = float(np.linalg.norm(assembly.gravity))
+    margins = np.full(directions, np.nan)
+    for k in _first_directions(directions):
+        margins[k] = _multiplier(multipliers, model.load(g * dirs[k]))
+    while np.isnan(margins).any():
+        bounds = hull_bounds(margins)
+        left = np.flatnonzero(np.isnan(margins) & (every_direction
+                                                   | (bounds < np.nanmin(margins))))
+        if not len(left):
+            break
+        k = int(left[np.argmin(bounds[left])])
+        margins[k] = _multiplier(multipliers, model.load(g * dirs[k]))
+    k = int(np.nanargmin(margins))
     return Margin(float(margins[k]), dirs[k], dirs, margins)
 
 
-def _multiplier(model, options: SolveOptions, live: np.ndarray) -> float:
-    solution = solve(model, options, live_load=live)
+def _first_directions(count: int) -> list[int]:
+    """Directions solved before any bound can help: +x, then -x, +y, -y (as close as the
+    count allows), so that the hull of their points surrounds 0."""
+    return list(dict.fromkeys(round(count * f) % count for f in (0.0, 0.5, 0.25, 0.75)))
+
+
+def hull_bounds(margins: np.ndarray) -> np.ndarray:
+    """Lower bound of every direction's margin (evenly spaced angles, as
+    horizontal_directions) from the solved ones (not NaN): how far its ray runs inside the
+    convex hull of 0 and the points margin_i d_i, which the convex set of accelerations the
+    assembly withstands contains. Solved directions get their own margin."""
+    angles = _angles(len(margins))
+    rays = np.stack((np.cos(angles), np.sin(angles)), axis=1)
+    solved = np.flatnonzero(~np.isnan(margins))
+    points = margins[solved, None] * rays[solved]
+    bounds = np.where(np.isnan(margins), 0.0, margins)
+    i, j = np.triu_indices(len(solved), 1)
+    for ray_index in np.flatnonzero(np.isnan(margins)):
+        d = rays[ray_index]
+        # rho d = p_j + t (p_i - p_j), 0 <= t <= 1: a point of the segment on the ray
+        e = points[i] - points[j]
+        det = e[:, 0] * -d[1] + d[0] * e[:, 1]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (points[j, 0] * d[1] - points[j, 1] * d[0]) / det
+            rho = (e[:, 1] * points[j, 0] - e[:, 0] * points[j, 1]) / det
+        ok = (np.abs(det) > 1e-12) & (t >= 0) & (t <= 1) & (rho > 0)
+        if ok.any():
+            bounds[ray_index] = rho[ok].max()
+    return bounds
+
+
+def _multiplier(multipliers: LoadMultipliers, live: np.ndarray) -> float:
+    solution = multipliers(live)
     if solution.status == "failed":
         raise RuntimeError(f"margin: solver failed: {solution.solver_status}")
     return float(solution.multiplier) if solution.solved else 0.0

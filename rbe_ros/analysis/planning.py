@@ -8,8 +8,8 @@ Holds of free blocks in the scene are ignored (the planner chooses them); holds 
 blocks (a scaffold, a centring present for some steps) apply by step index as in a check.
 
 At each step, the candidates of a partial plan are the unplaced blocks that rest on a
-present block (an interface whose normal into the candidate points up, against gravity;
-any contact when no block rests on one), lowest first (centroid along gravity), then the
+present block (an interface whose normal into the candidate points up, against gravity),
+then those that only touch one, each group lowest first (centroid along gravity), then the
 largest contact area with present blocks, then scene order. For a candidate the holds are
 found as a robot would keep them: nothing, if the step stands so; else the blocks held at
 the previous step plus the new block, with more blocks added greedily while the step does
@@ -131,8 +131,9 @@ class _Planner:
                 continue
             key = (round(self.height[b], 6), -round(sum(a for a, _ in near), 9), self.position[b])
             (resting if any(r for _, r in near) else touching).append((key, b))
-        chosen = resting or touching
-        return [b for _, b in sorted(chosen)][:self.plan.candidates]
+        # blocks that only touch (a key-stone's neighbour against the crown) come after:
+        # tried when no resting one fits, held as they are placed
+        return [b for _, b in sorted(resting) + sorted(touching)][:self.plan.candidates]
 
     def holds_for(self, order: tuple[str, ...], previous: tuple[str, ...]):
         """(held blocks, within K) for the step that places ``order[-1]``."""
@@ -197,9 +198,11 @@ class _Planner:
                         break
             if not children:
                 best = beam[0]
-                why = (f"; the best candidate, {best_rejected[0]}, needs {len(best_rejected[1])}"
-                       f" held blocks ({', '.join(best_rejected[1])})" if best_rejected else
-                       "; no unplaced block rests on the placed ones")
+                count = len(best_rejected[1]) if best_rejected else 0
+                why = (f"; the best candidate, {best_rejected[0]}, needs {count} held "
+                       f"block{'' if count == 1 else 's'} ({', '.join(best_rejected[1])})"
+                       if best_rejected else
+                       "; no unplaced block touches the placed ones")
                 return self._finish(best, False, k, f"no block can be placed at step {k} with "
                                     f"at most {self.plan.max_held} held{why}")
             beam = sorted(children.values(), key=lambda p: (p.score, p.order))[:self.plan.beam]
@@ -228,7 +231,8 @@ class _Planner:
         keep = [h for h in self.base.holds if h.until_step is None or h.until_step <= n]
         try:
             scene = make_scene(self.scene.name, [b for b in self.scene.blocks if b.id in placed],
-                               self.scene.gravity, order, [*keep, *holds]) if order else None
+                               self.scene.gravity, order, [*keep, *holds],
+                               _planned_under(self.options)) if order else None
         except SceneError:
             scene = None
         reports = check_sequence(scene, self.options) if scene is not None else []
@@ -237,6 +241,14 @@ class _Planner:
             feasible, failed = False, bad.step_index
             message = f"the plan does not re-check stable at step {failed}: {bad.message}"
         return Plan(feasible, order, held, message, failed, scene, reports, self.checks)
+
+
+def _planned_under(options: CheckOptions) -> tuple[float, float] | None:
+    """The pose uncertainty the plan was checked under, for the planned scene to keep (a scene
+    file's, or the command line's, which wins over it)."""
+    contact = options.contact
+    return ((contact.pose_uncertainty_m, contact.pose_uncertainty_deg) if contact.uncertain
+            else None)
 
 
 def plan_sequence(scene: Scene, max_held: int = 2, options: CheckOptions = CheckOptions(), *,

@@ -47,7 +47,8 @@ def scene_at_poses(design: Scene, poses: Mapping[str, Pose]) -> Scene:
         elif b.support:
             blocks.append(b)
     return make_scene(design.name, blocks, design.gravity,
-                      [s for s in design.sequence if s in poses])
+                      [s for s in design.sequence if s in poses],
+                      pose_uncertainty=design.pose_uncertainty)
 
 
 class AsBuilt:

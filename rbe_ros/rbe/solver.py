@@ -8,7 +8,8 @@
 H = diag(c) weights compression, tension (the penalty) and friction. The LP measures friction
 through auxiliary magnitudes t >= ||(fu, fv)|| (in the cone's own norm). With a live load the
 problem becomes the load-multiplier LP: maximise lambda with p = p_dead + lambda p_live and no
-tension allowed.
+tension allowed. For many live loads on one model, LoadMultipliers states it with the live load
+on the right-hand side (s = 1 / lambda), so that one solver serves them all.
 """
 from __future__ import annotations
 
@@ -165,7 +166,7 @@ def solve(model: EquilibriumModel, options: SolveOptions = SolveOptions(), *,
     # weight, which only slows the solver down).
     tension = options.allow_tension and not multiplier and options.friction == "plus"
     v = _Variables(nv, tension, lp, multiplier)
-    a, b, cones = _constraints(model, options, v, p, live_load)
+    a, b, cones = _constraints(model, options, v, p, live_load, (1.0, MAX_MULTIPLIER))
     p_diag, q = _objective(options, v, lp, multiplier)
     if lp:
         offsets = (model.points - model.points.mean(axis=0)) @ _TIE_DIRECTION
@@ -216,6 +217,67 @@ def _settings(options: SolveOptions, attempt: _Attempt, spent: float, kkt_size: 
     return settings
 
 
+#: Gap and feasibility tolerances of LoadMultipliers' solves: lambda to about 1e-6 of itself,
+#: two or three interior-point iterations fewer than Clarabel's 1e-8.
+MULTIPLIER_TOL = 1e-6
+
+
+class LoadMultipliers:
+    """The load-multiplier problem of one model for many live loads (``multipliers(p_live)``).
+
+    With s = 1 / lambda and f' = f / lambda (friction cones are cones: f' in K iff f in K):
+
+        minimise s   subject to   A_eq f' + s p_dead = -p_live,   f' in K,   s >= 1 / MAX_MULTIPLIER
+
+    The live load is now the right-hand side, the only data that differs between loads, so
+    one Clarabel solver serves them all: its KKT ordering, symbolic factorisation and
+    equilibration are made once (Clarabel's data update). No tension is allowed. A load whose
+    solve ends in numerical trouble is solved again by solve(), with its attempts."""
+
+    def __init__(self, model: EquilibriumModel, options: SolveOptions = SolveOptions()):
+        self.model, self.options = model, options
+        nv, self._neq = model.num_vertices, model.a_eq.shape[0]
+        self._v = _Variables(nv, False, False, True)
+        self._a, b, self._cones = _constraints(model, options, self._v, np.zeros(self._neq),
+                                               model.dead_load, (-1.0, -1.0 / MAX_MULTIPLIER))
+        self._b = np.array(b)
+        self._q = -_objective(options, self._v, False, True)[1]
+        self._rows = np.arange(self._neq)
+        self._solver = None
+
+    def __call__(self, live_load: np.ndarray) -> Solution:
+        checkpoint()
+        start = time.perf_counter()
+        b = -np.asarray(live_load, dtype=float)
+        settings = _settings(self.options, _attempts(False)[0], 0.0, len(self._b) + self._v.count)
+        settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = MULTIPLIER_TOL
+        if self._solver is None:
+            self._b[:self._neq] = b
+            self._solver = clarabel.DefaultSolver(
+                _Csc.diagonal(np.zeros(self._v.count)), _floats(self._q), self._a,
+                _floats(self._b), self._cones, settings)
+        else:
+            self._solver.update(b=(self._rows, b), settings=settings)
+        result = self._solver.solve()
+        status = str(result.status)
+        elapsed = time.perf_counter() - start
+        spent = _SOLVER_TIME.get()
+        if spent is not None:
+            spent[0] += elapsed
+        if status in _INFEASIBLE:       # no lambda > 0: the smallest live load topples it
+            return Solution("infeasible", status, np.full((4, self._v.nv), np.nan), elapsed,
+                            multiplier=0.0)
+        if status in _SOLVED:
+            x = np.array(result.x)
+            s = x[self._v.lam]
+            x /= s                              # (f', s) -> (f, lambda) = (f' / s, 1 / s)
+            x[self._v.lam] = 1.0 / s
+            accepted = _accept(self.model, self._v, x, self.model.dead_load, live_load, status)
+            if accepted is not None:
+                return replace(accepted, time=elapsed)
+        return solve(self.model, self.options, live_load=live_load)
+
+
 def _accept(model: EquilibriumModel, v: _Variables, x: np.ndarray, p, live_load,
             status: str) -> Solution | None:
     """The solution read from a solved x, unless it misses equilibrium by more than
@@ -235,10 +297,13 @@ def _accept(model: EquilibriumModel, v: _Variables, x: np.ndarray, p, live_load,
     return Solution("solved", status, forces * model.force_scale, 0.0, residual, lam)
 
 
-def _constraints(model: EquilibriumModel, options: SolveOptions, v: _Variables, p, live_load):
+def _constraints(model: EquilibriumModel, options: SolveOptions, v: _Variables, p, column,
+                 bound: tuple[float, float]):
     """A, b and the cones of A x + s = b, s in K, in Clarabel's order: zero cone, nonnegative
-    cone, second-order cones. The equilibrium rows are taken as columns of model.a_eq's CSC
-    arrays and stacked on the other rows, not rebuilt through coordinates (no sort)."""
+    cone, second-order cones. ``column`` (a load, or None) is the equilibrium column of the
+    multiplier variable, bounded by the row ``bound[0] * x <= bound[1]``. The equilibrium
+    rows are taken as columns of model.a_eq's CSC arrays and stacked on the other rows, not
+    rebuilt through coordinates (no sort)."""
     nv = v.nv
     neq = model.a_eq.shape[0]
     rows = _Rows(v.count, neq)
@@ -253,8 +318,8 @@ def _constraints(model: EquilibriumModel, options: SolveOptions, v: _Variables, 
     implied = finite_mu and len(fn_eff) == 1
     for k in ((0,) if not implied else ()) + ((1,) if v.base[1] >= 0 else ()):
         rows.add_rows([(v.index(k, np.arange(nv)), -1.0)], 0.0)
-    if live_load is not None:
-        rows.add_rows([(np.array([v.lam]), 1.0)], MAX_MULTIPLIER)
+    if column is not None:
+        rows.add_rows([(np.array([v.lam]), bound[0])], bound[1])
     lp = len(v.t) > 0
     fu, fv = v.index(2, np.arange(nv)), v.index(3, np.arange(nv))
     if options.cone != "soc":
@@ -274,14 +339,14 @@ def _constraints(model: EquilibriumModel, options: SolveOptions, v: _Variables, 
             if head is not None:
                 rows.add_cones(head, fu, fv)
                 cones += [clarabel.SecondOrderConeT(3)] * nv
-    a = _Csc.stack(_equilibrium_columns(model, v, live_load), rows.matrix())
+    a = _Csc.stack(_equilibrium_columns(model, v, column), rows.matrix())
     return a, _floats(np.concatenate([-np.asarray(p, dtype=float)] + rows.b)), cones
 
 
-def _equilibrium_columns(model: EquilibriumModel, v: _Variables, live_load) -> sp.csc_matrix:
-    """The rows A_eq x (+ lambda p_live) of the zero cone in the column layout of ``v``: the
+def _equilibrium_columns(model: EquilibriumModel, v: _Variables, column) -> sp.csc_matrix:
+    """The rows A_eq x (+ lambda column) of the zero cone in the column layout of ``v``: the
     columns of model.a_eq (stored by kind) without those of fn- unless v has them, empty
-    columns for t, a dense column for lambda."""
+    columns for t, a dense column for the multiplier."""
     a_eq, nv = sp.csc_matrix(model.a_eq), v.nv
     if not a_eq.has_canonical_format:
         a_eq = a_eq.copy()
@@ -293,8 +358,8 @@ def _equilibrium_columns(model: EquilibriumModel, v: _Variables, live_load) -> s
         indices = np.concatenate((indices[:lo], indices[hi:]))
         data = np.concatenate((data[:lo], data[hi:]))
     extra = [np.full(len(v.t), indptr[-1])]
-    if live_load is not None:
-        live = np.asarray(live_load, dtype=float)
+    if column is not None:
+        live = np.asarray(column, dtype=float)
         extra.append([indptr[-1] + len(live)])
         indices = np.concatenate((indices, np.arange(len(live))))
         data = np.concatenate((data, live))

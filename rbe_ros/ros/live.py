@@ -3,8 +3,8 @@
 :func:`live_recheck` is what :func:`rbe_ros.io.replay.replay_bag` takes as ``recheck``. The
 node is started here (``python -m rbe_ros.ros.node`` under a unique node name, with the
 parameters of the bag's check options, in the ROS_DOMAIN_ID of the environment) or, with
-``node_name``, the running node of that name is used as it is (its parameters must match the
-bag's options).
+``node_name``, the running node of that name is used, its parameters set to the bag's
+settings as below and put back as they were at the end.
 
 States are sent one at a time, each after the previous one is answered (the node checks the
 newest state on its topic and drops a waiting one under load): a state with a sequence as a
@@ -34,7 +34,7 @@ from rbe_msgs.msg import AssemblyState, BlockPoses, StabilityReport
 from rclpy.action import ActionClient
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.parameter import Parameter
+from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
@@ -174,6 +174,15 @@ class _Client:
         if refused:
             raise RuntimeError(f"{self.base} refused the recorded settings: {'; '.join(refused)}")
 
+    def get_parameters(self, names: list[str], timeout: float) -> dict[str, object]:
+        """The node's values of the parameters ``names``."""
+        if not self.parameters.wait_for_services(timeout):
+            raise TimeoutError(f"no parameter service of {self.base} within {timeout:g} s")
+        response = self._wait(self._in_executor(
+            lambda: self.parameters.get_parameters(names), timeout, "get_parameters"),
+            timeout, "get_parameters response")
+        return {n: parameter_value_to_python(v) for n, v in zip(names, response.values)}
+
     def check_sequence(self, state, timeout: float) -> list[dict]:
         future = self._in_executor(lambda: self.action.send_goal_async(
             CheckSequence.Goal(assembly=state)), timeout, "goal response")
@@ -218,6 +227,7 @@ def live_reports(runs, options: CheckOptions, *, node_name: str | None = None, c
         rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     process = None
     client = None
+    restore = None
     try:
         if node_name is None:
             node_name = f"rbe_replay_{os.getpid()}"
@@ -234,7 +244,10 @@ def live_reports(runs, options: CheckOptions, *, node_name: str | None = None, c
         settings = None
         for i, run in enumerate(runs):
             if run.settings is not None and run.settings != settings:
-                client.set_parameters(settings_parameters(run, options), timeout)
+                wanted = settings_parameters(run, options)
+                if process is None and restore is None:     # a running node: put it back
+                    restore = client.get_parameters(list(wanted), timeout)
+                client.set_parameters(wanted, timeout)
                 settings = run.settings
             state = dict_to_message(run.state, client.publishers[run.kind][1])
             if run.kind == STATE and run.state.get("sequence"):
@@ -248,7 +261,11 @@ def live_reports(runs, options: CheckOptions, *, node_name: str | None = None, c
         return out
     finally:
         if client is not None:
-            client.close()
+            try:
+                if restore is not None:
+                    client.set_parameters(restore, timeout)
+            finally:
+                client.close()
         if process is not None:
             process.stop()
         if own_context:

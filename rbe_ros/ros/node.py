@@ -555,6 +555,11 @@ class RbeChecks:
         """The design of ``design_file`` as the message a pipeline would send on ~/design
         (SceneError if it cannot be read)."""
         scene, _ = load_design(path)
+        if scene.pose_uncertainty is not None:
+            self.get_logger().warning(
+                f"design_file {path!r} declares pose_uncertainty {list(scene.pose_uncertainty)}"
+                ": the node declares its own (parameters pose_uncertainty_m, _deg), which its "
+                "bag records for replay")
         return dict_to_message(state_to_dict(scene, self.get_parameter("frame_id").value,
                                              self.get_clock().now().nanoseconds),
                                AssemblyState)

@@ -268,6 +268,7 @@ def test_a_box_on_a_slope_carries_tan_alpha_and_slides_against_a_smaller_mu():
     model = build_model(assembly.blocks, assembly.interfaces, assembly.gravity)
     solution = verdict.solve(model)
     weight = sum(b.mass for b in assembly.blocks if not b.support) * G
+    assert solution.solver_status == "Solved" and solution.time > 0
     [r] = interface_results(model, solution, mu_threshold=math.inf, tension_tol=0.0, mu=0.1)
     assert r.normal_resultant == pytest.approx(weight * math.cos(math.radians(20)), rel=1e-7)
     assert np.linalg.norm(r.shear) == pytest.approx(weight * math.sin(math.radians(20)), rel=1e-6)

@@ -132,7 +132,7 @@ def mutmut(args: list[str], what: str, children: int) -> None:
     env = {**os.environ, "HYPOTHESIS_PROFILE": "mutation", "OPENBLAS_NUM_THREADS": "1",
            "OMP_NUM_THREADS": "1"}
     before = sum(v != "not checked" for v in results().values())
-    start = time.monotonic()
+    date, start = time.strftime("%Y-%m-%d %H:%M"), time.monotonic()
     with open(LOG, "a") as log:
         log.write(f"\n=== mutmut run {what}\n")
         log.flush()
@@ -142,7 +142,7 @@ def mutmut(args: list[str], what: str, children: int) -> None:
     named = args and not any("*" in a for a in args)
     ran = len(args) if named else sum(v != "not checked" for v in results().values()) - before
     runs = json.loads(RUNS.read_text()) if RUNS.exists() else []
-    runs.append({"date": time.strftime("%Y-%m-%d %H:%M"), "what": what, "children": children,
+    runs.append({"date": date, "what": what, "children": children,
                  "mutants": ran, "seconds": round(seconds)})
     RUNS.write_text(json.dumps(runs, indent=1))
     if done.returncode:

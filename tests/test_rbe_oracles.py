@@ -18,7 +18,7 @@ from rbe_ros.geometry.contacts import ContactOptions
 from rbe_ros.rbe.model import build_model
 from rbe_ros.rbe.resultants import interface_results
 from rbe_ros.rbe.result import Status
-from rbe_ros.rbe.solver import Solution, SolveOptions, _Csc
+from rbe_ros.rbe.solver import LoadMultipliers, Solution, SolveOptions, _Csc
 from rbe_ros.scene import box_block, make_scene
 
 from helpers import DENSITY, checked, inclined_block, stacked_boxes
@@ -296,3 +296,24 @@ def test_the_model_scales_are_the_free_weight_and_the_assembly_extent():
         assert model.length_scale == pytest.approx(length, rel=1e-12)
     empty = build_model((), (), [0.0, 0.0, -G])
     assert (empty.force_scale, empty.length_scale) == (1.0, 1.0)
+
+
+@pytest.mark.parametrize("size, mu, limit", [((1, 1, 2), 0.6, 0.5), ((1, 1, 0.5), 0.3, 0.3)])
+def test_load_multipliers_are_the_tipping_or_sliding_limit_of_a_box(size, mu, limit):
+    """A box on the ground under a horizontal live load lambda m g (in x and in -y): it
+    tips at lambda = width / height or slides at lambda = mu, whichever comes first; one
+    LoadMultipliers serves both loads and agrees with solve's load-multiplier problem."""
+    scene = make_scene("box", [two_boxes_on_the_ground().blocks[0],
+                               box_block("b", size, (0, 0, size[2] / 2), density=DENSITY)])
+    assembly = Assembly.from_scene(scene)
+    model = build_model(assembly.blocks, assembly.interfaces, assembly.gravity)
+    options = SolveOptions(mu=mu)
+    multipliers = LoadMultipliers(model, options)
+    for direction in ([G, 0, 0], [0, -G, 0]):
+        live = model.load(np.array(direction))
+        found = multipliers(live)
+        assert found.solved and found.multiplier == pytest.approx(limit, rel=1e-5)
+        assert found.multiplier == pytest.approx(
+            verdict.solve(model, options, live_load=live).multiplier, rel=1e-5)
+        assert np.abs(model.a_eq @ found.forces.ravel() / model.force_scale
+                      + model.dead_load + found.multiplier * live).max() < 1e-6

@@ -308,15 +308,14 @@ def _constraints(model: EquilibriumModel, options: SolveOptions, v: _Variables, 
     neq = model.a_eq.shape[0]
     rows = _Rows(v.count, neq)
     finite_mu = math.isfinite(options.mu)
-    fn_eff = [(v.index(0, np.arange(nv)), 1.0)]
-    if v.base[1] >= 0 and options.friction == "net":
-        fn_eff.append((v.index(1, np.arange(nv)), -1.0))
+    # The cones bound the tangential force by mu fn+: friction+ by its definition, and
+    # friction-net too, as solve leaves fn- out under it (fn+ is then the net force).
+    fn = v.index(0, np.arange(nv))
     # nonnegative rows (s = b - A x >= 0): normal parts, the multiplier bound, pyramid facets.
-    # fn+ >= 0 is left out where a friction cone on fn+ alone implies it (a pyramid too: its
-    # opposite facets sum to 2 h mu fn+ >= 0): the redundant rows are ~10% of the vault's KKT
-    # system and cost it an interior-point iteration.
-    implied = finite_mu and len(fn_eff) == 1
-    for k in ((0,) if not implied else ()) + ((1,) if v.base[1] >= 0 else ()):
+    # fn+ >= 0 is left out where the friction cone implies it (a pyramid too: its opposite
+    # facets sum to 2 h mu fn+ >= 0): the redundant rows are ~10% of the vault's KKT system
+    # and cost it an interior-point iteration.
+    for k in ((0,) if not finite_mu else ()) + ((1,) if v.base[1] >= 0 else ()):
         rows.add_rows([(v.index(k, np.arange(nv)), -1.0)], 0.0)
     if column is not None:
         rows.add_rows([(np.array([v.lam]), bound[0])], bound[1])
@@ -327,14 +326,14 @@ def _constraints(model: EquilibriumModel, options: SolveOptions, v: _Variables, 
         for theta in angles:
             tangential = [(fu, math.cos(theta)), (fv, math.sin(theta))]
             if finite_mu:
-                rows.add_rows(tangential + [(c, -h * options.mu * w) for c, w in fn_eff], 0.0)
+                rows.add_rows(tangential + [(fn, -h * options.mu)], 0.0)
             if lp:
                 rows.add_rows(tangential + [(v.t, -1.0)], 0.0)
     cones = [clarabel.ZeroConeT(neq)] + ([clarabel.NonnegativeConeT(rows.count - neq)]
                                          if rows.count > neq else [])
     # second-order cones (t_i, fu_i, fv_i), rows interleaved per vertex
     if options.cone == "soc":
-        for head in ([(c, -options.mu * w) for c, w in fn_eff] if finite_mu else None,
+        for head in ([(fn, -options.mu)] if finite_mu else None,
                      [(v.t, -1.0)] if lp else None):
             if head is not None:
                 rows.add_cones(head, fu, fv)

@@ -15,14 +15,16 @@ from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.analysis.pipeline import check_scene
 from rbe_ros.analysis.verdict import _flag_sliding, infeasible_report, stable_forces
 from rbe_ros.geometry.contacts import ContactOptions
+from rbe_ros.rbe.cones import pyramid_facets
 from rbe_ros.rbe.model import build_model
 from rbe_ros.rbe.resultants import interface_results
 from rbe_ros.rbe.result import Status
 from rbe_ros.rbe.solver import LoadMultipliers, Solution, SolveOptions, _Csc
-from rbe_ros.scene import box_block, make_scene
+from rbe_ros.scene import box_block, make_block, make_scene
 
 from helpers import DENSITY, checked, inclined_block, stacked_boxes
 from test_core_units import slopes_and_flat
+from test_mass_properties import extrude, prism_faces
 
 G = 9.81
 
@@ -276,6 +278,70 @@ def test_a_box_on_a_slope_carries_tan_alpha_and_slides_against_a_smaller_mu():
     [r] = interface_results(model, solution, mu_threshold=math.inf, tension_tol=1e-5, mu=0.4)
     assert r.friction_exceeded is False
 
+
+
+@pytest.mark.parametrize("cone", ["soc", "pyramid4", "pyramid8"])
+def test_the_lp_objective_spends_no_friction_on_self_equilibrated_shear(cone):
+    """The LP objective (paper Eq. 16) prices each vertex's friction magnitude t, at least
+    its tangential force in the cone's own norm (Euclidean, or the largest projection on the
+    pyramid's facet normals): on a 20 deg slope, where the shear to carry is m g sin 20 and
+    N = m g cos 20 whatever the spread, no friction is spent on shear that cancels out, so
+    the vertices' magnitudes add up to the magnitude of their sum."""
+    assembly = Assembly.from_scene(inclined_block(20.0))
+    model = build_model(assembly.blocks, assembly.interfaces, assembly.gravity)
+    solution = verdict.solve(model, SolveOptions(objective="lp", cone=cone))
+    assert solution.solved
+    weight = sum(b.mass for b in assembly.blocks if not b.support) * G
+    shear = solution.forces[2][:, None] * model.u + solution.forces[3][:, None] * model.v
+    assert np.linalg.norm(shear.sum(axis=0)) == pytest.approx(
+        weight * math.sin(math.radians(20)), rel=1e-6)
+    tangential = solution.forces[2:4].T                     # (fu, fv): one interface frame
+    if cone == "soc":
+        magnitude = np.linalg.norm(tangential, axis=-1)
+    else:
+        angles = pyramid_facets(cone)[0]
+        magnitude = (tangential @ np.stack((np.cos(angles), np.sin(angles)))).max(axis=-1)
+    total = tangential.sum(axis=0)
+    assert magnitude.sum() == pytest.approx(
+        np.linalg.norm(total) if cone == "soc" else
+        (total @ np.stack((np.cos(angles), np.sin(angles)))).max(), rel=1e-6)
+    assert solution.forces[0].sum() == pytest.approx(weight * math.cos(math.radians(20)),
+                                                     rel=1e-6)
+
+
+def _wedge_in_a_groove(slope_deg: float):
+    """A wedge whose two faces rise at ``slope_deg`` from its lowest edge, 1 m deep, resting
+    in a V-groove of two supports whose top faces are those faces."""
+    a = 0.5
+    h = a * math.tan(math.radians(slope_deg))
+    wedge = [(-a, h), (0.0, 0.0), (a, h)]
+    left, right = [(0.0, 0.0), (-a, h), (-a, -0.3), (0.0, -0.3)], \
+        [(0.0, 0.0), (0.0, -0.3), (a, -0.3), (a, h)]
+    blocks = []
+    for bid, outline, support in (("wedge", wedge, False), ("left", left, True),
+                                  ("right", right, True)):
+        vertices = extrude(outline, 1.0)
+        blocks.append(make_block(bid, vertices, prism_faces(vertices), density=DENSITY,
+                                 support=support))
+    return make_scene("groove", blocks)
+
+
+@pytest.mark.parametrize("cone", ["soc", "pyramid4", "pyramid8"])
+def test_the_lp_objective_prices_friction_in_a_groove(cone):
+    """The LP objective (paper Eq. 16, unit weights) in a 30 deg V-groove: carrying the weight
+    W by the faces' normal forces alone costs W / cos 30 = 1.155 W; leaning on friction at
+    mu 0.6 costs (1 + mu) W / (cos 30 + mu sin 30) = 1.372 W. So the LP carries it without
+    friction: N = W / (2 cos 30) on each face, no shear. (With friction priced lower, or not
+    at all, friction would lower the cost and take part.)"""
+    scene = _wedge_in_a_groove(30.0)
+    options = CheckOptions(solve=SolveOptions(objective="lp", cone=cone))
+    report = checked(scene, options)
+    weight = sum(b.mass for b in Assembly.from_scene(scene).blocks if not b.support) * G
+    assert report.status == Status.STABLE and len(report.interfaces) == 2
+    for r in report.interfaces:
+        assert r.normal_resultant == pytest.approx(weight / (2 * math.cos(math.radians(30))),
+                                                   rel=1e-4)
+        assert np.linalg.norm(r.shear) < 1e-4 * weight
 
 
 def test_the_model_scales_are_the_free_weight_and_the_assembly_extent():

@@ -35,8 +35,8 @@ BUGS = {
         "    centroid = vertices.mean(axis=0)\n"),
     "cone-0.9-mu": (
         "exact friction cone built with 0.9 mu",
-        "for head in ([(c, -options.mu * w) for c, w in fn_eff]",
-        "for head in ([(c, -0.9 * options.mu * w) for c, w in fn_eff]"),
+        "for head in ([(fn, -options.mu)]",
+        "for head in ([(fn, -0.9 * options.mu)]"),
     "tangential-sign": (
         "sign of one tangential axis flipped in the resultants",
         "tangential = fu[:, None] * model.u + fv[:, None] * model.v",

@@ -115,13 +115,13 @@ def alternative_rows(directions: int = 3) -> list[str]:
     return rows
 
 
-def _s_form(model, mu, cone_rows):
-    """min s: A_eq f' + s p_dead = -p_live over fn, fu, fv (friction-net, fn- left out)
-    and s, with the friction cone as ``cone_rows``(mu): (rows, b) of A x + slack = b."""
+def _s_form_equilibrium(model) -> sp.csc_matrix:
+    """The equilibrium rows of min s: A_eq f' + s p_dead = -p_live, over fn, fu, fv
+    (friction-net, fn- left out) and s."""
     nv = model.num_vertices
     a_eq = sp.csc_matrix(model.a_eq)
-    columns = sp.hstack([a_eq[:, :nv], a_eq[:, 2 * nv:], sp.csc_matrix(model.dead_load[:, None])])
-    return columns.tocsc(), cone_rows(nv, mu)
+    return sp.hstack([a_eq[:, :nv], a_eq[:, 2 * nv:],
+                      sp.csc_matrix(model.dead_load[:, None])]).tocsc()
 
 
 def _highs(model, mu, loads):
@@ -130,7 +130,7 @@ def _highs(model, mu, loads):
     zero = sp.csc_matrix((nv, 1))
     facets = sp.vstack([sp.hstack([-mu * eye, sign * eye, 0 * eye, zero]) for sign in (1, -1)]
                        + [sp.hstack([-mu * eye, 0 * eye, sign * eye, zero]) for sign in (1, -1)])
-    equilibrium, _ = _s_form(model, mu, lambda n, m: None)
+    equilibrium = _s_form_equilibrium(model)
     a = sp.vstack([equilibrium, facets]).tocsc()
     neq = equilibrium.shape[0]
     lp = highspy.HighsLp()
@@ -158,7 +158,7 @@ def _highs(model, mu, loads):
 
 def _scs(model, mu, loads):
     nv = model.num_vertices
-    equilibrium, _ = _s_form(model, mu, lambda n, m: None)
+    equilibrium = _s_form_equilibrium(model)
     rows = []                 # (mu fn, fu, fv) in the second-order cone: slack = -A x, b = 0
     for i in range(nv):
         rows += [(3 * i, i, -mu), (3 * i + 1, nv + i, -1.0), (3 * i + 2, 2 * nv + i, -1.0)]

@@ -114,10 +114,10 @@ def hull_bounds(margins: np.ndarray) -> np.ndarray:
     points = margins[solved, None] * rays[solved]
     bounds = np.where(np.isnan(margins), 0.0, margins)
     i, j = np.triu_indices(len(solved), 1)
+    e = points[i] - points[j]                # segments p_j + t e, 0 <= t <= 1
     for ray_index in np.flatnonzero(np.isnan(margins)):
         d = rays[ray_index]
-        # rho d = p_j + t (p_i - p_j), 0 <= t <= 1: a point of the segment on the ray
-        e = points[i] - points[j]
+        # rho d = p_j + t e: where the ray meets each segment
         det = e[:, 0] * -d[1] + d[0] * e[:, 1]
         with np.errstate(divide="ignore", invalid="ignore"):
             t = (points[j, 0] * d[1] - points[j, 1] * d[0]) / det

@@ -151,6 +151,15 @@ def solver_timing():
         _SOLVER_TIME.reset(token)
 
 
+def _spent_since(start: float) -> float:
+    """Seconds since ``start`` (perf_counter), added to the block's solver_timing if any."""
+    elapsed = time.perf_counter() - start
+    spent = _SOLVER_TIME.get()
+    if spent is not None:
+        spent[0] += elapsed
+    return elapsed
+
+
 def solve(model: EquilibriumModel, options: SolveOptions = SolveOptions(), *,
           load: np.ndarray | None = None, live_load: np.ndarray | None = None) -> Solution:
     """Solve the RBE problem of ``model`` under ``load`` (scaled p; default: dead load).
@@ -191,10 +200,7 @@ def solve(model: EquilibriumModel, options: SolveOptions = SolveOptions(), *,
             accepted = _accept(model, v, np.array(result.x), p, live_load, status)
             if accepted is not None:
                 break
-    elapsed = time.perf_counter() - start
-    spent = _SOLVER_TIME.get()
-    if spent is not None:
-        spent[0] += elapsed
+    elapsed = _spent_since(start)
     if accepted is not None:
         return replace(accepted, time=elapsed)
     kind = "infeasible" if status in _INFEASIBLE else "failed"
@@ -260,10 +266,7 @@ class LoadMultipliers:
             self._solver.update(b=(self._rows, b), settings=settings)
         result = self._solver.solve()
         status = str(result.status)
-        elapsed = time.perf_counter() - start
-        spent = _SOLVER_TIME.get()
-        if spent is not None:
-            spent[0] += elapsed
+        elapsed = _spent_since(start)
         if status in _INFEASIBLE:       # no lambda > 0: the smallest live load topples it
             return Solution("infeasible", status, np.full((4, self._v.nv), np.nan), elapsed,
                             multiplier=0.0)
@@ -358,10 +361,10 @@ def _equilibrium_columns(model: EquilibriumModel, v: _Variables, column) -> sp.c
         data = np.concatenate((data[:lo], data[hi:]))
     extra = [np.full(len(v.t), indptr[-1])]
     if column is not None:
-        live = np.asarray(column, dtype=float)
-        extra.append([indptr[-1] + len(live)])
-        indices = np.concatenate((indices, np.arange(len(live))))
-        data = np.concatenate((data, live))
+        values = np.asarray(column, dtype=float)
+        extra.append([indptr[-1] + len(values)])
+        indices = np.concatenate((indices, np.arange(len(values))))
+        data = np.concatenate((data, values))
     indptr = np.concatenate([indptr] + extra)
     return sp.csc_matrix((data, indices, indptr), shape=(a_eq.shape[0], v.count))
 

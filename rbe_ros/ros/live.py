@@ -161,14 +161,17 @@ class _Client:
                                    "in this ROS_DOMAIN_ID?)")
             time.sleep(0.05)
 
-    def set_parameters(self, values: dict[str, object], timeout: float) -> None:
-        """Set the node's parameters to ``values`` (RuntimeError naming those it refused)."""
+    def _parameter_call(self, call, what: str, timeout: float):
+        """The response of ``call()`` on the node's parameter services (named ``what``)."""
         if not self.parameters.wait_for_services(timeout):
             raise TimeoutError(f"no parameter service of {self.base} within {timeout:g} s")
+        return self._wait(self._in_executor(call, timeout, what), timeout, f"{what} response")
+
+    def set_parameters(self, values: dict[str, object], timeout: float) -> None:
+        """Set the node's parameters to ``values`` (RuntimeError naming those it refused)."""
         params = [Parameter(k, value=v) for k, v in values.items()]
-        response = self._wait(self._in_executor(
-            lambda: self.parameters.set_parameters(params), timeout, "set_parameters"),
-            timeout, "set_parameters response")
+        response = self._parameter_call(lambda: self.parameters.set_parameters(params),
+                                        "set_parameters", timeout)
         refused = [f"{p.name}: {r.reason}" for p, r in zip(params, response.results)
                    if not r.successful]
         if refused:
@@ -176,11 +179,8 @@ class _Client:
 
     def get_parameters(self, names: list[str], timeout: float) -> dict[str, object]:
         """The node's values of the parameters ``names``."""
-        if not self.parameters.wait_for_services(timeout):
-            raise TimeoutError(f"no parameter service of {self.base} within {timeout:g} s")
-        response = self._wait(self._in_executor(
-            lambda: self.parameters.get_parameters(names), timeout, "get_parameters"),
-            timeout, "get_parameters response")
+        response = self._parameter_call(lambda: self.parameters.get_parameters(names),
+                                        "get_parameters", timeout)
         return {n: parameter_value_to_python(v) for n, v in zip(names, response.values)}
 
     def check_sequence(self, state, timeout: float) -> list[dict]:

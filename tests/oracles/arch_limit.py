@@ -32,7 +32,7 @@ import numpy as np
 from scipy.optimize import linprog
 
 
-def _area_centroid_x(poly: np.ndarray) -> tuple[float, float]:
+def area_centroid_x(poly: np.ndarray) -> tuple[float, float]:
     """Area and centroid abscissa of a simple polygon (counter-clockwise or not)."""
     x, z = poly[:, 0], poly[:, 1]
     x1, z1 = np.roll(x, -1), np.roll(z, -1)
@@ -72,7 +72,7 @@ def _joints(n: int, ratio: float):
         k = (n - 1) // 2
         half = _clip_right(quad(k))
         crown = None               # a section through a rigid block: any height (see below)
-        a, cx = _area_centroid_x(half)
+        a, cx = area_centroid_x(half)
         w, wx = a, a * cx
         below = range(k - 1, -1, -1)   # voussoirs under the crown one, down to v0
         first_joint = k                # joint at phi = pi k / n bounds the crown voussoir
@@ -87,7 +87,7 @@ def _joints(n: int, ratio: float):
     if n % 2:
         out.append((math.pi * j / n, w, wx))
     for i in below:
-        a, cx = _area_centroid_x(quad(i))
+        a, cx = area_centroid_x(quad(i))
         w, wx = w + a, wx + a * cx
         j = i
         out.append((math.pi * j / n, w, wx))

@@ -23,6 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linprog
 
+from .arch_limit import area_centroid_x
+
 G = 9.81
 
 
@@ -40,14 +42,6 @@ class Joint:
     q: np.ndarray
 
 
-def _area_centroid(poly: np.ndarray) -> tuple[float, np.ndarray]:
-    x, z = poly[:, 0], poly[:, 1]
-    x1, z1 = np.roll(x, -1), np.roll(z, -1)
-    cross = x * z1 - x1 * z
-    a = 0.5 * cross.sum()
-    return abs(a), np.array([((x + x1) * cross).sum(), ((z + z1) * cross).sum()]) / (6 * a)
-
-
 def stands(blocks: dict[str, Block], joints: list[Joint], present: set[str],
            fixed: set[str], mu: float = 0.6) -> bool:
     """Whether the blocks of ``present`` that are not ``fixed`` are in equilibrium under
@@ -61,7 +55,7 @@ def stands(blocks: dict[str, Block], joints: list[Joint], present: set[str],
     a_eq = np.zeros((3 * len(free), 3 * len(active)))
     b_eq = np.zeros(3 * len(free))
     for b in free:
-        weight, cx = blocks[b].weight, _area_centroid(blocks[b].polygon)[1][0]
+        weight, cx = blocks[b].weight, area_centroid_x(blocks[b].polygon)[1]
         # weight (0, -W) at the centroid: sum of forces + (0, -W) = 0, moments about the origin
         b_eq[row[b] + 1] = weight
         b_eq[row[b] + 2] = cx * weight
@@ -117,7 +111,7 @@ def _voussoirs(n, centre, r_in, r_out, depth, density, blocks, joints, springing
         a0, a1 = math.pi * i / n, math.pi * (i + 1) / n
         d0, d1 = (np.array([math.cos(a), math.sin(a)]) for a in (a0, a1))
         poly = np.array([c + r_in * d0, c + r_out * d0, c + r_out * d1, c + r_in * d1])
-        blocks[bid] = Block(poly, _area_centroid(poly)[0] * depth * density * G)
+        blocks[bid] = Block(poly, area_centroid_x(poly)[0] * depth * density * G)
         if i + 1 < n:
             joints.append(Joint(bid, ids[i + 1], c + r_in * d1, c + r_out * d1))
     right, left = springing

@@ -55,6 +55,9 @@ def _input_arguments(parser: argparse.ArgumentParser) -> None:
     i.add_argument("--density", type=float, default=None, metavar="KG_M3",
                    help="density of the blocks of a COMPAS file that gives them none "
                    "(default 2500)")
+    i.add_argument("--supports", type=node_keys, default=None, metavar="KEY[,KEY...]",
+                   help="the support blocks of a COMPAS file by node key, instead of its "
+                   "is_support flags (for files whose supports a script sets)")
     i.add_argument("--interfaces", choices=("detected", "stored", "compare"),
                    default="detected", help="detected (default); stored: check on the "
                    "interfaces a COMPAS file stores, as given; compare: list how the detected "
@@ -98,6 +101,14 @@ def uncertainty(text: str) -> tuple[float, float]:
     return parts[0], parts[1] if len(parts) > 1 else 0.0
 
 
+def node_keys(text: str) -> tuple[str, ...]:
+    """KEY[,KEY...] (argparse type): node keys, none of them empty."""
+    keys = tuple(k.strip() for k in text.split(","))
+    if not all(keys):
+        raise ValueError(text)
+    return keys
+
+
 def _options(args) -> CheckOptions:
     """The check options of the flags (ValueError naming a flag out of its range)."""
     values = {o: getattr(args, o.path) for o in OPTIONS if o.flag is not None}
@@ -114,7 +125,8 @@ def _scene(args) -> tuple[Scene, Assembly | None]:
     if args.poses and args.interfaces != "detected":
         raise ValueError("--interfaces stored and compare are of the blocks as the file has "
                          "them, not at measured poses (--poses)")
-    scene, stored = load_design(args.scene, args.density, stored=args.interfaces != "detected")
+    scene, stored = load_design(args.scene, args.density, stored=args.interfaces != "detected",
+                                supports=args.supports)
     if args.poses:
         scene = scene_at_poses(scene, load_poses(args.poses))
     if args.interfaces == "compare":

@@ -17,6 +17,7 @@ from rbe_ros import generators as gen
 from rbe_ros.analysis.assembly import Assembly
 from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.analysis.pipeline import check_scene
+from rbe_ros.cli import main
 from rbe_ros.io.compas import (compas_interfaces, compas_samples_dir, load_compas_assembly,
                                save_compas_assembly)
 from rbe_ros.geometry.block import pose_block
@@ -137,3 +138,21 @@ def test_armadillo_sample_loads_and_checks(samples):
     report = check_scene(scene, CheckOptions(SolveOptions(mu=0.6), contact=contact))
     assert report.status == Status.STABLE and report.num_blocks == 399
     assert_physical(scene, report, mu=0.6)
+
+
+def test_supports_flag_of_the_command_line(capsys):
+    """--supports replaces a COMPAS file's is_support flags: with the top cube as the support
+    the bottom one hangs from it and needs tension (its whole weight, 2000 kg/m^3 x 1 m^3);
+    a scene file flags its own supports (an error names why), and an empty key is refused."""
+    assert main(["check", str(SAMPLE), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["status"] == Status.STABLE
+    assert main(["check", str(SAMPLE), "--supports", "1", "--json"]) == 0
+    hanging = json.loads(capsys.readouterr().out)
+    assert hanging["status"] == Status.TENSION_REQUIRED
+    [it] = hanging["interfaces"]
+    assert -sum(it["normal_forces"]) == pytest.approx(2000.0 * 9.81, rel=1e-3)
+    scene = Path(__file__).parents[1] / "examples" / "build_sequence.json"
+    assert main(["check", str(scene), "--supports", "ground"]) != 0
+    assert "COMPAS files" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["check", str(SAMPLE), "--supports", "0,,1"])

@@ -31,10 +31,15 @@ import numpy as np
 
 from ..rbe.model import build_model
 from ..rbe.result import Report
-from ..rbe.solver import LoadMultipliers, SolveOptions
+from ..rbe.solver import MULTIPLIER_TOL, LoadMultipliers, SolveOptions
 from .assembly import Assembly
 
 DEFAULT_DIRECTIONS = 8
+
+
+#: Margins within this share of the least are ties (ten times the solver's tolerance on
+#: the load multiplier).
+TIE = 10 * MULTIPLIER_TOL
 
 
 @dataclass(frozen=True)
@@ -93,7 +98,11 @@ def stability_margin(assembly: Assembly, options: SolveOptions = SolveOptions(),
             break
         k = int(left[np.argmin(bounds[left])])
         margins[k] = _multiplier(multipliers, model.load(g * dirs[k]))
-    k = int(np.nanargmin(margins))
+    # Directions whose margins tie within the solver's tolerance on lambda (a symmetric
+    # dome's) are one minimum: the first of them in direction order is reported, so that
+    # rounding never picks the direction.
+    least = float(np.nanmin(margins))
+    k = int(np.flatnonzero(margins <= least + TIE * max(least, 1.0))[0])
     return Margin(float(margins[k]), dirs[k], dirs, margins)
 
 

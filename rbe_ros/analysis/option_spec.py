@@ -113,9 +113,9 @@ _LENGTH = "relative to the smaller block's size (the cube root of its volume)"
 OPTIONS: tuple[Option, ...] = (
     Option("solve.mu", float, "Coulomb friction coefficient mu of every interface",
            "--mu", "friction_coefficient", 0.0, 10.0, low_open=True),
-    Option("mu_threshold", float, "post-check |V| <= threshold * N per interface; 0: the "
-           "friction coefficient", "--mu-threshold", "friction_threshold", 0.0, 10.0,
-           zero=NONE),
+    Option("mu_threshold", float, "friction threshold: below mu, the cone of the check "
+           "(|V| <= threshold * N); 0: the friction coefficient", "--mu-threshold",
+           "friction_threshold", 0.0, 10.0, zero=NONE),
     Option("solve.objective", str, "objective of the force solve: qp (smooth, unique forces) "
            "or lp", "--objective", "objective", choices=OBJECTIVES),
     Option("solve.friction", str, "net (friction-net: decides stability) or plus (friction+: "

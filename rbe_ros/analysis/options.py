@@ -5,7 +5,7 @@ Every entry point (CLI, node parameters, options stored in a bag) builds a
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from ..geometry.contacts import ContactOptions
 from ..rbe.solver import SolveOptions
@@ -40,7 +40,9 @@ class CheckOptions:
     """Everything that decides a check's result."""
 
     solve: SolveOptions = field(default_factory=SolveOptions)
-    mu_threshold: float | None = None   # post-check |V| <= mu_threshold N; None: the solve's mu
+    #: Friction threshold below mu: the cone of the deciding problem (see ``deciding``) and the
+    #: bound of every interface's |V| <= mu_threshold N; None: the solve's mu.
+    mu_threshold: float | None = None
     tension_tol: float = 1e-5           # tension counts above this share of the free weight
     contact: ContactOptions = field(default_factory=ContactOptions)
     full_solve: bool = False            # sequences: always solve the whole partial assembly
@@ -54,3 +56,14 @@ class CheckOptions:
     def threshold(self) -> float:
         """The friction threshold of the post-check: ``mu_threshold``, else the solve's mu."""
         return self.solve.mu if self.mu_threshold is None else self.mu_threshold
+
+    @property
+    def deciding(self) -> SolveOptions:
+        """The problem whose feasibility is the verdict: the solve's, with its cone at the
+        friction threshold when that is below mu. A threshold checked only on one solution
+        at mu would judge an arbitrary member of a face of optimal force fields (a wall's
+        course joints put at the limit where the wall needs no friction); stated as the cone,
+        the step is within the threshold exactly when some admissible field is."""
+        if self.threshold < self.solve.mu:
+            return replace(self.solve, mu=self.threshold)
+        return self.solve

@@ -104,7 +104,7 @@ def _completed(report: Report, assembly: Assembly, held, options: CheckOptions) 
     with stage("hold search"):
         suggested = suggested_holds(report, assembly, options)
     with stage("margin"):
-        found = report_margin(report, assembly, options.solve, options.margin_directions)
+        found = report_margin(report, assembly, options.deciding, options.margin_directions)
     extra = {} if found is None else {"margin_g": found.margin_g,
                                       "margin_direction": found.direction}
     return replace(report, near_contacts=near, verdict_sensitive=bool(sensitive),

@@ -36,7 +36,7 @@ def _deciding(assembly: Assembly, options: CheckOptions):
                       f"no equilibrium: {_names(floating)} not connected to a support by any"
                       f" contact", unstable_blocks=floating)
     model = build_model(assembly.blocks, assembly.interfaces, assembly.gravity)
-    return model, solve(model, options.solve)
+    return model, solve(model, options.deciding)
 
 
 def _verdict(assembly: Assembly, options: CheckOptions) -> Report:
@@ -93,11 +93,11 @@ def stable_forces(model: EquilibriumModel, options: CheckOptions, load=None
     """The solution and interface results of the deciding problem under ``load`` (scaled p;
     default the dead load) when they pass the criterion of :func:`check`: solved, no
     tension, every interface within the friction threshold. None otherwise."""
-    solution = solve(model, options.solve, load=load)
+    solution = solve(model, options.deciding, load=load)
     if not solution.solved:
         return None
     results = interface_results(model, solution, mu_threshold=options.threshold,
-                                tension_tol=options.tension_tol, mu=options.solve.mu)
+                                tension_tol=options.tension_tol, mu=options.deciding.mu)
     if any(r.tension or (r.friction_exceeded and counts)
            for r, counts in zip(results, _loaded(model, results, options))):
         return None
@@ -118,7 +118,7 @@ def feasible_without_tension(model: EquilibriumModel, options: CheckOptions, loa
 def _report(model, solution, options: CheckOptions, *, sliding: bool = False) -> Report:
     """Report of a solved problem. ``sliding``: the solution needed more friction than the
     cone allows, so the interfaces that ask most of it are flagged."""
-    mu = options.solve.mu
+    mu = options.deciding.mu
     results = interface_results(model, solution, mu_threshold=options.threshold,
                                 tension_tol=options.tension_tol, mu=mu)
     loaded = _loaded(model, results, options)
@@ -140,14 +140,16 @@ def _report(model, solution, options: CheckOptions, *, sliding: bool = False) ->
     elif friction:
         worst_it = max(friction, key=lambda r: r.friction_ratio)
         status = Status.FRICTION_EXCEEDED
-        limit = (f"the {options.solve.cone} cone allows with mu {mu:.3g}" if sliding
+        limit = (f"the {options.solve.cone} cone allows with mu {mu:.3g}"
+                 if sliding and mu == options.solve.mu
                  else f"the threshold {options.threshold:.3g}")
         message = (f"friction exceeded: |V|/N = {worst_it.friction_ratio:.3g} at interface"
                    f" {_iface(worst_it)}, more than {limit} ({_names(unstable)} would slide)")
     else:
         status = Status.STABLE
         message = (f"stable: {len(results)} interface{'s' * (len(results) != 1)} in compression,"
-                   f" worst |V|/N {worst:.3f} (mu {mu:.3g})")
+                   f" worst |V|/N {worst:.3f} (mu {options.solve.mu:.3g}"
+                   + (f", threshold {mu:.3g})" if mu < options.solve.mu else ")"))
     return Report(status, message, max_tension, worst, num_blocks=len(model.blocks),
                   interfaces=results, unstable_blocks=unstable)
 

@@ -60,8 +60,12 @@ def interface_results(model: EquilibriumModel, solution: Solution, *, mu_thresho
     tension_limit = tension_tol * scale
     tension[vi[fn_neg > tension_limit]] = True
     tension |= 0.0 > tension_limit          # max(fn-, initial=0) > limit
+    # Sliding under friction+ (whose cones bound the shear by the compressive part fn+ only):
+    # shear beyond mu times the net compression, with the tolerances of the ratio test, so
+    # that a ratio at or below the threshold (the cone's own limit included) is never
+    # flagged, nor an interface whose net force is a rounding-level tension with no shear.
     with np.errstate(invalid="ignore"):     # mu = inf with N = 0: no sliding, as inf * 0 = nan
-        slides = shear_norm > mu * big_n + 1e-9 * scale
+        slides = shear_norm > mu * np.maximum(big_n, 0.0) * (1 + 1e-6) + NEGLIGIBLE * scale
     exceeded = (ratio > mu_threshold * (1 + 1e-6)) | slides
     resultant = big_n[:, None] * n + shear
 

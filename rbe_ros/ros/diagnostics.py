@@ -2,14 +2,18 @@
 a cell supervisor watches, as the ROS diagnostics tools (rqt_robot_monitor, the diagnostic
 aggregator) expect it.
 
-Levels: ERROR when recording to the bag failed or a check raised an unexpected error (the
-node goes on, but a log is lost or a report is not a verdict); WARN when states were dropped
-under overload since the last message, or the last report had no verdict (SOLVER_FAILED: a
-solver failure, the time limit, a superseded sequence); OK otherwise.
+Levels, the first that applies: ERROR when recording to the bag failed or a check raised an
+unexpected error (the node goes on, but a log is lost or a report is not a verdict); STALE,
+message "inactive", while a managed node is inactive (nothing is checked; what arrives is
+counted as dropped); WARN when states were dropped under overload since the last message, or
+the last report had no verdict (SOLVER_FAILED: a solver failure, the time limit, a
+superseded sequence); STALE, message "stale", when no input has been checked for
+:data:`STALE_AFTER_S`; OK otherwise.
 """
 from __future__ import annotations
 
 import threading
+import time
 from dataclasses import dataclass, field
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -18,6 +22,8 @@ from ..rbe.result import Report, Status
 
 TOPIC = "/diagnostics"
 PERIOD_S = 1.0
+#: No report for this long: the cell's view of the assembly is not being checked.
+STALE_AFTER_S = 10.0
 
 
 @dataclass
@@ -31,18 +37,31 @@ class NodeHealth:
     bag_bytes: int = 0              # message bytes written to the bag
     last_error: str = ""
     failed: bool = False            # an unexpected error or a recording failure happened
+    active: bool = False            # checking (the interfaces are open)
+    last_report_at: float = field(default_factory=time.monotonic)   # or since active
     _dropped_seen: int = 0
     _lock: threading.Lock = field(default_factory=threading.Lock)
 
     def reported(self, report: Report) -> None:
         with self._lock:
             self.checks += 1
+            self.last_report_at = time.monotonic()
             self.last_duration_s = report.solve_time
             self.last_status = report.status.name
             self.dropped = max(self.dropped, report.dropped_states)
             if report.status == Status.SOLVER_FAILED:
                 self.last_error = report.message
                 self.failed |= report.message.startswith("check failed")
+
+    def set_active(self, active: bool) -> None:
+        with self._lock:
+            self.active = active
+            self.last_report_at = time.monotonic()
+
+    def dropped_count(self, dropped: int) -> None:
+        """Dropped states counted before a report carries them (messages while inactive)."""
+        with self._lock:
+            self.dropped = max(self.dropped, dropped)
 
     def recorded(self, size: int) -> None:
         with self._lock:
@@ -60,10 +79,15 @@ class NodeHealth:
             self._dropped_seen = self.dropped
             if self.failed:
                 level, summary = DiagnosticStatus.ERROR, f"error: {self.last_error}"
+            elif not self.active:
+                level, summary = DiagnosticStatus.STALE, "inactive: nothing is checked"
             elif newly_dropped or self.last_status == Status.SOLVER_FAILED.name:
                 level = DiagnosticStatus.WARN
                 summary = "states dropped under overload" if newly_dropped else \
                     f"last check without a verdict: {self.last_error}"
+            elif (idle := time.monotonic() - self.last_report_at) > STALE_AFTER_S:
+                level, summary = DiagnosticStatus.STALE, \
+                    f"stale: no input checked for {idle:.0f} s"
             else:
                 level, summary = DiagnosticStatus.OK, "ok"
             values = {"checks done": str(self.checks),

@@ -8,9 +8,14 @@ system brings the checks up only once the rest is ready:
   ``design_file`` read; a bad one fails the transition with one error line (the node stays
   unconfigured);
 * activate: ``~/assembly``, ``~/design``, ``~/poses``, ``~/check`` and ``~/check_sequence``
-  open (the design of ``design_file`` is sent on, as by ``rbe_node``); deactivate closes them
-  (a running check ends after its current step);
-* cleanup: the bag is closed; shutdown: everything is closed.
+  open (the design of ``design_file`` is sent on, as by ``rbe_node``, at the first activate
+  after configure); deactivate closes the service and the action and stops the checks (a
+  running check ends after its current step), but keeps the design and the poses measured so
+  far (the next activate goes on from them) and the topic subscriptions: what arrives while
+  inactive is ignored and counted (``dropped_states`` of the next report, /diagnostics, a
+  warning at activate);
+* cleanup: the bag is closed, the design and measured poses forgotten; shutdown: everything
+  is closed.
 
 Run: ``rbe_lifecycle_node --ros-args -p mcap_path:=bags/run`` (or
 ``python -m rbe_ros.ros.lifecycle_node``).
@@ -19,6 +24,7 @@ from __future__ import annotations
 
 from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 
+from ..io.poses import AsBuilt
 from ..scene import SceneError
 from .node import NODE_NAME, ConfigurationError, RbeChecks, spin
 
@@ -37,27 +43,34 @@ class RbeLifecycleNode(RbeChecks, LifecycleNode):
             self.check_options()
             self._open_bag()
             self._design = self.design_message(path) if path else None
+            self._asbuilt = AsBuilt()
         except (ConfigurationError, SceneError, ValueError) as exc:
             self.close_bag()
             self.get_logger().error(f"configure failed: {exc}")
             return TransitionCallbackReturn.FAILURE
         self._record_settings()
         self._start_foxglove()
+        self.get_logger().info("configured")
         return TransitionCallbackReturn.SUCCESS
 
     def on_activate(self, state) -> TransitionCallbackReturn:
         self._start_interfaces()
-        if self._design is not None:
-            self._send_design(self._design)
+        if self._design is not None:    # once: a second activate keeps the measured poses
+            design, self._design = self._design, None
+            self._send_design(design)
+        self.get_logger().info("activated")
         return super().on_activate(state)
 
     def on_deactivate(self, state) -> TransitionCallbackReturn:
-        self._stop_interfaces()
+        self._stop_interfaces(pause=True)
+        self.get_logger().info("deactivated: the design and the measured poses are kept")
         return super().on_deactivate(state)
 
     def on_cleanup(self, state) -> TransitionCallbackReturn:
+        self._stop_interfaces()
         self._close_outputs()
         self._design = None
+        self.get_logger().info("cleaned up: the bag closed, the design forgotten")
         return TransitionCallbackReturn.SUCCESS
 
     def on_shutdown(self, state) -> TransitionCallbackReturn:

@@ -170,6 +170,11 @@ class RbeChecks:
         self._slot: bytes | tuple | None = None
         self._slot_cond = threading.Condition()
         self._dropped = 0
+        # a managed node keeps its topic subscriptions while inactive, so that what arrives
+        # in a pause is counted (in _dropped and the log) instead of lost unseen
+        self._paused = False
+        self._paused_messages = 0
+        self._topics: list = []         # the topic subscriptions, while open
         self._worker: threading.Thread | None = None
         # the design and the poses measured so far (~/design, ~/poses): updated in the
         # callbacks, so that no measurement is lost when its check is dropped under overload
@@ -220,16 +225,18 @@ class RbeChecks:
         # raw: the callback gets the CDR bytes; a state is converted to a message only when
         # the worker checks it (converting every state that arrives would hold the GIL and
         # starve the checks at high rates)
-        self._interfaces = [
-            self.create_subscription(AssemblyState, "~/assembly", self._on_state, STATE_QOS,
-                                     callback_group=self._topic_group, raw=True),
-            self.create_subscription(AssemblyState, "~/design", self._on_design, LATCHED_QOS,
-                                     callback_group=self._topic_group, raw=True),
-            # deep: each update carries measurements that later checks build on
-            self.create_subscription(BlockPoses, "~/poses", self._on_poses, POSES_QOS,
-                                     callback_group=self._topic_group, raw=True),
-            self.create_service(CheckAssembly, "~/check", self._on_check,
-                                callback_group=self._service_group)]
+        if not self._topics:
+            self._topics = [
+                self.create_subscription(AssemblyState, "~/assembly", self._on_state,
+                                         STATE_QOS, callback_group=self._topic_group, raw=True),
+                self.create_subscription(AssemblyState, "~/design", self._on_design,
+                                         LATCHED_QOS, callback_group=self._topic_group,
+                                         raw=True),
+                # deep: each update carries measurements that later checks build on
+                self.create_subscription(BlockPoses, "~/poses", self._on_poses, POSES_QOS,
+                                         callback_group=self._topic_group, raw=True)]
+        self._interfaces = [self.create_service(CheckAssembly, "~/check", self._on_check,
+                                                callback_group=self._service_group)]
         self._action = ActionServer(
             self, CheckSequence, "~/check_sequence", execute_callback=self._execute_sequence,
             goal_callback=lambda _goal: GoalResponse.ACCEPT,
@@ -237,26 +244,40 @@ class RbeChecks:
             callback_group=self._action_group)
         self._worker = threading.Thread(target=self._work, name="rbe_state_worker", daemon=True)
         self._worker.start()
+        with self._slot_cond:
+            self._paused, paused = False, self._paused_messages
+            self._paused_messages = 0
+        self.health.set_active(True)
+        if paused:
+            self.get_logger().warning(
+                f"{paused} messages on {self.state_topic}, {self.design_topic} or "
+                f"{self.poses_topic} arrived while inactive: ignored (counted in dropped_states)")
         self.get_logger().info(
             f"ready: {self.state_topic} -> {self.report_topic}, service "
             f"{self._interfaces[-1].service_name}, "
             f"mu {self.get_parameter('friction_coefficient').value}")
 
-    def _stop_interfaces(self) -> None:
+    def _stop_interfaces(self, pause: bool = False) -> None:
         """Stop the worker (a running check ends after its current step) and close what
-        :meth:`_start_interfaces` opened. Idempotent."""
+        :meth:`_start_interfaces` opened. Idempotent. ``pause``: keep the topic
+        subscriptions, counting what arrives until the next start (deactivate keeps the
+        latched design from coming again, and the measured poses with it)."""
+        with self._slot_cond:
+            self._paused = pause
+        self.health.set_active(False)
         self.stop()
         worker, self._worker = self._worker, None
         if worker is not None and worker is not threading.current_thread():
             worker.join(timeout=10.0)
             if worker.is_alive():
                 self.get_logger().warning("the state worker is still checking; closing anyway")
-        for entity in self._interfaces:
-            if hasattr(entity, "srv_type"):
-                self.destroy_service(entity)
-            else:
-                self.destroy_subscription(entity)
+        for service in self._interfaces:
+            self.destroy_service(service)
         self._interfaces = []
+        if not pause:
+            for subscription in self._topics:
+                self.destroy_subscription(subscription)
+            self._topics = []
         if self._action is not None:
             self._action.destroy()
             self._action = None
@@ -455,7 +476,18 @@ class RbeChecks:
     def _on_state(self, data: bytes) -> None:
         """Subscription callback (raw CDR): put the state in the slot for the worker (never
         blocks on a check)."""
-        self._put(data)
+        if not self._counted_in_pause():
+            self._put(data)
+
+    def _counted_in_pause(self) -> bool:
+        """Whether the node is inactive: then a message that arrives is counted as dropped
+        (``dropped_states`` of the next report, /diagnostics), and ignored."""
+        with self._slot_cond:
+            if self._paused:
+                self._paused_messages += 1
+                self._dropped += 1
+                self.health.dropped_count(self._dropped)
+            return self._paused
 
     def _put(self, data: bytes | tuple) -> None:
         """Put a state (CDR) or an as-built state in the slot for the worker; one still
@@ -528,6 +560,8 @@ class RbeChecks:
     def _on_asbuilt(self, data: bytes, msg_type, topic: str, kind: str) -> None:
         """Record a design or poses message, merge it into the as-built state
         (:func:`rbe_ros.replay.merge_message`) and put the result in the slot; never raises."""
+        if self._counted_in_pause():
+            return
         try:
             msg = deserialize_message(data, msg_type)
             header = self._received(msg, data, topic)

@@ -1,17 +1,28 @@
-"""rbe_lifecycle_node over DDS: every transition, with ~/assembly, ~/check and
-~/check_sequence present only while active, the bag open from configure to cleanup; a bad
-design_file or mcap_path fails configure with one error line."""
+"""rbe_lifecycle_node over DDS: every transition, with ~/check and ~/check_sequence present
+only while active (~/assembly subscribed from the first activate to cleanup, so that what
+arrives in a pause is counted), the bag open from configure to cleanup; the measured poses
+kept across deactivate/activate; a bad design_file or mcap_path fails configure with one
+error line."""
 from __future__ import annotations
 
+import threading
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from lifecycle_msgs.msg import State, Transition
 from lifecycle_msgs.srv import ChangeState, GetState
-from rbe_msgs.msg import StabilityReport
+from rbe_msgs.msg import AssemblyState, BlockPoses, StabilityReport
 
+from rbe_ros import generators as gen
+from rbe_ros.analysis.pipeline import check_scene
+from rbe_ros.io.messages import poses_to_dict, state_to_dict
+from rbe_ros.io.poses import scene_at_poses
 from rbe_ros.io.replay import read_runs
+from rbe_ros.ros.convert import dict_to_message
 from rbe_ros.ros.live import NodeProcess
 
 from rbe_client import DENSITY, G, NODE, Client, stacked_boxes, state_msg, wait_future, \
     wait_until
+from test_poses_node import Pipeline
 
 MODULE = "rbe_ros.ros.lifecycle_node"
 
@@ -62,7 +73,8 @@ def test_every_transition_with_the_interfaces_only_while_active(rclpy_context, t
             StabilityReport.TENSION_REQUIRED                 # b's centre beyond a's edge
         assert life.transition(Transition.TRANSITION_DEACTIVATE)
         assert life.state() == State.PRIMARY_STATE_INACTIVE
-        wait_until(lambda: interfaces(client) == (False, False, False), what="no interfaces")
+        # ~/assembly stays subscribed: what comes in the pause is counted, not lost unseen
+        wait_until(lambda: interfaces(client) == (True, False, False), what="no services")
         assert life.transition(Transition.TRANSITION_ACTIVATE)       # and back
         wait_until(lambda: interfaces(client) == (True, True, True), what="the interfaces")
         assert life.transition(Transition.TRANSITION_DEACTIVATE)
@@ -98,3 +110,78 @@ def test_a_bad_design_file_or_mcap_path_fails_configure_with_one_line(rclpy_cont
         errors = [line for line in out.splitlines() if "configure failed" in line]
         assert len(errors) == 1 and str(path) in errors[0], out
         assert "Traceback" not in out, out
+
+
+def test_measured_poses_survive_deactivate_activate_and_the_pause_is_counted(rclpy_context,
+                                                                             tmp_path):
+    design = gen.running_bond_wall(3, 3)                 # 10 bricks on a footing
+    order = list(design.sequence)
+    proc = NodeProcess([], tmp_path / "node.log", MODULE)
+    client = Client(rclpy_context, markers=False)
+    life = Lifecycle(client)
+    pipeline = Pipeline(rclpy_context)
+    levels: list[tuple[int, str]] = []
+    lock = threading.Lock()
+
+    def keep(msg):
+        with lock:
+            levels.extend((s.level, s.message, {kv.key: kv.value for kv in s.values})
+                          for s in msg.status if s.name.endswith(NODE))
+
+    client.node.create_subscription(DiagnosticArray, "/diagnostics", keep, 10)
+
+    def send(stamp: int, bids) -> None:
+        poses = {b: (design.block(b).position.tolist(), design.block(b).orientation.tolist())
+                 for b in bids}
+        pipeline.poses.publish(dict_to_message(poses_to_dict(poses, "wall", stamp * 10**9),
+                                               BlockPoses))
+
+    def seen(level: int, text: str, dropped: int | None = None) -> bool:
+        with lock:
+            levels.clear()
+
+        def matches(lv, m, values):
+            return lv == level and text in m and \
+                (dropped is None or values["dropped states"] == str(dropped))
+        return wait_until(lambda: any(matches(*x) for x in list(levels)), 60.0,
+                          f"/diagnostics {text} {dropped}")
+    try:
+        assert life.transition(Transition.TRANSITION_CONFIGURE)
+        assert seen(DiagnosticStatus.STALE, "inactive")        # configured, not checking
+        assert life.transition(Transition.TRANSITION_ACTIVATE)
+        wait_until(pipeline.ready, 60.0, "the node's topics")
+        pipeline.design.publish(dict_to_message(state_to_dict(design, "wall", 10**9 * 100),
+                                                AssemblyState))
+        wait_until(lambda: pipeline.report(100), 60.0, "the design's report")
+        for k, bid in enumerate(order):                  # one at a time: none superseded
+            send(101 + k, [bid])
+            wait_until(lambda: pipeline.report(101 + k), 60.0, f"the report of {bid}")
+        before = pipeline.report(100 + len(order))
+        assert before.status == StabilityReport.STABLE and before.num_blocks == 1 + len(order)
+        assert life.transition(Transition.TRANSITION_DEACTIVATE)
+        assert seen(DiagnosticStatus.STALE, "inactive")
+        for k in range(5):                              # ignored, counted
+            send(200 + k, order[:1])
+        # counted as they come (the dropped count of /diagnostics), before the activate
+        assert seen(DiagnosticStatus.STALE, "inactive", before.dropped_states + 5)
+        assert life.transition(Transition.TRANSITION_ACTIVATE)
+        assert seen(DiagnosticStatus.OK, "ok")
+        send(300, order[-1:])                           # the last brick measured again
+        after = wait_until(lambda: pipeline.report(300), 60.0, "the report after activate")
+    finally:
+        pipeline.close()
+        client.close()
+        assert proc.stop() == 0
+    out = proc.output()
+    assert "Traceback" not in out, out
+    # every brick still measured: the wall stands on the footing, as the core computes it
+    assert after.status == StabilityReport.STABLE and after.num_blocks == 1 + len(order)
+    assert [r.header.stamp.sec for r in pipeline.reports].count(100) == 1   # design once
+    final = check_scene(scene_at_poses(design, {b: (design.block(b).position,
+                                                    design.block(b).orientation)
+                                                for b in order}))
+    assert [(i.block_a, i.block_b) for i in after.interfaces] == \
+        [(i.block_a, i.block_b) for i in final.interfaces]
+    assert after.dropped_states - before.dropped_states == 5
+    assert "5 messages" in out and "arrived while inactive" in out, out
+    assert "deactivated" in out and "activated" in out

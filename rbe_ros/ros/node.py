@@ -82,6 +82,9 @@ from .diagnostics import TOPIC as DIAGNOSTICS_TOPIC
 from .diagnostics import NodeHealth
 
 NODE_NAME = "rbe_node"
+#: At most one INFO line per this many seconds sums up the reports (a line per report at
+#: 10 Hz buries what matters); unstable verdicts are WARN lines of their own.
+LOG_SUMMARY_S = 10.0
 
 #: Depth 1: under overload only the newest state matters (see the single-slot buffer).
 STATE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
@@ -211,7 +214,12 @@ class RbeChecks:
         self.design_topic = self.resolve_topic_name("~/design")
         self.poses_topic = self.resolve_topic_name("~/poses")
         self.marker_topic = self._marker_pub.topic_name
-        self.add_post_set_parameters_callback(lambda _params: self._record_settings())
+        self.add_post_set_parameters_callback(self._parameters_set)
+        # the report log (_log_report): verdict counts since the last summary line
+        self._log_lock = threading.Lock()
+        self._log_counts: dict[str, int] = {}
+        self._log_since = time.monotonic() - LOG_SUMMARY_S     # the first report: a line
+        self._last_verdict = None
 
     def _start_foxglove(self) -> None:
         if self.get_parameter("foxglove_port").value:
@@ -291,6 +299,12 @@ class RbeChecks:
             if problem is not None:
                 return SetParametersResult(successful=False, reason=f"{p.name} {problem}")
         return SetParametersResult(successful=True)
+
+    def _parameters_set(self, params) -> None:
+        """Record the new settings (for replay) and say in the log what changed."""
+        self._record_settings()
+        self.get_logger().info("parameters set: " + ", ".join(f"{p.name} = {p.value!r}"
+                                                              for p in params))
 
     def check_options(self) -> CheckOptions:
         """The core's options from the current parameter values."""
@@ -429,14 +443,34 @@ class RbeChecks:
         self._marker_pub.publish(markers)
         where = f" step {report.step_index} ({report.block_placed})" \
             if report.step_index >= 0 else ""
-        text = f"{header['frame_id']}{where}: {report.status.name}: {report.message}"
+        self._log_report(f"{header['frame_id']}{where}: {report.status.name}: "
+                         f"{report.message}", report)
+        return data
+
+    def _log_report(self, text: str, report: Report) -> None:
+        """A failed check at ERROR, an unstable verdict at WARN when it differs from the
+        previous report's (a wall that keeps falling at 10 Hz is one line), and at most every
+        :data:`LOG_SUMMARY_S` one INFO line counting the verdicts since the last one."""
         # one call site per severity: rclpy refuses a call site whose severity changes
         # ("Logger severity cannot be changed between calls")
+        verdict = (report.status, report.step_index, report.message)
+        with self._log_lock:
+            changed, self._last_verdict = verdict != self._last_verdict, verdict
+            self._log_counts[report.status.name] = self._log_counts.get(report.status.name,
+                                                                        0) + 1
+            now = time.monotonic()
+            summary = None
+            if now - self._log_since >= LOG_SUMMARY_S:
+                counts = ", ".join(f"{n} {k}" for k, n in sorted(self._log_counts.items()))
+                summary = f"{sum(self._log_counts.values())} reports in " \
+                    f"{now - self._log_since:.0f} s ({counts}); last: {text}"
+                self._log_counts, self._log_since = {}, now
         if report.status == Status.SOLVER_FAILED:
             self.get_logger().error(text)
-        else:
-            self.get_logger().info(text)
-        return data
+        elif not report.stable and changed:
+            self.get_logger().warning(text)
+        if summary is not None:
+            self.get_logger().info(summary)
 
     def _drawable(self, state: AssemblyState) -> dict:
         """The message dict of an unchecked ``state`` to draw, if within the block limit."""

@@ -192,3 +192,39 @@ def test_record_markers_false_keeps_a_lean_bag(make_node, tmp_path):
     assert [m.topic for m in bag.read_bag(tmp_path / "bag")] == [
         "/rbe_unit_test/rbe_node/settings", "/rbe_unit_test/rbe_node/assembly",
         "/rbe_unit_test/rbe_node/report"]
+
+
+def test_log_unstable_at_warn_changes_at_info_and_a_summary_not_a_line_per_report(
+        make_node, monkeypatch):
+    from rbe_msgs.msg import AssemblyState
+
+    from rbe_client import stacked_boxes
+    from rbe_ros.io import messages
+    from rbe_ros.ros import node as node_module
+    from rbe_ros.ros.convert import dict_to_message
+
+    lines: list[tuple[str, str]] = []
+
+    class Capture:
+        def __getattr__(self, level):
+            return lambda text, **_kw: lines.append((level, text))
+
+    node = make_node()
+    monkeypatch.setattr(node, "get_logger", lambda: Capture())
+    assert node.set_parameters([Parameter("friction_coefficient", value=0.5)])[0].successful
+    assert lines == [("info", "parameters set: friction_coefficient = 0.5")]
+    lines.clear()
+    # 5 standing stacks, then 5 with the top box's centre beyond the edge (0.6 > 0.5)
+    for k, shift in enumerate([0.1] * 5 + [0.6] * 5):
+        node.check_state(dict_to_message(messages.state_to_dict(stacked_boxes(shift), "", k),
+                                         AssemblyState))
+    # the first report is summed up at once, then nothing until LOG_SUMMARY_S has passed;
+    # the unstable verdict once (unchanged for the next four)
+    assert [level for level, _ in lines] == ["info", "warning"]
+    assert lines[0][1].startswith("1 reports in") and "1 STABLE" in lines[0][1]
+    assert "TENSION_REQUIRED" in lines[1][1]
+    monkeypatch.setattr(node, "_log_since", node._log_since - node_module.LOG_SUMMARY_S)
+    node.check_state(dict_to_message(messages.state_to_dict(stacked_boxes(0.1), "", 10),
+                                     AssemblyState))
+    assert lines[2][0] == "info" and "5 STABLE, 5 TENSION_REQUIRED" in lines[2][1] \
+        and lines[2][1].startswith("10 reports in"), lines

@@ -11,6 +11,7 @@ import inspect
 import json
 import math
 import shutil
+import signal
 import sys
 import time
 from pathlib import Path
@@ -36,6 +37,7 @@ from .io.figures import draw_report
 from .io.messages import header_dict, json_safe, report_json, report_to_dict, state_to_dict
 from .io.replay import (REPORT_TOPIC, STATE_TOPIC, Run, bag_options, default_output,
                         offline_reports, read_runs, replay_bag, step_stamps, write_runs)
+from .io.plan_output import ProgressLines, ReportLines, step_summary
 from .io.table import format_table
 from .io.view import ViewRun, checked_runs, write_html
 from .io.scene_json import load_scene, scene_to_dict
@@ -222,7 +224,13 @@ def build_parser() -> argparse.ArgumentParser:
                       help="the scene's sequence is a fixed prefix of the order")
     plan.add_argument("-o", "--output", metavar="SCENE",
                       help="write the planned scene (sequence and holds) as JSON")
-    plan.add_argument("--json", action="store_true", help="print one JSON object")
+    plan.add_argument("--json", action="store_true", help="print one JSON object: the plan "
+                      "and one summary per step (status, holds, margin, worst ratio, time)")
+    plan.add_argument("--reports", metavar="FILE.jsonl",
+                      help="write every step's full report as JSON Lines, as it is made")
+    plan.add_argument("--full-candidates", action="store_true",
+                      help="check every candidate by solving whole components (the planner "
+                      "without incremental checks, to compare with)")
     _solver_arguments(plan)
     plan.set_defaults(run=_run_plan)
 
@@ -474,8 +482,23 @@ def _run_plan(args) -> int:
     if not args.json:
         print(f"planning {scene.name}: {sum(not b.support for b in scene.blocks)} blocks to "
               f"place, at most {args.max_held} held", file=sys.stderr)
-    plan = plan_sequence(scene, args.max_held, options, beam=args.beam,
-                         candidates=args.candidates, keep_sequence=args.keep_sequence)
+    reports = ReportLines(args.reports) if args.reports else None
+    interrupted = []
+    previous = signal.signal(signal.SIGINT, lambda *_: interrupted.append(True))
+    try:
+        # the plan's --time-limit bounds the whole search, not each check
+        plan = plan_sequence(scene, args.max_held, replace(
+                                 options, solve=replace(options.solve, time_limit=math.inf)),
+                             beam=args.beam, candidates=args.candidates,
+                             keep_sequence=args.keep_sequence,
+                             full_candidates=args.full_candidates,
+                             time_limit=options.solve.time_limit,
+                             progress=ProgressLines(sys.stderr),
+                             should_stop=lambda: bool(interrupted), on_report=reports)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if reports is not None:
+            reports.close()
     if args.output and plan.scene is not None:
         out_path = Path(args.output)
         out_path.parent.mkdir(parents=True, exist_ok=True)
@@ -484,8 +507,8 @@ def _run_plan(args) -> int:
         out = {"scene": scene.name, "feasible": plan.feasible, "max_held": args.max_held,
                "order": plan.order, "failed_step": plan.failed_step, "message": plan.message,
                "holds": scene_to_dict(plan.scene).get("holds", []) if plan.scene else [],
-               "search_checks": plan.checks, "time": plan.time,
-               "reports": [report_json(r) for r in plan.reports]}
+               "search_checks": plan.checks, "models": plan.models, "time": plan.time,
+               "steps": [step_summary(r) for r in plan.reports]}
         print(json.dumps(out, indent=1))
     else:
         verdict = "feasible" if plan.feasible else f"NOT feasible (step {plan.failed_step})"

@@ -16,7 +16,6 @@ from rbe_ros.analysis.pipeline import check_sequence
 from rbe_ros.analysis.steps import sequence_steps
 from rbe_ros.cli import main
 from rbe_ros.scene import make_scene
-from rbe_ros.rbe.result import Status
 from rbe_ros.io.scene_json import scene_to_dict
 
 
@@ -135,9 +134,9 @@ def test_cli_plan_json_and_exit_status(tmp_path, capsys):
     out = json.loads(capsys.readouterr().out)
     assert out["feasible"] and out["failed_step"] == -1 and out["max_held"] == 2
     assert out["order"] == ["v00", "v06", "v01", "v05", "v02", "v04", "v03"]
-    assert [s["held_blocks"] for s in out["reports"]] == [[], [], ["v01"], ["v01", "v05"],
+    assert [s["held_blocks"] for s in out["steps"]] == [[], [], ["v01"], ["v01", "v05"],
                                                  ["v02", "v05"], ["v02", "v04"], []]
-    assert all(s["stable"] and s["status"] == Status.STABLE for s in out["reports"])
+    assert all(s["stable"] and s["status"] == "STABLE" for s in out["steps"])
     planned = json.loads(out_scene.read_text())
     assert planned["sequence"] == out["order"] and planned["holds"] == out["holds"]
     assert {"block": "v05", "from_step": 3, "until_step": 5} in planned["holds"]

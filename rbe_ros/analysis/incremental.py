@@ -24,6 +24,7 @@ region only.
 """
 from __future__ import annotations
 
+import collections
 from dataclasses import replace
 
 import numpy as np
@@ -50,58 +51,89 @@ def _key(assembly: Assembly, it) -> tuple:
 
 
 class StepChecker:
-    """Checks successive, growing assemblies, reusing the last admissible state."""
+    """Checks successive, growing assemblies, reusing the last admissible state.
+
+    A free block is *balanced* by the kept state when it was free then and every one of its
+    interfaces now was kept (no new contact, no support taken away, not released from a
+    hold); the blocks that are not form the step's new blocks. A hold added since (a free
+    block made a support) keeps the others balanced: its kept forces stay as loads on them.
+    """
 
     def __init__(self, options: CheckOptions = CheckOptions(), *, local: bool = True):
         self.options = options
         self.local = local
         self._results: dict[tuple, InterfaceResult] | None = None   # last admissible state
-        self._present: frozenset[str] = frozenset()
-        self._supports: frozenset[str] = frozenset()
+        self._free: frozenset[str] = frozenset()          # free blocks it balanced
+        self._count: dict[str, int] = {}                  # their interfaces then
         self._previous: frozenset[str] = frozenset()     # blocks of the last step checked
         self._last_failed = False
 
     def check(self, assembly: Assembly) -> Report:
         """The verdict of ``assembly``, the next step after the ones checked before."""
-        report = self._local(assembly) if self.local and self._extends(assembly) else None
+        report = self.attempt(assembly) if self.local else None
         if report is None:
             report = check(assembly, self.options)
+        self.advance(assembly, report)
+        return replace(report, num_blocks=len(assembly.blocks))
+
+    def attempt(self, assembly: Assembly, around=()) -> Report | None:
+        """The verdict of ``assembly`` from the kept state and models smaller than the whole
+        (None when only the full problem settles it); nothing is remembered. ``around``:
+        ids of blocks whose forces the change likely moves too (the planner's open course,
+        carried between two holds), tried first as a region with the new blocks."""
+        if self._results is None:
+            return None
+        graph = ContactGraph(assembly)
+        new = self._new_blocks(assembly, graph)
+        if not new:                       # nothing changed for any free block
+            return self._kept_elsewhere(assembly, assembly, [], 0, 0.0, "no block moved")
+        first = set(new) | {k for k in graph.free if assembly.blocks[k].id in set(around)}
+        return self._local(assembly, graph, new, first)
+
+    def advance(self, assembly: Assembly, report: Report) -> None:
+        """Take ``report`` (of ``assembly``) as the step reached: kept if it stands."""
         self._last_failed = not report.stable
         self._previous = frozenset(b.id for b in assembly.blocks)
         if report.stable:
             self._remember(assembly, report)
-        return replace(report, num_blocks=len(assembly.blocks))
 
-    def _extends(self, assembly: Assembly) -> bool:
-        """Whether the last admissible state is a sub-assembly with the same supports."""
-        if self._results is None:
-            return False
-        ids = {b.id for b in assembly.blocks}
-        supports = {b.id for b in assembly.blocks if b.support}
-        return self._present <= ids and supports & self._present == self._supports
+    def _new_blocks(self, assembly: Assembly, graph: ContactGraph) -> list[int]:
+        """Free blocks the kept state does not balance (see the class docstring)."""
+        count = [0] * len(assembly.blocks)
+        missing = set()
+        for it in assembly.interfaces:
+            count[it.a] += 1
+            count[it.b] += 1
+            if _key(assembly, it) not in self._results:
+                missing.update((it.a, it.b))
+        return [k for k in graph.free
+                if k in missing or assembly.blocks[k].id not in self._free
+                or count[k] != self._count[assembly.blocks[k].id]]
 
     def _remember(self, assembly: Assembly, report: Report) -> None:
         self._results = {_key(assembly, it): r for it, r in zip(assembly.interfaces,
                                                                 report.interfaces)}
-        self._present = frozenset(b.id for b in assembly.blocks)
-        self._supports = frozenset(b.id for b in assembly.blocks if b.support)
+        count = collections.Counter()
+        for it in assembly.interfaces:
+            count[it.a] += 1
+            count[it.b] += 1
+        self._free = frozenset(b.id for b in assembly.blocks if not b.support)
+        self._count = {b.id: count[k] for k, b in enumerate(assembly.blocks) if not b.support}
 
-    def _local(self, assembly: Assembly) -> Report | None:
-        graph = ContactGraph(assembly)
-        new = [k for k, b in enumerate(assembly.blocks) if b.id not in self._present]
-        if not new:
-            return None
+    def _local(self, assembly: Assembly, graph: ContactGraph, new: list[int],
+               first: set[int] = frozenset()) -> Report | None:
         component = graph.component(set(new) | graph.free_neighbours(new))
-        report = self._region(assembly, graph, new, component) \
+        report = self._region(assembly, graph, new, component, first) \
             if len(component) >= MIN_LOCAL_BLOCKS else None
         if report is None and len(component) < len(graph.free):
             report = self._component(assembly, graph, component)
         return report
 
     def _region(self, assembly: Assembly, graph: ContactGraph, new: list[int],
-                component: set[int]) -> Report | None:
+                component: set[int], first: set[int] = frozenset()) -> Report | None:
         """The report of the first region around ``new`` that settles the step, up to
-        MAX_LOCAL_SHARE of ``component`` (the free blocks joined to the new ones)."""
+        MAX_LOCAL_SHARE of ``component`` (the free blocks joined to the new ones); ``first``
+        (with ``new``) is tried before."""
         # after a failure the next step tends to fail too: then try the cheap proofs of that
         # first, the block placed now on rigid neighbours (one block: a tiny problem), then
         # every block placed since the last stable step; after a success, the proof of stability
@@ -111,6 +143,11 @@ class StepChecker:
                 report = self._relaxed(assembly, graph, region)
                 if report is not None:
                     return report
+        if len(first) > len(new):
+            report = (self._restricted(assembly, graph, first)
+                      or self._relaxed(assembly, graph, first))
+            if report is not None:
+                return report
         region = set(new) | graph.free_neighbours(new) | graph.path_to_support(new)
         limit = MAX_LOCAL_SHARE * len(component)
         while len(region) <= limit and not component <= region:

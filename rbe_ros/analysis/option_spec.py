@@ -127,7 +127,8 @@ OPTIONS: tuple[Option, ...] = (
            "blocks' weight", "--tension-tol", "tension_tolerance", 0.0, 1.0),
     Option("solve.time_limit", float, "time limit in s of each check (of each step of a "
            "sequence), geometry included; over it the report is SOLVER_FAILED naming the "
-           "stage; 0: none", "--time-limit", "check_time_limit", 0.0, 3600.0, zero=INFINITE,
+           "stage; plan: of the whole search, then the best partial plan; 0: none",
+           "--time-limit", "check_time_limit", 0.0, 3600.0, zero=INFINITE,
            stored=False, metavar="S"),
     Option("margin_directions", bool, "reports carry margin_g: the smallest horizontal "
            "acceleration (share of g) that topples or slides the checked assembly, over "

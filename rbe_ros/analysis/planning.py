@@ -20,14 +20,25 @@ candidate is feasible with at most K holds. Each partial plan keeps the first ``
 feasible candidates; of all children the ``beam`` best survive (fewest hold-steps so far,
 then fewest holds now, then candidate rank). No child at a step: the plan fails there.
 
+A candidate step is the partial plan's last standing state plus one block, so it is checked
+as :func:`check_sequence` checks a step (:class:`StepChecker`: the kept forces of that state,
+a local region around the blocks that changed, the component only when no region settles
+it); every set of holds tried is such a step, and the verdict is the full problem's. The
+report of the accepted candidate is the step's report (no second check of the plan);
+``full_candidates`` solves whole components per trial instead (the planner before, kept to
+compare with).
+
 The finished assembly must stand with nothing held; if the last step holds blocks, a release
-step follows. The planned scene (sequence = order, holds = the runs of steps each block is
-held) is finally checked step by step with :func:`check_sequence`.
+step follows (its report: the finished assembly's check).
 """
 from __future__ import annotations
 
+import collections
+import copy
+import math
 import time
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -36,9 +47,11 @@ from ..scene import Hold, Scene, SceneError, make_scene
 from .asbuilt import declared
 from .assembly import Assembly
 from .holds import StabilityOracle, minimal_holds, release_unneeded
+from .incremental import StepChecker
 from .options import CheckOptions
 from .pipeline import check_sequence
 from .steps import supports_present
+from .verdict import check
 
 #: A contact carries a block when its normal into the block points up by at least this
 #: cosine (87 deg from vertical).
@@ -47,24 +60,46 @@ RESTS_ON = 0.05
 
 @dataclass(frozen=True)
 class PlanOptions:
-    """The planner's search: the holds it may use and the width of its beam."""
+    """The planner's search: the holds it may use, the width of its beam, and how a
+    candidate is checked."""
 
     max_held: int = 2            # K: blocks held at any step
     beam: int = 1                # partial plans kept per step (1: greedy)
     candidates: int = 8          # candidates tried per partial plan and step, lowest first
     keep_sequence: bool = False  # the scene's sequence is a fixed prefix of the order
+    #: every candidate check solves the components of the whole partial assembly (the
+    #: planner before the incremental checks; for comparison)
+    full_candidates: bool = False
+    time_limit: float = math.inf  # s: then the best partial plan is returned
 
     def __post_init__(self):
         for name, low in (("max_held", 0), ("beam", 1), ("candidates", 1)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
                 raise ValueError(f"{name} must be an integer >= {low}, not {value!r}")
+        if not self.time_limit > 0:
+            raise ValueError(f"time_limit must be > 0 s, not {self.time_limit!r}")
+
+
+@dataclass(frozen=True)
+class PlanProgress:
+    """Where a running plan is: after each placed step of its best partial plan."""
+
+    placed: int                  # blocks placed
+    total: int                   # blocks to place
+    step: int                    # the step just placed
+    block: str
+    held: tuple[str, ...]        # blocks held at that step
+    elapsed: float               # s since the search started
+    estimate: float              # s left, from the mean time per block so far
 
 
 @dataclass
 class Plan:
     """The result of :func:`plan_sequence`. ``held[k]``: blocks held at step k (one more
-    entry than ``order`` when a release step follows the last placement)."""
+    entry than ``order`` when a release step follows the last placement). ``reports``: the
+    step reports of the search, without their interfaces (the full ones are streamed to
+    ``on_report``): memory stays linear in the blocks."""
 
     feasible: bool
     order: list[str]
@@ -72,13 +107,18 @@ class Plan:
     message: str
     failed_step: int = -1                  # first step no candidate can be placed at
     scene: Scene | None = None             # the planned scene (sequence, holds)
-    reports: list[Report] = field(default_factory=list)   # check_sequence of ``scene``
-    checks: int = 0                        # component checks spent by the search
+    reports: list[Report] = field(default_factory=list)   # one per step (interfaces dropped)
+    checks: int = 0                        # candidate checks spent by the search
     time: float = 0.0                      # s
+    models: dict[str, int] = field(default_factory=dict)   # checks answered per model
 
     @property
     def max_held(self) -> int:
         return max((len(h) for h in self.held), default=0)
+
+
+class _Stopped(Exception):
+    """The time limit ran out or ``should_stop`` asked to stop."""
 
 
 @dataclass(frozen=True)
@@ -86,11 +126,53 @@ class _Partial:
     order: tuple[str, ...]
     held: tuple[tuple[str, ...], ...]
     score: tuple
+    reports: tuple[Report, ...] = ()           # slim step reports
+    checker: StepChecker | None = None         # the kept forces of its last step
+
+
+class _Trial:
+    """One candidate step (the partial plan's blocks and the candidate) checked with sets of
+    held blocks: through the partial plan's kept forces (:class:`StepChecker`, local
+    regions first), else the full check; each set once."""
+
+    def __init__(self, planner: _Planner, order: tuple[str, ...], checker: StepChecker,
+                 open_course: tuple[str, ...] = ()):
+        self.planner, self.checker, self.open_course = planner, checker, open_course
+        self.present = planner.present(order, len(order) - 1)
+        self.free = {b for b in self.present if b in planner.free_set}
+        self.reports: dict[frozenset, tuple[Assembly, Report]] = {}
+
+    def result(self, held) -> tuple[Assembly, Report]:
+        key = frozenset(held)
+        found = self.reports.get(key)
+        if found is None:
+            self.planner.poll()
+            assembly = self.planner.full.subset(self.present, key)
+            report = (self.checker.attempt(assembly, self.open_course)
+                      or check(assembly, self.planner.options))
+            self.planner.counted(report)
+            found = self.reports[key] = (assembly, report)
+        return found
+
+    def stands(self, held) -> bool:
+        return self.result(held)[1].stable
+
+    def next_hold(self, held) -> str | None:
+        """The block to hold next when ``held`` is not enough: the highest the failed check
+        names as moving, else the highest free one (None: nothing left to hold)."""
+        report = self.result(held)[1]
+        left = self.free - set(held)
+        named = [b for b in report.unstable_blocks if b in left]
+        pool = named or left
+        return max(pool, key=lambda b: (self.planner.height[b], -self.planner.position[b]),
+                   default=None)
 
 
 class _Planner:
-    def __init__(self, scene: Scene, options: CheckOptions, plan: PlanOptions):
+    def __init__(self, scene: Scene, options: CheckOptions, plan: PlanOptions,
+                 progress, should_stop, on_report):
         self.scene, self.options, self.plan = scene, options, plan
+        self.progress, self.should_stop, self.on_report = progress, should_stop, on_report
         # holds of free blocks are the planner's; those of supports stay (scaffolds)
         supports = {b.id for b in scene.blocks if b.support}
         self.base = make_scene(scene.name, scene.blocks, scene.gravity, (),
@@ -99,6 +181,7 @@ class _Planner:
         self.ids = [b.id for b in self.full.blocks]
         self.position = {bid: k for k, bid in enumerate(self.ids)}
         self.free = [b.id for b in self.full.blocks if not b.support]
+        self.free_set = set(self.free)
         up = -np.asarray(self.full.gravity, dtype=float)
         up = up / (np.linalg.norm(up) or 1.0)
         self.height = {b.id: float(b.centroid @ up) for b in self.full.blocks}
@@ -111,6 +194,18 @@ class _Planner:
             self.contacts[a].append((b, it.area, -n_up >= RESTS_ON))
         self.cache: dict = {}
         self.checks = 0
+        self.models: collections.Counter = collections.Counter()
+        self.start = time.perf_counter()
+
+    def poll(self) -> None:
+        """Raise _Stopped when the time limit ran out or the caller asks to stop."""
+        if (time.perf_counter() - self.start > self.plan.time_limit
+                or (self.should_stop is not None and self.should_stop())):
+            raise _Stopped
+
+    def counted(self, report: Report) -> None:
+        self.checks += 1
+        self.models[report.model.split()[0]] += 1
 
     def present(self, order, k: int) -> tuple[str, ...]:
         """The supports present at step ``k`` (those with holds while active) and ``order``."""
@@ -135,13 +230,48 @@ class _Planner:
         # tried when no resting one fits, held as they are placed
         return [b for _, b in sorted(resting) + sorted(touching)][:self.plan.candidates]
 
-    def holds_for(self, order: tuple[str, ...], previous: tuple[str, ...]):
-        """(held blocks, within K) for the step that places ``order[-1]``."""
-        k = len(order) - 1
-        assembly = self.full.subset(self.present(order, k))
+    def holds_for(self, order: tuple[str, ...], previous: tuple[str, ...], checker,
+                  open_course: tuple[str, ...] = ()):
+        """(held blocks, within K, step report or None, its assembly) for the step that
+        places ``order[-1]``; ``open_course``: the blocks placed since the last step that
+        stood with nothing held."""
+        if self.plan.full_candidates:
+            return (*self._holds_by_components(order, previous), None, None)
+        trial = _Trial(self, order, checker, open_course)
+        held = self._repair(trial, order[-1], previous)
+        if len(held) > self.plan.max_held:
+            assembly = self.full.subset(trial.present)
+            self.poll()
+            oracle = StabilityOracle(assembly, self.options, self.cache)
+            result = minimal_holds(assembly, self.options, prefer=(*previous, order[-1]),
+                                   oracle=oracle)
+            self.checks += oracle.checks
+            if result.stands and len(result.blocks) < len(held):
+                held = result.blocks
+        ok = len(held) <= self.plan.max_held
+        assembly, report = trial.result(held) if ok else (None, None)
+        return held, ok, report, assembly
+
+    def _repair(self, trial: _Trial, new: str, previous) -> tuple[str, ...]:
+        """Nothing held if the step stands so; else the previous holds and the new block,
+        more while it does not stand, then those whose release keeps it standing."""
+        if trial.stands(()):
+            return ()
+        held = [b for b in previous if b in trial.free] + [new]
+        while not trial.stands(held):
+            more = trial.next_hold(held)
+            if more is None:
+                break
+            held.append(more)
+        held = release_unneeded(trial, held)
+        return tuple(sorted(held, key=self.position.__getitem__))
+
+    def _holds_by_components(self, order, previous) -> tuple[tuple[str, ...], bool]:
+        """The search before incremental checks: every check solves whole components."""
+        assembly = self.full.subset(self.present(order, len(order) - 1))
         oracle = StabilityOracle(assembly, self.options, self.cache)
         try:
-            held = self._repair(oracle, order[-1], previous)
+            held = self._repair_components(oracle, order[-1], previous)
             if len(held) > self.plan.max_held:
                 result = minimal_holds(assembly, self.options, prefer=(*previous, order[-1]),
                                        oracle=oracle)
@@ -151,11 +281,14 @@ class _Planner:
             self.checks += oracle.checks
         return held, len(held) <= self.plan.max_held
 
-    def _repair(self, oracle: StabilityOracle, new: str, previous) -> tuple[str, ...]:
+    def _repair_components(self, oracle: StabilityOracle, new: str, previous
+                           ) -> tuple[str, ...]:
+        self.poll()
         if oracle.stands(()):
             return ()
         held = [oracle.index[b] for b in previous if b in oracle.index] + [oracle.index[new]]
         while True:
+            self.poll()
             fails = oracle.failing(held)
             if not fails:
                 break
@@ -166,56 +299,100 @@ class _Planner:
         held = release_unneeded(oracle, held)
         return tuple(oracle.ids[j] for j in sorted(held))
 
+    def step_report(self, order, held, report, assembly, checker: StepChecker
+                    ) -> tuple[Report, Assembly]:
+        """The full report of the step placing ``order[-1]`` and its assembly (checked as
+        a sequence step when the search used the component checks)."""
+        if report is None:
+            assembly = self.full.subset(self.present(order, len(order) - 1), held)
+            report = checker.attempt(assembly) or check(assembly, self.options)
+        return replace(report, step_index=len(order) - 1, block_placed=order[-1],
+                       held_blocks=tuple(held), num_blocks=len(assembly.blocks)), assembly
+
     def run(self) -> Plan:
         n = len(self.free)
-        beam = [_Partial((), (), (0, 0, 0))]
         final = self.full.subset(self.present(self.free, n + 1))
-        if not StabilityOracle(final, self.options, self.cache).stands(()):
+        self.final = check(final, self.options)
+        if not self.final.stable:
             return Plan(False, [], [], "the finished assembly does not stand without holds "
                         "(rbe-ros check names why): no build order can end stable",
                         failed_step=n)
+        beam = [_Partial((), (), (0, 0, 0), (), StepChecker(self.options))]
         for k in range(n):
-            children: dict[frozenset, _Partial] = {}
-            best_rejected = None
-            for partial in beam:
-                found = 0
-                previous = partial.held[-1] if partial.held else ()
-                for rank, b in enumerate(self.candidates(partial.order)):
-                    order = (*partial.order, b)
-                    held, ok = self.holds_for(order, previous)
-                    if not ok:
-                        if best_rejected is None or len(held) < len(best_rejected[1]):
-                            best_rejected = (b, held)
-                        continue
-                    total, worst, ranks = partial.score
-                    child = _Partial(order, (*partial.held, held),
-                                     (total + len(held), len(held), ranks + rank))
-                    key = frozenset(order)
-                    if key not in children or child.score < children[key].score:
-                        children[key] = child
-                    found += 1
-                    if found >= self.plan.beam:
-                        break
+            try:
+                children, best_rejected = self._children(beam)
+            except _Stopped:
+                return self._finish(beam[0], False, k, f"stopped after {k} of {n} blocks "
+                                    f"(time limit or asked to stop); step {k} not placed")
             if not children:
-                best = beam[0]
                 count = len(best_rejected[1]) if best_rejected else 0
                 why = (f"; the best candidate, {best_rejected[0]}, needs {count} held "
                        f"block{'' if count == 1 else 's'} ({', '.join(best_rejected[1])})"
                        if best_rejected else
                        "; no unplaced block touches the placed ones")
-                return self._finish(best, False, k, f"no block can be placed at step {k} with "
-                                    f"at most {self.plan.max_held} held{why}")
+                return self._finish(beam[0], False, k, f"no block can be placed at step {k} "
+                                    f"with at most {self.plan.max_held} held{why}")
             beam = sorted(children.values(), key=lambda p: (p.score, p.order))[:self.plan.beam]
+            self._placed(beam[0], n)
         best = beam[0]
         return self._finish(best, True, -1, f"every step stands with at most "
                             f"{max((len(h) for h in best.held), default=0)} held blocks "
                             f"(limit {self.plan.max_held})")
 
+    def _children(self, beam: list[_Partial]):
+        """The feasible children of the partial plans of ``beam`` (by the set of blocks
+        placed), and the rejected candidate needing the fewest holds."""
+        children: dict[frozenset, _Partial] = {}
+        best_rejected = None
+        for partial in beam:
+            found = 0
+            previous = partial.held[-1] if partial.held else ()
+            unheld = max((j for j, h in enumerate(partial.held) if not h), default=-1)
+            for rank, b in enumerate(self.candidates(partial.order)):
+                order = (*partial.order, b)
+                held, ok, report, assembly = self.holds_for(order, previous, partial.checker,
+                                                            partial.order[unheld + 1:])
+                if not ok:
+                    if best_rejected is None or len(held) < len(best_rejected[1]):
+                        best_rejected = (b, held)
+                    continue
+                total, worst, ranks = partial.score
+                report, assembly = self.step_report(order, held, report, assembly,
+                                                    partial.checker)
+                checker = copy.copy(partial.checker)
+                checker.advance(assembly, report)
+                child = _Partial(order, (*partial.held, held),
+                                 (total + len(held), len(held), ranks + rank),
+                                 (*partial.reports, _slim(report)), checker)
+                if self.plan.beam == 1 and self.on_report is not None:
+                    self.on_report(report)          # greedy: this step is the plan's
+                key = frozenset(order)
+                if key not in children or child.score < children[key].score:
+                    children[key] = child
+                found += 1
+                if found >= self.plan.beam:
+                    break
+        return children, best_rejected
+
+    def _placed(self, best: _Partial, n: int) -> None:
+        if self.progress is None:
+            return
+        k = len(best.order)
+        elapsed = time.perf_counter() - self.start
+        self.progress(PlanProgress(k, n, k - 1, best.order[-1], best.held[-1], elapsed,
+                                   elapsed / k * (n - k)))
+
     def _finish(self, partial: _Partial, feasible: bool, failed: int, message: str) -> Plan:
         order, held = list(partial.order), list(partial.held)
+        reports = list(partial.reports)
         n = len(order)
-        if feasible and held and held[-1]:
+        release = feasible and held and held[-1]
+        if release:
             held.append(())                          # release step
+            report = replace(self.final, step_index=n, block_placed="")
+            reports.append(_slim(report))
+            if self.plan.beam == 1 and self.on_report is not None:
+                self.on_report(report)
         holds = []
         for block in self.free:
             k = 0
@@ -235,12 +412,16 @@ class _Planner:
                                _planned_under(self.options)) if order else None
         except SceneError:
             scene = None
-        reports = check_sequence(scene, self.options) if scene is not None else []
-        if feasible and not all(r.stable for r in reports):
-            bad = next(r for r in reports if not r.stable)
-            feasible, failed = False, bad.step_index
-            message = f"the plan does not re-check stable at step {failed}: {bad.message}"
-        return Plan(feasible, order, held, message, failed, scene, reports, self.checks)
+        if self.plan.beam > 1 and self.on_report is not None and scene is not None:
+            # a beam's steps are the plan's only once it is chosen: its reports are re-made
+            check_sequence(scene, self.options, on_step=lambda r, _total: self.on_report(r))
+        return Plan(feasible, order, held, message, failed, scene, reports, self.checks,
+                    models=dict(self.models))
+
+
+def _slim(report: Report) -> Report:
+    """``report`` without its interfaces (what a plan keeps of each step)."""
+    return replace(report, interfaces=(), near_contacts=())
 
 
 def _planned_under(options: CheckOptions) -> tuple[float, float] | None:
@@ -252,14 +433,26 @@ def _planned_under(options: CheckOptions) -> tuple[float, float] | None:
 
 
 def plan_sequence(scene: Scene, max_held: int = 2, options: CheckOptions = CheckOptions(), *,
-                  beam: int = 1, candidates: int = 8, keep_sequence: bool = False) -> Plan:
+                  beam: int = 1, candidates: int = 8, keep_sequence: bool = False,
+                  full_candidates: bool = False, time_limit: float = math.inf,
+                  progress: Callable[[PlanProgress], None] | None = None,
+                  should_stop: Callable[[], bool] | None = None,
+                  on_report: Callable[[Report], None] | None = None) -> Plan:
     """An insertion order of every free block of ``scene`` in which each step stands with at
-    most ``max_held`` blocks held (see the module docstring), or where none was found."""
+    most ``max_held`` blocks held (see the module docstring), or where none was found.
+
+    ``progress`` is called after each placed step; ``should_stop`` is polled between
+    candidate checks, and when it returns True (or ``time_limit`` s have passed) the best
+    partial plan is returned (not feasible, "stopped after K of N blocks"). ``on_report``
+    receives each step's full report as the plan makes it (greedy; a beam's after the
+    search)."""
     start = time.perf_counter()
     result = _Planner(scene, declared(options, scene),
-                      PlanOptions(max_held, beam, candidates, keep_sequence)).run()
+                      PlanOptions(max_held, beam, candidates, keep_sequence, full_candidates,
+                                  time_limit),
+                      progress, should_stop, on_report).run()
     result.time = time.perf_counter() - start
     return result
 
 
-__all__ = ["Plan", "PlanOptions", "plan_sequence"]
+__all__ = ["Plan", "PlanOptions", "PlanProgress", "plan_sequence"]

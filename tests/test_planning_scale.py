@@ -1,0 +1,138 @@
+"""The planner at scale: every candidate verdict of the incremental checks equals a full check
+of the same step, progress is reported, and a plan stopped by a time limit, a caller or
+SIGINT returns (and writes) the best partial plan with the reports of its steps."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from rbe_ros import generators
+from rbe_ros.analysis import planning
+from rbe_ros.analysis.planning import plan_sequence
+from rbe_ros.analysis.verdict import check
+from rbe_ros.cli import main
+from rbe_ros.io.scene_json import scene_to_dict
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.mark.parametrize("scene, max_held", [
+    (generators.dome(slices=10, courses=5), 2),      # 40 free blocks: local regions answer
+    (generators.semicircular_arch(7), 1),            # one small component: full checks
+    (generators.side_by_side(generators.dome(slices=8, courses=4), 2, 12.0), 2),
+])
+def test_every_candidate_verdict_is_the_full_checks(scene, max_held, monkeypatch):
+    """Each set of holds tried for each candidate step, checked again in full (the plain
+    check of the same blocks with the same holds): the same verdict; and the same plan as
+    the search by whole components (``full_candidates``)."""
+    trials = []
+    result = planning._Trial.result
+
+    def audited(self, held):
+        assembly, report = result(self, held)
+        trials.append((assembly, report.stable, report.model))
+        return assembly, report
+
+    monkeypatch.setattr(planning._Trial, "result", audited)
+    plan = plan_sequence(scene, max_held)
+    assert plan.feasible, plan.message
+    seen = set()
+    for assembly, stable, _model in trials:
+        key = (tuple(b.id for b in assembly.blocks), tuple(b.support for b in assembly.blocks))
+        if key in seen:
+            continue
+        seen.add(key)
+        assert check(assembly).stable == stable, key
+    models = {m.split()[0] for _, _, m in trials}
+    if len(scene.blocks) > 30:
+        assert {"local", "relaxed"} <= models, models      # the shortcuts are exercised
+    monkeypatch.undo()
+    whole = plan_sequence(scene, max_held, full_candidates=True)
+    assert (whole.order, whole.held) == (plan.order, plan.held)
+
+
+def _scene_file(tmp_path, scene) -> str:
+    path = tmp_path / "scene.json"
+    path.write_text(json.dumps(scene_to_dict(scene)))
+    return str(path)
+
+
+def test_progress_lines_on_stderr(tmp_path, capsys):
+    path = _scene_file(tmp_path, generators.semicircular_arch(7))
+    assert main(["plan", path, "--max-held", "2", "--json"]) == 0
+    err = capsys.readouterr().err.splitlines()
+    lines = [line for line in err if line.startswith("plan: ")]
+    # the first and the last step are always printed, the others at most every 2 s
+    assert lines[0].startswith("plan: 1/7 blocks placed, held: none, ")
+    assert lines[-1].startswith("plan: 7/7 blocks placed, held: none, ")
+    assert all(" s, about " in line and line.endswith(" s left") for line in lines)
+
+
+def test_should_stop_returns_the_partial_plan_so_far():
+    dome = generators.dome(slices=8, courses=4)
+    seen, streamed = [], []
+    plan = plan_sequence(dome, 2, progress=seen.append, should_stop=lambda: len(seen) >= 5,
+                         on_report=streamed.append)
+    assert not plan.feasible and plan.failed_step == 5 and len(plan.order) == 5
+    assert plan.message.startswith("stopped after 5 of 24 blocks")
+    assert [p.placed for p in seen] == [1, 2, 3, 4, 5] and seen[-1].total == 24
+    assert [p.block for p in seen] == plan.order
+    assert [r.block_placed for r in streamed] == plan.order
+    assert all(r.stable for r in plan.reports) and len(plan.reports) == 5
+    assert all(r.interfaces == () for r in plan.reports)     # the plan keeps no interfaces
+    assert any(r.interfaces for r in streamed)               # the stream has them
+    full = plan_sequence(dome, 2)
+    assert full.order[:5] == plan.order and full.held[:5] == plan.held
+
+
+def test_time_limit_gives_the_best_partial_plan(tmp_path, capsys):
+    path = _scene_file(tmp_path, generators.dome(slices=8, courses=4))
+    assert main(["plan", path, "--max-held", "2", "--json", "--time-limit", "0.001"]) == 1
+    out = json.loads(capsys.readouterr().out)
+    assert not out["feasible"] and out["message"].startswith("stopped after 0 of 24 blocks")
+    assert out["order"] == [] and out["failed_step"] == 0 and out["steps"] == []
+
+
+def test_json_has_one_summary_per_step_and_reports_stream(tmp_path, capsys):
+    path = _scene_file(tmp_path, generators.semicircular_arch(7))
+    lines = tmp_path / "reports.jsonl"
+    assert main(["plan", path, "--max-held", "2", "--json", "--reports", str(lines)]) == 0
+    out = json.loads(capsys.readouterr().out)
+    steps = out["steps"]
+    assert [s["block"] for s in steps] == out["order"]
+    assert set(steps[0]) == {"step", "block", "status", "stable", "held_blocks", "margin_g",
+                             "worst_friction_ratio", "max_tension", "time", "model"}
+    full = [json.loads(line) for line in lines.read_text().splitlines()]
+    assert [r["block_placed"] for r in full] == out["order"]
+    assert [r["held_blocks"] for r in full] == [s["held_blocks"] for s in steps]
+    assert all(len(r["interfaces"]) >= 1 for r in full)
+    assert [r["worst_friction_ratio"] for r in full] == \
+        [s["worst_friction_ratio"] for s in steps]
+
+
+def test_sigint_leaves_a_readable_partial_plan(tmp_path):
+    """SIGINT after the first progress line: the plan stops at the next candidate check and
+    prints its partial plan; the streamed reports are those of its steps."""
+    path = _scene_file(tmp_path, generators.dome())
+    lines = tmp_path / "reports.jsonl"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen([sys.executable, "-m", "rbe_ros.cli", "plan", path, "--max-held",
+                             "2", "--json", "--reports", str(lines)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    first = proc.stderr.readline()
+    assert first.startswith("plan: 1/126 blocks placed"), first
+    proc.send_signal(signal.SIGINT)
+    out, _err = proc.communicate(timeout=120)
+    assert proc.returncode == 1
+    plan = json.loads(out)
+    assert not plan["feasible"] and plan["message"].startswith("stopped after ")
+    assert 1 <= len(plan["order"]) < 126 and plan["failed_step"] == len(plan["order"])
+    streamed = [json.loads(line) for line in lines.read_text().splitlines()]
+    assert [r["block_placed"] for r in streamed] == plan["order"]
+    assert all(s["stable"] for s in plan["steps"])

@@ -59,9 +59,11 @@ class StepChecker:
     block made a support) keeps the others balanced: its kept forces stay as loads on them.
     """
 
-    def __init__(self, options: CheckOptions = CheckOptions(), *, local: bool = True):
+    def __init__(self, options: CheckOptions = CheckOptions(), *, local: bool = True,
+                 explain: bool = True):
         self.options = options
         self.local = local
+        self.explain = explain      # False: a relaxation's failure is not explained
         self._results: dict[tuple, InterfaceResult] | None = None   # last admissible state
         self._free: frozenset[str] = frozenset()          # free blocks it balanced
         self._count: dict[str, int] = {}                  # their interfaces then
@@ -76,11 +78,14 @@ class StepChecker:
         self.advance(assembly, report)
         return replace(report, num_blocks=len(assembly.blocks))
 
-    def attempt(self, assembly: Assembly, around=()) -> Report | None:
+    def attempt(self, assembly: Assembly, around=(), *, restrict: bool = True
+                ) -> Report | None:
         """The verdict of ``assembly`` from the kept state and models smaller than the whole
         (None when only the full problem settles it); nothing is remembered. ``around``:
         ids of blocks whose forces the change likely moves too (the planner's open course,
-        carried between two holds), tried first as a region with the new blocks."""
+        carried between two holds), tried first as a region with the new blocks.
+        ``restrict`` False: only the relaxations of those two regions (when a restriction is
+        known not to settle such a step, only a failure is worth proving)."""
         if self._results is None:
             return None
         graph = ContactGraph(assembly)
@@ -88,6 +93,9 @@ class StepChecker:
         if not new:                       # nothing changed for any free block
             return self._kept_elsewhere(assembly, assembly, [], 0, 0.0, "no block moved")
         first = set(new) | {k for k in graph.free if assembly.blocks[k].id in set(around)}
+        if not restrict:
+            return next(filter(None, (self._relaxed(assembly, graph, region)
+                                      for region in (set(new), first))), None)
         return self._local(assembly, graph, new, first)
 
     def advance(self, assembly: Assembly, report: Report) -> None:
@@ -225,7 +233,7 @@ class StepChecker:
         rigid = graph.neighbours(region)
         ids = {assembly.blocks[k].id for k in region | rigid}
         relaxed = assembly.subset(ids, held={assembly.blocks[k].id for k in rigid})
-        report = infeasible_report(relaxed, self.options)
+        report = infeasible_report(relaxed, self.options, explain=self.explain)
         if report is None or report.status == Status.SOLVER_FAILED:
             return None
         return replace(report, message=f"{report.message} [even with the blocks around it rigid]",

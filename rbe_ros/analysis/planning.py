@@ -51,7 +51,7 @@ from .incremental import StepChecker
 from .options import CheckOptions
 from .pipeline import check_sequence
 from .steps import supports_present
-from .verdict import check
+from .verdict import UNEXPLAINED, check
 
 #: A contact carries a block when its normal into the block points up by at least this
 #: cosine (87 deg from vertical).
@@ -135,10 +135,18 @@ class _Trial:
     held blocks: through the partial plan's kept forces (:class:`StepChecker`, local
     regions first), else the full check; each set once."""
 
-    def __init__(self, planner: _Planner, order: tuple[str, ...], checker: StepChecker,
-                 open_course: tuple[str, ...] = ()):
-        self.planner, self.checker, self.open_course = planner, checker, open_course
-        self.present = planner.present(order, len(order) - 1)
+    def __init__(self, planner: _Planner, partial: _Partial, block: str):
+        self.planner, self.checker = planner, partial.checker
+        self.order = (*partial.order, block)
+        self.previous = partial.held[-1] if partial.held else ()
+        unheld = max((j for j, h in enumerate(partial.held) if not h), default=-1)
+        self.open_course = partial.order[unheld + 1:]   # placed since it stood unheld
+        # a release of a hold that the last step could only prove by the full problem: the
+        # forces of the open course and below all move (friction at its limit, docs/
+        # SCALING.md), so such a trial only tries to prove a failure before the full check
+        self.direct = (len(partial.held) >= 2 and bool(set(partial.held[-2]) - set(self.previous))
+                       and partial.reports[-1].model == "full")
+        self.present = planner.present(self.order, len(self.order) - 1)
         self.free = {b for b in self.present if b in planner.free_set}
         self.reports: dict[frozenset, tuple[Assembly, Report]] = {}
 
@@ -148,7 +156,8 @@ class _Trial:
         if found is None:
             self.planner.poll()
             assembly = self.planner.full.subset(self.present, key)
-            report = (self.checker.attempt(assembly, self.open_course)
+            restrict = not (self.direct and set(self.previous) - key)
+            report = (self.checker.attempt(assembly, self.open_course, restrict=restrict)
                       or check(assembly, self.planner.options))
             self.planner.counted(report)
             found = self.reports[key] = (assembly, report)
@@ -160,7 +169,9 @@ class _Trial:
     def next_hold(self, held) -> str | None:
         """The block to hold next when ``held`` is not enough: the highest the failed check
         names as moving, else the highest free one (None: nothing left to hold)."""
-        report = self.result(held)[1]
+        assembly, report = self.result(held)
+        if report.message == UNEXPLAINED:
+            report = check(assembly, self.planner.options)
         left = self.free - set(held)
         named = [b for b in report.unstable_blocks if b in left]
         pool = named or left
@@ -230,20 +241,20 @@ class _Planner:
         # tried when no resting one fits, held as they are placed
         return [b for _, b in sorted(resting) + sorted(touching)][:self.plan.candidates]
 
-    def holds_for(self, order: tuple[str, ...], previous: tuple[str, ...], checker,
-                  open_course: tuple[str, ...] = ()):
+    def holds_for(self, partial: _Partial, block: str):
         """(held blocks, within K, step report or None, its assembly) for the step that
-        places ``order[-1]``; ``open_course``: the blocks placed since the last step that
-        stood with nothing held."""
+        places ``block`` after ``partial``."""
+        order = (*partial.order, block)
+        previous = partial.held[-1] if partial.held else ()
         if self.plan.full_candidates:
             return (*self._holds_by_components(order, previous), None, None)
-        trial = _Trial(self, order, checker, open_course)
-        held = self._repair(trial, order[-1], previous)
+        trial = _Trial(self, partial, block)
+        held = self._repair(trial, block, previous)
         if len(held) > self.plan.max_held:
             assembly = self.full.subset(trial.present)
             self.poll()
             oracle = StabilityOracle(assembly, self.options, self.cache)
-            result = minimal_holds(assembly, self.options, prefer=(*previous, order[-1]),
+            result = minimal_holds(assembly, self.options, prefer=(*previous, block),
                                    oracle=oracle)
             self.checks += oracle.checks
             if result.stands and len(result.blocks) < len(held):
@@ -317,7 +328,7 @@ class _Planner:
             return Plan(False, [], [], "the finished assembly does not stand without holds "
                         "(rbe-ros check names why): no build order can end stable",
                         failed_step=n)
-        beam = [_Partial((), (), (0, 0, 0), (), StepChecker(self.options))]
+        beam = [_Partial((), (), (0, 0, 0), (), StepChecker(self.options, explain=False))]
         for k in range(n):
             try:
                 children, best_rejected = self._children(beam)
@@ -346,12 +357,10 @@ class _Planner:
         best_rejected = None
         for partial in beam:
             found = 0
-            previous = partial.held[-1] if partial.held else ()
-            unheld = max((j for j, h in enumerate(partial.held) if not h), default=-1)
             for rank, b in enumerate(self.candidates(partial.order)):
+                start = time.perf_counter()
                 order = (*partial.order, b)
-                held, ok, report, assembly = self.holds_for(order, previous, partial.checker,
-                                                            partial.order[unheld + 1:])
+                held, ok, report, assembly = self.holds_for(partial, b)
                 if not ok:
                     if best_rejected is None or len(held) < len(best_rejected[1]):
                         best_rejected = (b, held)
@@ -359,6 +368,7 @@ class _Planner:
                 total, worst, ranks = partial.score
                 report, assembly = self.step_report(order, held, report, assembly,
                                                     partial.checker)
+                report = replace(report, solve_time=time.perf_counter() - start)
                 checker = copy.copy(partial.checker)
                 checker.advance(assembly, report)
                 child = _Partial(order, (*partial.held, held),

@@ -51,16 +51,22 @@ def _verdict(assembly: Assembly, options: CheckOptions) -> Report:
     return _explain(model, options)
 
 
-def infeasible_report(assembly: Assembly, options: CheckOptions = CheckOptions()) -> Report | None:
+def infeasible_report(assembly: Assembly, options: CheckOptions = CheckOptions(), *,
+                      explain: bool = True) -> Report | None:
     """The report of ``assembly`` if its deciding problem is infeasible (it cannot stand,
-    whatever else is checked), None if that problem has a solution or the solver failed."""
+    whatever else is checked), None if that problem has a solution or the solver failed.
+    ``explain`` False: an INFEASIBLE report without the solves that say why."""
     deciding = _deciding(assembly, options)
     if isinstance(deciding, Report):
         return deciding
     model, primary = deciding
     if primary.solved or primary.status == "failed":
         return None
-    return _explain(model, options)
+    return _explain(model, options) if explain else Report(Status.INFEASIBLE, UNEXPLAINED)
+
+
+#: The message of an infeasible report whose explanation was not asked for.
+UNEXPLAINED = "no equilibrium (not explained)"
 
 
 def _explain(model: EquilibriumModel, options: CheckOptions) -> Report:

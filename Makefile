@@ -75,6 +75,15 @@ bags: setup
 scaling: setup
 	$(PY) benchmarks/scaling.py
 
+# The planner at scale (issue 23): the 527-block dome planned with --pose-uncertainty
+# 0.005,2.5 --max-held 2 (time, peak RSS, JSON size, ratio to its re-check), the 14 x 10
+# dome against --full-candidates, --beam 2 against greedy: the planner section of
+# docs/SCALING.md (minutes; run it nice'd on a shared machine). PLAN_BENCH_ARGS=--quick:
+# without the 527-block dome.
+.PHONY: plan-bench
+plan-bench: setup
+	nice -n 10 $(PY) benchmarks/plan_bench.py $(PLAN_BENCH_ARGS)
+
 # Cost of the shape analysis of large meshes and the check time limit: docs/BOUNDED_CHECKS.md
 # (about a minute).
 .PHONY: bounded

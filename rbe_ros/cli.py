@@ -7,6 +7,7 @@ With ``--strict`` the exit status is 1 when a checked assembly or step is not st
 from __future__ import annotations
 
 import argparse
+import functools
 import inspect
 import json
 import math
@@ -24,7 +25,7 @@ from .analysis.friction import minimum_friction
 from .analysis.option_spec import BY_PATH, OPTIONS, from_outer
 from .analysis.options import CheckOptions
 from .analysis.pipeline import check_scene, check_sequence, first_failing_step
-from .analysis.executors import ProcessPool, ray_cluster
+from .analysis.executors import CheckPool, ProcessPool, ray_checks, ray_cluster
 from .analysis.perturb import PoseNoise
 from .analysis.planning import plan_sequence
 from .analysis.robust import RobustJob, estimate, sample_scene, serial
@@ -109,6 +110,15 @@ def node_keys(text: str) -> tuple[str, ...]:
     if not all(keys):
         raise ValueError(text)
     return keys
+
+
+def _executor_arguments(parser: argparse.ArgumentParser, what: str, ray_more: str) -> None:
+    """--workers and --ray: where ``what`` runs."""
+    parser.add_argument("--workers", type=int, default=1, metavar="K",
+                        help=f"local worker processes for {what} (default 1: this process)")
+    parser.add_argument("--ray", metavar="ADDRESS",
+                        help=f"run {what} as Ray tasks on the cluster at ADDRESS ('auto': "
+                        f"the local cluster's{ray_more})")
 
 
 def _options(args) -> CheckOptions:
@@ -228,6 +238,8 @@ def build_parser() -> argparse.ArgumentParser:
                       "and one summary per step (status, holds, margin, worst ratio, time)")
     plan.add_argument("--reports", metavar="FILE.jsonl",
                       help="write every step's full report as JSON Lines, as it is made")
+    _executor_arguments(plan, "the full checks of the steps ahead (the plan is the same)",
+                        "; 'local': a new local instance of --workers CPUs")
     plan.add_argument("--full-candidates", action="store_true",
                       help="check every candidate by solving whole components (the planner "
                       "without incremental checks, to compare with)")
@@ -252,11 +264,7 @@ def build_parser() -> argparse.ArgumentParser:
     robust.add_argument("--json", action="store_true", help="print one JSON object")
     robust.add_argument("-o", "--output", metavar="WORST.json",
                         help="write the failing sample closest to the design as a scene file")
-    robust.add_argument("--workers", type=int, default=1, metavar="K",
-                        help="local worker processes (default 1: this process)")
-    robust.add_argument("--ray", metavar="ADDRESS",
-                        help="run the batches as Ray tasks on the cluster at ADDRESS ('auto': "
-                        "the local cluster's; README: How sure is a step?)")
+    _executor_arguments(robust, "the batches", "; README: How sure is a step?")
     robust.add_argument("--batch", type=int, default=16, metavar="B",
                         help="samples per task (default 16)")
     _solver_arguments(robust)
@@ -482,6 +490,13 @@ def _run_plan(args) -> int:
     if not args.json:
         print(f"planning {scene.name}: {sum(not b.support for b in scene.blocks)} blocks to "
               f"place, at most {args.max_held} held", file=sys.stderr)
+    if args.workers < 1:
+        raise ValueError("--workers must be at least 1")
+    look_ahead = (ray_checks(None if args.ray == "local" else args.ray, max(args.workers, 2),
+                             **({"num_cpus": args.workers} if args.ray == "local" else {}))
+                  if args.ray else
+                  functools.partial(CheckPool, workers=args.workers) if args.workers > 1
+                  else None)
     reports = ReportLines(args.reports) if args.reports else None
     interrupted = []
     previous = signal.signal(signal.SIGINT, lambda *_: interrupted.append(True))
@@ -494,7 +509,8 @@ def _run_plan(args) -> int:
                              full_candidates=args.full_candidates,
                              time_limit=options.solve.time_limit,
                              progress=ProgressLines(sys.stderr),
-                             should_stop=lambda: bool(interrupted), on_report=reports)
+                             should_stop=lambda: bool(interrupted), on_report=reports,
+                             look_ahead=look_ahead)
     finally:
         signal.signal(signal.SIGINT, previous)
         if reports is not None:

@@ -3,6 +3,7 @@ of the same step, progress is reported, and a plan stopped by a time limit, a ca
 SIGINT returns (and writes) the best partial plan with the reports of its steps."""
 from __future__ import annotations
 
+import functools
 import json
 import os
 import signal
@@ -15,6 +16,7 @@ import pytest
 
 from rbe_ros import generators
 from rbe_ros.analysis import planning
+from rbe_ros.analysis.executors import CheckPool, ray_checks
 from rbe_ros.analysis.options import CheckOptions, HoldSearch
 from rbe_ros.analysis.pipeline import check_sequence
 from rbe_ros.analysis.planning import plan_sequence
@@ -153,3 +155,26 @@ def test_sequence_checks_of_a_planned_scene_reuse_forces_across_holds():
     # e.g. a ring's second block held beside its first: before, every such step was full
     assert sum(local[k].model.startswith("local") for k in changed) >= 3
     assert {r.model for r in full} == {"full"}
+
+
+def test_two_workers_give_the_one_process_plan():
+    """The look-ahead's full checks on two spawned workers are used by (blocks, holds), never
+    by arrival: the same order and holds as one process, and some were used."""
+    dome = generators.dome(slices=8, courses=5)
+    alone = plan_sequence(dome, 2)
+    pooled = plan_sequence(dome, 2, look_ahead=functools.partial(CheckPool, workers=2))
+    assert (pooled.order, pooled.held) == (alone.order, alone.held)
+    assert pooled.feasible and pooled.max_held == 2
+    assert pooled.models["full"] > alone.models["full"]      # look-ahead checks were used
+
+
+def test_ray_gives_the_one_process_plan():
+    """The same look-ahead as Ray tasks on a local 2-CPU instance (make ray): the same plan."""
+    ray = pytest.importorskip("ray")
+    dome = generators.dome(slices=8, courses=4)
+    alone = plan_sequence(dome, 2)
+    try:
+        on_ray = plan_sequence(dome, 2, look_ahead=ray_checks(None, 2, num_cpus=2))
+    finally:
+        ray.shutdown()
+    assert (on_ray.order, on_ray.held) == (alone.order, alone.held) and on_ray.feasible

@@ -1,9 +1,11 @@
-"""Where the batches of a Monte Carlo study run: a local process pool or a Ray cluster.
+"""Where the batches of a Monte Carlo study, and the planner's full checks of the steps
+ahead, run: a local process pool or a Ray cluster.
 
 Both map :func:`rbe_ros.analysis.robust.run_batch` over the batches and yield the results in
 batch order; since every sample is seeded by its index, the numbers are the executor's
-business only in speed. Workers import the ROS-free core only (no rclpy) and run one solver
-thread each: the processes are the parallelism.
+business only in speed. For the planner (:class:`CheckPool`, :func:`ray_checks`) each task is
+the plain check of one step, the same wherever it runs. Workers import the ROS-free core
+only (no rclpy) and run one solver thread each: the processes are the parallelism.
 """
 from __future__ import annotations
 
@@ -13,7 +15,10 @@ from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
 
+from .assembly import Assembly
+from .options import CheckOptions
 from .robust import RobustJob, SampleResult, run_batch
+from .verdict import check
 
 #: Thread pools of numeric libraries capped at one thread per worker process.
 _ONE_THREAD = {k: "1" for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
@@ -62,20 +67,97 @@ class ProcessPool:
         self.close()
 
 
+#: The assembly and options of a planner's worker process (set once, by _plan_worker).
+_PLAN: dict = {}
+
+
+def _plan_worker(assembly: Assembly, options: CheckOptions) -> None:
+    _PLAN.update(assembly=assembly, options=options)
+
+
+def _check_step(present: tuple[str, ...], held: tuple[str, ...], assembly=None, options=None):
+    """The plain check of one step of the planner's assembly (a worker's, or the given)."""
+    assembly = _PLAN["assembly"] if assembly is None else assembly
+    options = _PLAN["options"] if options is None else options
+    return check(assembly.subset(present, held), options)
+
+
+class CheckPool:
+    """The planner's look-ahead (:class:`rbe_ros.analysis.planning.LookAhead`) on
+    ``workers`` spawned processes, each given the assembly once."""
+
+    def __init__(self, assembly: Assembly, options: CheckOptions, workers: int):
+        if workers < 1:
+            raise ValueError(f"workers must be at least 1, not {workers}")
+        self.workers = workers
+        self.pool = ProcessPoolExecutor(max_workers=workers, initializer=_plan_worker,
+                                        initargs=(assembly, options),
+                                        mp_context=multiprocessing.get_context("spawn"))
+
+    def submit(self, present, held):
+        with _one_thread_env():                 # workers are spawned on submission
+            return self.pool.submit(_check_step, tuple(present), tuple(sorted(held)))
+
+    def close(self) -> None:
+        self.pool.shutdown(cancel_futures=True)
+
+
+class _RayFuture:
+    def __init__(self, ray, ref):
+        self.ray, self.ref = ray, ref
+
+    def result(self):
+        return self.ray.get(self.ref)
+
+    def cancel(self) -> None:
+        self.ray.cancel(self.ref)
+
+
+def ray_checks(address: str | None, workers: int = 2, **init):
+    """A look-ahead factory (``plan_sequence(look_ahead=...)``) sending each step's check
+    as a Ray task (one CPU each) to the cluster at ``address`` (as :func:`ray_cluster`),
+    ``workers`` steps ahead; the assembly is put in the object store once."""
+    ray = _ray()
+
+    class RayChecks:
+        def __init__(self, assembly: Assembly, options: CheckOptions):
+            _ray_init(ray, address, init)
+            self.workers = workers
+            self.refs = ray.put(assembly), ray.put(options)
+            self.remote = ray.remote(num_cpus=1)(_check_step)
+
+        def submit(self, present, held):
+            return _RayFuture(ray, self.remote.remote(tuple(present), tuple(sorted(held)),
+                                                      *self.refs))
+
+        def close(self) -> None:
+            pass                              # the cluster outlives the plan
+    return RayChecks
+
+
+def _ray():
+    try:
+        import ray                # optional dependency, only needed on this path
+    except ImportError as exc:
+        raise RuntimeError("--ray needs Ray: pip install -r requirements/ray.txt") from exc
+    return ray
+
+
+def _ray_init(ray, address, init) -> None:
+    if not ray.is_initialized():
+        ray.init(address=address, include_dashboard=False, log_to_driver=False,
+                 runtime_env={"env_vars": _ONE_THREAD}, **init)
+
+
 def ray_cluster(address: str | None, **init):
     """An executor sending each batch as a Ray task (one CPU each) to the cluster at
     ``address`` ("auto": the one this machine belongs to; None: a new local instance, with
     ``init`` passed to ``ray.init``, e.g. num_cpus=2). Ray is optional:
     ``pip install -r requirements/ray.txt``."""
-    try:
-        import ray                # optional dependency, only needed on this path
-    except ImportError as exc:
-        raise RuntimeError("--ray needs Ray: pip install -r requirements/ray.txt") from exc
+    ray = _ray()
 
     def run(job: RobustJob, parts: list[range]) -> Iterator[list[SampleResult]]:
-        if not ray.is_initialized():
-            ray.init(address=address, include_dashboard=False, log_to_driver=False,
-                     runtime_env={"env_vars": _ONE_THREAD}, **init)
+        _ray_init(ray, address, init)
         remote = ray.remote(num_cpus=1)(run_batch)
         job_ref = ray.put(job)
         refs = [remote.remote(job_ref, part) for part in parts]

@@ -39,6 +39,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from typing import Protocol
 
 import numpy as np
 
@@ -117,6 +118,17 @@ class Plan:
         return max((len(h) for h in self.held), default=0)
 
 
+class LookAhead(Protocol):
+    """Full checks (:func:`check`) of sub-assemblies of the planner's assembly, run by
+    ``workers`` workers: ``submit(present, held)`` returns a future of the report."""
+
+    workers: int
+
+    def submit(self, present: tuple[str, ...], held: frozenset): ...
+
+    def close(self) -> None: ...
+
+
 class _Stopped(Exception):
     """The time limit ran out or ``should_stop`` asked to stop."""
 
@@ -157,7 +169,8 @@ class _Trial:
             self.planner.poll()
             assembly = self.planner.full.subset(self.present, key)
             restrict = not (self.direct and set(self.previous) - key)
-            report = (self.checker.attempt(assembly, self.open_course, restrict=restrict)
+            report = (self.planner.ahead(self.present, key)
+                      or self.checker.attempt(assembly, self.open_course, restrict=restrict)
                       or check(assembly, self.planner.options))
             self.planner.counted(report)
             found = self.reports[key] = (assembly, report)
@@ -184,6 +197,8 @@ class _Planner:
                  progress, should_stop, on_report):
         self.scene, self.options, self.plan = scene, options, plan
         self.progress, self.should_stop, self.on_report = progress, should_stop, on_report
+        self.pool: LookAhead | None = None
+        self.submitted: dict[tuple, object] = {}     # (present, held) -> future
         # holds of free blocks are the planner's; those of supports stay (scaffolds)
         supports = {b.id for b in scene.blocks if b.support}
         self.base = make_scene(scene.name, scene.blocks, scene.gravity, (),
@@ -345,6 +360,8 @@ class _Planner:
                                     f"with at most {self.plan.max_held} held{why}")
             beam = sorted(children.values(), key=lambda p: (p.score, p.order))[:self.plan.beam]
             self._placed(beam[0], n)
+            if self.pool is not None and self.plan.beam == 1:
+                self._look_ahead(beam[0])
         best = beam[0]
         return self._finish(best, True, -1, f"every step stands with at most "
                             f"{max((len(h) for h in best.held), default=0)} held blocks "
@@ -383,6 +400,35 @@ class _Planner:
                 if found >= self.plan.beam:
                     break
         return children, best_rejected
+
+    def _look_ahead(self, partial: _Partial) -> None:
+        """Full checks of the next steps as a held course goes on (the first hold kept, the
+        newest block held instead of the one before: a trial that only the full problem
+        settles, docs/SCALING.md), sent to the pool before the search reaches them: the
+        first candidate of each, as many steps ahead as the pool has workers. Results are
+        used by (blocks, holds), never by arrival, so the plan is the one process's."""
+        order, held = partial.order, partial.held[-1]
+        wanted = set()
+        for _ in range(self.pool.workers):
+            if not held or order[-1] not in held:
+                break
+            following = self.candidates(order)
+            if not following:
+                break
+            order = (*order, following[0])
+            held = tuple(sorted({*held} - {order[-2]} | {order[-1]},
+                                key=self.position.__getitem__))
+            key = (self.present(order, len(order) - 1), frozenset(held))
+            wanted.add(key)
+            if key not in self.submitted:
+                self.submitted[key] = self.pool.submit(*key)
+        for key in set(self.submitted) - wanted:     # off the path taken: not needed
+            self.submitted.pop(key).cancel()
+
+    def ahead(self, present: tuple[str, ...], held: frozenset) -> Report | None:
+        """The look-ahead's full check of this step with ``held``, if it was sent."""
+        future = self.submitted.pop((present, held), None)
+        return None if future is None else future.result()
 
     def _placed(self, best: _Partial, n: int) -> None:
         if self.progress is None:
@@ -447,7 +493,9 @@ def plan_sequence(scene: Scene, max_held: int = 2, options: CheckOptions = Check
                   full_candidates: bool = False, time_limit: float = math.inf,
                   progress: Callable[[PlanProgress], None] | None = None,
                   should_stop: Callable[[], bool] | None = None,
-                  on_report: Callable[[Report], None] | None = None) -> Plan:
+                  on_report: Callable[[Report], None] | None = None,
+                  look_ahead: Callable[[Assembly, CheckOptions], LookAhead] | None = None
+                  ) -> Plan:
     """An insertion order of every free block of ``scene`` in which each step stands with at
     most ``max_held`` blocks held (see the module docstring), or where none was found.
 
@@ -455,14 +503,23 @@ def plan_sequence(scene: Scene, max_held: int = 2, options: CheckOptions = Check
     candidate checks, and when it returns True (or ``time_limit`` s have passed) the best
     partial plan is returned (not feasible, "stopped after K of N blocks"). ``on_report``
     receives each step's full report as the plan makes it (greedy; a beam's after the
-    search)."""
+    search). ``look_ahead(assembly, options)``: workers for the full checks of the steps
+    ahead (:mod:`rbe_ros.analysis.executors`), closed when the plan is made; the plan is
+    the same with and without."""
     start = time.perf_counter()
-    result = _Planner(scene, declared(options, scene),
-                      PlanOptions(max_held, beam, candidates, keep_sequence, full_candidates,
-                                  time_limit),
-                      progress, should_stop, on_report).run()
+    planner = _Planner(scene, declared(options, scene),
+                       PlanOptions(max_held, beam, candidates, keep_sequence, full_candidates,
+                                   time_limit),
+                       progress, should_stop, on_report)
+    if look_ahead is not None and not full_candidates:
+        planner.pool = look_ahead(planner.full, planner.options)
+    try:
+        result = planner.run()
+    finally:
+        if planner.pool is not None:
+            planner.pool.close()
     result.time = time.perf_counter() - start
     return result
 
 
-__all__ = ["Plan", "PlanOptions", "PlanProgress", "plan_sequence"]
+__all__ = ["LookAhead", "Plan", "PlanOptions", "PlanProgress", "plan_sequence"]

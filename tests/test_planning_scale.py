@@ -121,18 +121,24 @@ def test_json_has_one_summary_per_step_and_reports_stream(tmp_path, capsys):
         [s["worst_friction_ratio"] for s in steps]
 
 
-def test_sigint_leaves_a_readable_partial_plan(tmp_path):
-    """SIGINT after the first progress line: the plan stops at the next candidate check and
-    prints its partial plan; the streamed reports are those of its steps."""
+@pytest.mark.parametrize("workers", ["1", "2"])
+def test_sigint_leaves_a_readable_partial_plan(tmp_path, workers):
+    """SIGINT to the process group (as Ctrl-C sends it) after the first progress line: the
+    plan stops at the next candidate check and prints its partial plan, with or without
+    look-ahead workers; the streamed reports are those of its steps."""
     path = _scene_file(tmp_path, generators.dome())
     lines = tmp_path / "reports.jsonl"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.Popen([sys.executable, "-m", "rbe_ros.cli", "plan", path, "--max-held",
-                             "2", "--json", "--reports", str(lines)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-    first = proc.stderr.readline()
+                             "2", "--json", "--reports", str(lines), "--workers", workers],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                            start_new_session=True)
+    first = line = proc.stderr.readline()
     assert first.startswith("plan: 1/126 blocks placed"), first
-    proc.send_signal(signal.SIGINT)
+    while workers == "2" and "held: none" in line:     # until the look-ahead has started
+        line = proc.stderr.readline()
+        assert line.startswith("plan: ") and not line.startswith("plan: 126/"), line
+    os.killpg(proc.pid, signal.SIGINT)
     out, _err = proc.communicate(timeout=120)
     assert proc.returncode == 1
     plan = json.loads(out)

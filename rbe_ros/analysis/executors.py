@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import signal
 from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
@@ -72,6 +73,9 @@ _PLAN: dict = {}
 
 
 def _plan_worker(assembly: Assembly, options: CheckOptions) -> None:
+    # Ctrl-C reaches the whole process group: the planner stops and returns its partial
+    # plan, which needs its workers' pending results, not their KeyboardInterrupt
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     _PLAN.update(assembly=assembly, options=options)
 
 

@@ -31,6 +31,13 @@ DOME527 = ROOT / "tests" / "data" / "compas_assembly" / "dome_assembly.json.gz"
 UNCERTAIN = ["--pose-uncertainty", "0.005,2.5"]
 #: The section of docs/SCALING.md this script owns, from this line to the end of the file.
 MARK = "<!-- planner section: made by benchmarks/plan_bench.py (make plan-bench) -->"
+#: Why the time bar is missed: what a step costs that no region settles.
+LEVER = ("Each step that moves a held course's newest hold is a full solve of the partial "
+         "dome (friction at its limit, below); those steps are most of the time, one after "
+         "the other: the look-ahead runs the next ones on the workers while the search "
+         "does the rest, so the gain is bounded by the workers left free on a shared "
+         "machine, and a solve warm-started from the last step's (Clarabel has none) "
+         "remains the lever.")
 #: The issue's figures of the planner before (not re-run: 11 minutes and 10 GB).
 TODAY_527 = "11.5 min (608 s of planning), 10.7 GB peak, 1.03 GB JSON (issue 23)"
 
@@ -124,7 +131,17 @@ def main() -> int:
                         ("Ray, local 2 CPUs", on_ray)):
             lines.append(f"| {name} | {r['time']:.1f} | {r['rss_mb']:.0f} | "
                          f"{big['time'] / r['time']:.2f} | {'yes' if same(r, big) else 'NO'} |")
-        lines += ["", f"Ray / pool: {on_ray['time'] / pool['time']:.2f}.", ""]
+        lines += ["", f"Ray / pool: {on_ray['time'] / pool['time']:.2f}.", "",
+                  "Issue 23's bars: " + "; ".join(
+                      f"{what} {'met' if ok else 'NOT met'}" for what, ok in (
+                          ("plan <= 60 s", big["time"] <= 60),
+                          ("peak RSS <= 1.5 GB", big["rss_mb"] <= 1536),
+                          ("--json < 20 MB", big["bytes"] < 20e6),
+                          ("pool >= 1.6x one process", big["time"] / pool["time"] >= 1.6),
+                          ("Ray within 20% of the pool", on_ray["time"] <= 1.2 * pool["time"]),
+                          ("the same order and holds from all three",
+                           same(pool, big) and same(on_ray, big)))) + ". "
+                  + LEVER, ""]
 
     incremental = plan(dome)
     whole = plan(dome, "--full-candidates")
@@ -161,6 +178,7 @@ def main() -> int:
               "at the friction limit, and no region short of most of the dome keeps the "
               "earlier forces admissible. The planner tries only to prove such a trial fails "
               "(a relaxation) before solving it in full.", ""]
+    lines[4] = lines[4].replace(" (shared).", f", at the end {os.getloadavg()[0]:.1f} (shared).")
     text = (ROOT / "docs" / "SCALING.md").read_text()
     head = text.split(MARK)[0].rstrip("\n")
     (ROOT / "docs" / "SCALING.md").write_text(head + "\n\n" + "\n".join(lines))

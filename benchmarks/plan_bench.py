@@ -100,6 +100,8 @@ def main() -> int:
         print(f"527-block dome: {big['time']:.1f} s, {big['rss_mb']:.0f} MB", flush=True)
         recheck = run(["check", str(planned), "--sequence", "--strict"])
         print(f"re-check: {recheck['time']:.1f} s ({recheck['status']})", flush=True)
+        solved = run(["check", str(planned), "--sequence", "--strict", "--full-solve"])
+        print(f"full-solve re-check: {solved['time']:.1f} s ({solved['status']})", flush=True)
         pool = plan(DOME527, *UNCERTAIN, "--workers", "2")
         print(f"pool: {pool['time']:.1f} s", flush=True)
         on_ray = plan(DOME527, *UNCERTAIN, "--workers", "2", "--ray", "local")
@@ -117,6 +119,9 @@ def main() -> int:
                   f"| re-check (`check --sequence`) | {recheck['time']:.1f} | "
                   f"{recheck['rss_mb']:.0f} | {recheck['bytes'] / 1e6:.2f} | "
                   f"{'every step stable' if recheck['status'] == 0 else 'a step NOT stable'} |",
+                  f"| re-check with full solves (`--full-solve`) | {solved['time']:.1f} | "
+                  f"{solved['rss_mb']:.0f} | {solved['bytes'] / 1e6:.2f} | "
+                  f"{'every step stable' if solved['status'] == 0 else 'a step NOT stable'} |",
                   "", f"Plan / re-check: **{big['time'] / recheck['time']:.2f}**. Candidate "
                   f"checks: {info['search_checks']}, answered by "
                   + ", ".join(f"{k} {v}" for k, v in sorted(info["models"].items()))

@@ -1,6 +1,6 @@
 """Speed against accuracy: rbe_ros side by side with what users would pick instead.
 
-    .venv/bin/python benchmarks/bench.py            (or: make bench; about 20-30 minutes)
+    .venv/bin/python benchmarks/bench.py            (or: make bench; about 30-40 minutes)
     .venv/bin/python benchmarks/bench.py --quick    (under 3 minutes; writes out/bench-quick/)
 
 Methods, all run in this one process run, scene by scene (compas_cra in a subprocess of its
@@ -747,10 +747,11 @@ def only_lmgc90(args, out: Path) -> int:
         run_lmgc90(case, python)
         score(case)
         record["results"]["lmgc90"] = case.results["lmgc90"]
-        print(f"[case] {case.name}: LMGC90 {_word(case.results['lmgc90'])}"
-              f" ({'ok' if case.results['lmgc90'].get('correct') else 'WRONG'})"
+        res = case.results["lmgc90"]
+        print(f"[case] {case.name}: LMGC90 {_word(res)}"
+              f" ({'ok' if res.get('correct') else 'WRONG' if 'correct' in res else 'not scored'})"
               f"  ({time.perf_counter() - start:.1f} s)", flush=True)
-    result["lmgc90"] = lmgc90_run_info(python, args, cases, load0, t0)
+    result["lmgc90"] = lmgc90_run_info(python, args, cases, load0, t0) | {"merged": True}
     _bench_report.write(result, out)
     print(f"[bench] wrote {out / 'BENCHMARKS.md'} (LMGC90 merged) in {time.perf_counter() - t0:.0f} s")
     return 0

@@ -147,15 +147,19 @@ def check(scene, mu: float, python: Path, T: float = T) -> dict:
     request = {"bodies": body_list, "mu": float(mu), "dt": DT, "theta": THETA, "T": float(T),
                "check_every": CHECK_EVERY, "disp_tol": DISP_TOL, "rot_tol_deg": ROT_TOL_DEG}
     start = time.perf_counter()
-    proc = subprocess.run([str(python), str(HERE / "_lmgc90_driver.py")], input=json.dumps(request),
-                          capture_output=True, text=True, timeout=TIMEOUT,
-                          env=os.environ | SINGLE_THREAD)
+    try:
+        proc = subprocess.run([str(python), str(HERE / "_lmgc90_driver.py")],
+                              input=json.dumps(request), capture_output=True, text=True,
+                              timeout=TIMEOUT, env=os.environ | SINGLE_THREAD)
+    except subprocess.TimeoutExpired:
+        proc = None
     elapsed = time.perf_counter() - start
-    lines = proc.stdout.strip().splitlines()
-    if proc.returncode != 0 or not lines:
-        tail = " | ".join(proc.stderr.strip().splitlines()[-3:])
-        return {"failed": True, "stable": None, "error": f"exit {proc.returncode}: {tail}",
-                "time": elapsed, "time_process": elapsed} | convexified
+    lines = proc.stdout.strip().splitlines() if proc else []
+    if proc is None or proc.returncode != 0 or not lines:
+        error = (f"no answer within {TIMEOUT:g} s" if proc is None else f"exit {proc.returncode}: "
+                 + " | ".join(proc.stderr.strip().splitlines()[-3:]))
+        return {"failed": True, "stable": None, "error": error, "time": elapsed,
+                "time_process": elapsed} | convexified
     answer = json.loads(lines[-1])
     answer["time_process"] = elapsed
     answer["failed"] = False

@@ -41,7 +41,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from ..analysis.option_spec import node_parameters
 from ..analysis.options import CheckOptions
-from ..io.replay import DESIGN, POSES, STATE, Run, run_settings
+from ..io.replay import DESIGN, PLAN, POSES, STATE, Run, run_settings
 from .convert import dict_to_message, message_to_dict
 
 
@@ -249,6 +249,9 @@ def live_reports(runs, options: CheckOptions, *, node_name: str | None = None, c
                     restore = client.get_parameters(list(wanted), timeout)
                 client.set_parameters(wanted, timeout)
                 settings = run.settings
+            if run.kind == PLAN:
+                raise ValueError(f"run {i} is a ~/plan goal: replay --live re-checks states "
+                                 "only; replay the bag offline (without --live) to re-plan it")
             state = dict_to_message(run.state, client.publishers[run.kind][1])
             if run.kind == STATE and run.state.get("sequence"):
                 out.append(client.check_sequence(state, timeout))

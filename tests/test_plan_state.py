@@ -18,7 +18,7 @@ from rbe_ros.io.messages import (header_dict, plan_goal_from_dict, plan_goal_to_
                                  plan_result_to_dict, state_to_dict)
 from rbe_ros.io.plans import HOLD_CAPACITIES, PlanLimits, plan_options, plan_state
 from rbe_ros.io.replay import PLAN_GOAL_TYPE, PLAN_RESULT_TYPE
-from rbe_ros.scene import SceneError
+from rbe_ros.scene import SceneError, ValidationLimits
 
 ARCH = generators.semicircular_arch(7)
 
@@ -59,6 +59,9 @@ def test_bad_requests_are_plans_that_failed():
     plan = plan_state(unreadable, PlanLimits(2))
     assert (plan.feasible, plan.order, plan.message) == (
         False, [], "invalid input: block 'x': no shape")
+    few = CheckOptions(limits=ValidationLimits(max_blocks=8))       # the arch has 9
+    assert plan_state(lambda: ARCH, PlanLimits(2), few).message.startswith(
+        "invalid input: the scene has 9 blocks, more than the limit of 8")
     for name in HOLD_CAPACITIES:        # the options of that name, where the build has them
         limits = PlanLimits(2, **{name: 100.0})
         if name in BY_PARAM:

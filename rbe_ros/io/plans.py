@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from ..analysis.option_spec import BY_PARAM, from_outer
 from ..analysis.options import CheckOptions
 from ..analysis.planning import Plan, PlanOptions, PlanProgress, plan_sequence
-from ..scene import Scene, SceneError
+from ..scene import Scene, SceneError, validate_scene
 
 #: Hold capacities a request may set over the options: the node parameters of those names
 #: (outer values, N and N m; <= 0: the options' own).
@@ -62,8 +62,10 @@ def plan_state(read_scene: Callable[[], Scene], limits: PlanLimits,
                options: CheckOptions = CheckOptions(), *,
                progress: Callable[[PlanProgress], None] | None = None,
                should_stop: Callable[[], bool] | None = None) -> Plan:
-    """Plan the scene ``read_scene()`` makes within ``limits``; never raises: bad input is a
-    plan that failed with "invalid input: ...", any other error "plan failed: ...".
+    """Plan the scene ``read_scene()`` makes within ``limits``; never raises: bad input (a
+    limit out of range, a scene outside the options' validation limits, as a check would
+    refuse it) is a plan that failed with "invalid input: ...", any other error "plan failed:
+    ...".
     ``should_stop`` and the time limit stop the search between candidate checks (the best
     partial plan, "stopped after K of N blocks")."""
     deadline = time.monotonic() + limits.time_limit if limits.time_limit > 0 else None
@@ -78,6 +80,8 @@ def plan_state(read_scene: Callable[[], Scene], limits: PlanLimits,
         return _failed(f"invalid input: {exc}")
     try:
         scene = read_scene()
+        if options.limits is not None:
+            validate_scene(scene, options.limits)
         return plan_sequence(scene, search.max_held, plan_options(options, limits),
                              beam=search.beam, candidates=search.candidates,
                              keep_sequence=search.keep_sequence, progress=progress,

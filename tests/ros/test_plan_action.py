@@ -13,9 +13,10 @@ from action_msgs.msg import GoalStatus
 from rbe_msgs.action import PlanSequence
 
 from rbe_ros import generators
-from rbe_ros.analysis.planning import STOPPED
+from rbe_ros.analysis.planning import STOPPED, plan_sequence
 from rbe_ros.cli import main
-from rbe_ros.io.replay import PLAN, bag_options, read_runs, write_runs
+from rbe_ros.io.messages import report_to_dict
+from rbe_ros.io.replay import PLAN, bag_options, compare_report, read_runs, write_runs
 from rbe_ros.io.scene_json import scene_to_dict
 from rbe_ros.ros.convert import message_to_dict
 
@@ -67,6 +68,11 @@ def test_the_arch_planned_over_dds_equals_rbe_ros_plan(rbe, capsys):
     assert rows == [(r["step_index"], r["block_placed"], r["status"], r["stable"],
                      r["held_blocks"]) for r in expected["reports"]]
     assert all(r.stable for r in result.reports)
+    # and every force of every step as the core computes it (within replay's tolerances)
+    plan = plan_sequence(arch, MAX_HELD)
+    header = message_to_dict(result.reports[0].header)
+    for report, step in zip(plan.reports, result.reports):
+        assert not compare_report(report_to_dict(report, header), message_to_dict(step))
     assert max(len(r.held_blocks) for r in result.reports) <= MAX_HELD
     # the planned assembly: the placed blocks in the planned order with the planned holds,
     # with the goal's stamp on it and on every report

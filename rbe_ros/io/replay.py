@@ -246,6 +246,15 @@ def state_reports(state: dict, options: CheckOptions = CheckOptions()) -> list[R
     return check_state(read, bool(state.get("sequence")), options).reports
 
 
+def stopped_at(run: Run) -> int | None:
+    """How many blocks the recorded plan of a plan run had placed when it was stopped
+    (canceled, preempted, its time limit); None if it was not stopped."""
+    recorded = run.reports[0] if run.reports else {}
+    if not str(recorded.get("message", "")).startswith(STOPPED):
+        return None
+    return len(recorded.get("order", []))
+
+
 def replay_plan(run: Run, options: CheckOptions = CheckOptions()) -> list[dict]:
     """The result dict of re-planning the goal of a plan run through the node's dispatch
     (:func:`plan_state`), with the settings the node had then. A recorded plan that was
@@ -254,16 +263,14 @@ def replay_plan(run: Run, options: CheckOptions = CheckOptions()) -> list[dict]:
     options, frame_id = run_settings(run, options)
     state, limits = plan_goal_from_dict(run.state)
     limits = replace(limits, time_limit=0.0)
-    recorded = run.reports[0] if run.reports else {}
+    until = stopped_at(run)
     placed = [0]
 
     def count(progress) -> None:
         placed[0] = progress.placed
 
-    stop = None
-    if str(recorded.get("message", "")).startswith(STOPPED):
-        def stop() -> bool:
-            return placed[0] >= len(recorded.get("order", []))
+    def stop() -> bool:
+        return until is not None and placed[0] >= until
 
     plan = plan_state(lambda: scene_from_state_dict(state), limits, options,
                       progress=count, should_stop=stop)
@@ -706,4 +713,4 @@ __all__ = ["DESIGN", "Difference", "OPTIONS_KEY", "PLAN", "POSES", "ReplayResult
            "compare_plan", "compare_report", "compare_runs", "default_output", "free_weights",
            "merge_message", "offline_reports", "options_from_json", "options_to_json",
            "read_runs", "record_bag", "replay_bag", "replay_plan", "replay_run", "run_settings",
-           "SETTINGS_TYPE", "state_reports", "step_stamps", "write_runs"]
+           "SETTINGS_TYPE", "state_reports", "step_stamps", "stopped_at", "write_runs"]

@@ -16,9 +16,11 @@ from rbe_ros import generators
 from rbe_ros.analysis.planning import STOPPED, plan_sequence
 from rbe_ros.cli import main
 from rbe_ros.io.messages import report_to_dict
-from rbe_ros.io.replay import PLAN, bag_options, compare_report, read_runs, write_runs
+from rbe_ros.io.replay import (PLAN, bag_options, compare_plan, compare_report, read_runs,
+                               replay_bag, write_runs)
 from rbe_ros.io.scene_json import scene_to_dict
 from rbe_ros.ros.convert import message_to_dict
+from rbe_ros.ros.live import live_goal, live_recheck
 
 from rbe_client import node_and_client, stamp_of, state_msg, wait_until
 
@@ -31,7 +33,8 @@ def rbe(rclpy_context, tmp_path_factory):
     bag = tmp / "bag"
     with node_and_client(rclpy_context, ["-p", f"mcap_path:={bag}"], tmp / "node.log") \
             as (proc, client):
-        yield SimpleNamespace(proc=proc, client=client, bag=bag, tmp=tmp)
+        yield SimpleNamespace(proc=proc, client=client, bag=bag, tmp=tmp,
+                              context=rclpy_context)
 
 
 def goal_of(scene, max_held: int = MAX_HELD, **limits) -> PlanSequence.Goal:
@@ -153,3 +156,13 @@ def test_the_bag_replays_its_plans(rbe, capsys):
     out = capsys.readouterr().out
     assert "run 0 whole assembly plan result: order: recorded" in out
     assert "run 1 step 3" in out and "normal_resultant: recorded" in out
+
+    # live: the arch's goal sent again to the running node (its settings put back after)
+    live = replay_bag(perturbed, write=False, recheck=live_recheck("rbe_node", rbe.context, 60.0))
+    assert len(live.runs) == 2 and len(live.replayed) == 2
+    assert {(d.run, d.field) for d in live.differences} >= {(0, "order"),
+                                                            (1, "normal_resultant")}
+    assert not compare_plan(arch.reports[0], live.replayed[0][0])
+    stopped = runs[1]       # the canceled dome
+    with pytest.raises(ValueError, match="the recorded plan was stopped"):
+        live_goal(stopped)

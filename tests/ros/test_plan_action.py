@@ -83,6 +83,8 @@ def test_the_arch_planned_over_dds_equals_rbe_ros_plan(rbe, capsys):
     assert [message_to_dict(h) for h in result.plan.holds] == holds
     assert {stamp_of(r) for r in [*result.reports, result.plan]} == {stamp_of(goal.assembly)}
     # feedback after every placed step: placed rising to 7, the block and holds of the step
+    # (feedback and result are different topics: the last feedback may come after the result)
+    wait_until(lambda: len(feedback) >= 7, what="the feedback of 7 steps")
     assert [f.placed for f in feedback] == list(range(1, 8))
     assert all(f.total == 7 for f in feedback)
     assert [f.block for f in feedback] == expected["order"]
@@ -111,6 +113,7 @@ def test_a_dome_plan_canceled_then_one_preempted(rbe):
     assert not result.feasible and result.failed_step == placed
     assert result.message == f"{STOPPED} {placed} of {total} blocks"
     assert [r.block_placed for r in result.reports][:placed] == list(result.order)
+    wait_until(lambda: len(feedback) >= placed, what=f"the feedback of {placed} steps")
     assert list(result.order) == [f.block for f in feedback][:placed]
 
     feedback = []

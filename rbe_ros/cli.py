@@ -503,8 +503,7 @@ def _run_view(args) -> int:
     source = Path(args.scene)
     if source.suffix == ".mcap" or (source / "metadata.yaml").is_file():
         options = bag_options(source)
-        runs = [ViewRun(f"run {k}", run.state, run.reports)
-                for k, run in enumerate(read_runs(source))]
+        runs = [ViewRun(f"run {k}", *run.checked()) for k, run in enumerate(read_runs(source))]
         title = source.name
     else:
         options = _options(args)

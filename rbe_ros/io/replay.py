@@ -128,6 +128,14 @@ class Run:
     def key(self) -> tuple[int, int]:
         return _key(self.header)
 
+    def checked(self) -> tuple[dict, list[dict]]:
+        """The state checked and its reports: of a plan, the planned assembly and its steps'
+        reports (from its result; nothing without one), else the state and its reports."""
+        if self.kind == PLAN:
+            result = self.reports[0] if self.reports else {}
+            return result.get("plan", {}), result.get("reports", [])
+        return self.state, self.reports
+
     def describe(self) -> str:
         header = self.header
         seq = self.state.get("sequence") or []

@@ -147,6 +147,10 @@ def test_the_bag_replays_its_plans(rbe, capsys):
     capsys.readouterr()
     assert main(["replay", str(rbe.bag), "--compare", "-o", str(rbe.tmp / "replayed")]) == 0
     assert "all recorded reports reproduced" in capsys.readouterr().out
+    # the view of the bag: each plan's planned assembly with its steps' reports
+    assert main(["view", str(rbe.bag), "-o", str(rbe.tmp / "view.html")]) == 0
+    steps = sum(len(r.reports[0]["reports"]) for r in runs)
+    assert f"{steps} reports of 5 states written" in capsys.readouterr().out
 
     arch = runs[0]
     swapped = json.loads(json.dumps(arch.reports[0]))

@@ -705,11 +705,19 @@ class RbeChecks:
             goal_handle.abort()
         return result
 
-
     def _execute_plan(self, goal_handle) -> PlanSequence.Result:
         """Plan the goal's assembly (the goal and its result recorded), one plan at a time:
         a newer goal stops this one between two candidate checks (ABORTED), as a cancel does
         (CANCELED); the result is then the best partial plan."""
+        try:
+            return self._plan_goal(goal_handle)
+        except Exception as exc:   # publishing or recording failed (e.g. during shutdown)
+            message = f"plan failed: {type(exc).__name__}: {exc}"
+            self.get_logger().error(f"plan goal not handled: {message}")
+            goal_handle.abort()
+            return PlanSequence.Result(message=message, failed_step=0)
+
+    def _plan_goal(self, goal_handle) -> PlanSequence.Result:
         self._plan_newest = goal_handle
         goal = goal_handle.request
         self._record(self.plan_goal_topic, goal)

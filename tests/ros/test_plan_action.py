@@ -141,7 +141,8 @@ def test_bad_limits_are_an_infeasible_result(rbe):
 def test_the_bag_replays_its_plans(rbe, capsys):
     """Every goal so far re-planned offline through the node's dispatch equals its recorded
     result (the canceled and preempted ones up to as many blocks as they had placed);
-    a recorded result with two steps swapped, or a hold force changed, is a difference."""
+    a recorded result with two steps swapped, or a force of a step 1% off, is a difference
+    (offline, and live through the running node). Runs after the tests above (their goals)."""
     runs = [r for r in read_runs(rbe.bag) if r.kind == PLAN]
     assert len(runs) == 5 and all(len(r.reports) == 1 for r in runs)
     capsys.readouterr()

@@ -111,7 +111,7 @@ def test_a_dome_plan_canceled_then_one_preempted(rbe):
     placed = len(result.order)
     assert 2 <= placed < total
     assert not result.feasible and result.failed_step == placed
-    assert result.message == f"{STOPPED} {placed} of {total} blocks"
+    assert result.message.startswith(f"{STOPPED} {placed} of {total} blocks")
     assert [r.block_placed for r in result.reports][:placed] == list(result.order)
     wait_until(lambda: len(feedback) >= placed, what=f"the feedback of {placed} steps")
     assert list(result.order) == [f.block for f in feedback][:placed]
@@ -141,8 +141,9 @@ def test_bad_limits_are_an_infeasible_result(rbe):
 def test_the_bag_replays_its_plans(rbe, capsys):
     """Every goal so far re-planned offline through the node's dispatch equals its recorded
     result (the canceled and preempted ones up to as many blocks as they had placed);
-    a recorded result with two steps swapped, or a force of a step 1% off, is a difference
-    (offline, and live through the running node). Runs after the tests above (their goals)."""
+    a recorded result with two steps swapped, or a step's friction ratio 1% off, is a
+    difference (offline, and live through the running node). Runs after the tests above
+    (their goals are the bag's)."""
     runs = [r for r in read_runs(rbe.bag) if r.kind == PLAN]
     assert len(runs) == 5 and all(len(r.reports) == 1 for r in runs)
     capsys.readouterr()
@@ -157,19 +158,19 @@ def test_the_bag_replays_its_plans(rbe, capsys):
     swapped = json.loads(json.dumps(arch.reports[0]))
     swapped["order"][1], swapped["order"][2] = swapped["order"][2], swapped["order"][1]
     forces = json.loads(json.dumps(arch.reports[0]))
-    forces["reports"][3]["interfaces"][0]["normal_resultant"] *= 1.01
+    forces["reports"][3]["worst_friction_ratio"] *= 1.01
     perturbed = rbe.tmp / "perturbed"
     write_runs(perturbed, [arch, arch], [[swapped], [forces]], bag_options(rbe.bag))
     assert main(["replay", str(perturbed), "--compare", "-o", str(rbe.tmp / "p_out")]) == 1
     out = capsys.readouterr().out
     assert "run 0 whole assembly plan result: order: recorded" in out
-    assert "run 1 step 3" in out and "normal_resultant: recorded" in out
+    assert "run 1 step 3" in out and "worst_friction_ratio: recorded" in out
 
     # live: the arch's goal sent again to the running node (its settings put back after)
     live = replay_bag(perturbed, write=False, recheck=live_recheck("rbe_node", rbe.context, 60.0))
     assert len(live.runs) == 2 and len(live.replayed) == 2
     assert {(d.run, d.field) for d in live.differences} >= {(0, "order"),
-                                                            (1, "normal_resultant")}
+                                                            (1, "worst_friction_ratio")}
     assert not compare_plan(arch.reports[0], live.replayed[0][0])
     stopped = runs[1]       # the canceled dome
     with pytest.raises(ValueError, match="the recorded plan was stopped"):

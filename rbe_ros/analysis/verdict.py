@@ -47,8 +47,12 @@ def _verdict(assembly: Assembly, options: CheckOptions) -> Report:
     model, primary = deciding
     if primary.solved:
         report = _report(model, primary, options)
-        found = _squeezed(model, options) if report.stable else None
-        return report if found is None else _prestress_report(model, report, found, options)
+        if not report.stable:
+            return report
+        field = _without_prestress(model, options, primary)
+        if isinstance(field, Squeeze):
+            return _prestress_report(model, report, field, options)
+        return report if field is primary else _report(model, field, options)
     if primary.status == "failed":
         return _failed(primary)
     return _explain(model, options)
@@ -104,17 +108,25 @@ def stable_forces(model: EquilibriumModel, options: CheckOptions, load=None
     if any(r.tension or (r.friction_exceeded and counts)
            for r, counts in zip(results, _loaded(model, results, options))):
         return None
-    if _squeezed(model, options, load) is not None:
+    field = _without_prestress(model, options, solution, load)
+    if isinstance(field, Squeeze):
         return None
-    return solution, results
+    if field is not solution:
+        results = interface_results(model, field, mu_threshold=options.threshold,
+                                    tension_tol=options.tension_tol, mu=options.deciding.mu)
+    return field, results
 
 
-def _squeezed(model: EquilibriumModel, options: CheckOptions, load=None) -> Squeeze | None:
-    """The squeeze of a field that stands only by prestress (rbe/prestress.py), None when
-    the loads alone hold every block: the last part of the criterion of check and
-    stable_forces."""
+def _without_prestress(model: EquilibriumModel, options: CheckOptions, solution: Solution,
+                       load=None) -> Solution | Squeeze:
+    """The last part of the criterion of check and stable_forces, for a ``solution`` that
+    passed the others: the field to report, ``solution`` itself when no squeeze can arise,
+    else one without prestress (rbe/prestress.py); the Squeeze when the blocks stand only
+    squeezed."""
     found = squeeze(model, options.deciding, load)
-    return None if found is None or found.stands else found
+    if found is None:
+        return solution
+    return found.field if found.stands else found
 
 
 def _prestress_report(model, report: Report, found: Squeeze, options: CheckOptions) -> Report:

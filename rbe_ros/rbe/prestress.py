@@ -3,19 +3,18 @@
 RBE asks for some admissible force field. With Coulomb friction (no dilatancy) a field may
 hold a block by a compression the loads never produce in rigid blocks that start unstressed:
 a bar between two posts held by friction from a horizontal squeeze (Kao et al. 2022, Coupled
-Rigid-Block Analysis, Fig. 2). Such a squeeze is a self-equilibrated compression s: A s = 0,
-s in the friction cones, s != 0. Two steps (docs/METHOD.md, "Prestress"):
+Rigid-Block Analysis). The test (docs/METHOD.md, "Prestress"):
 
-1. Gate: is there any? A virtual dilation of the blocks that opens every contact strictly
-   (d_n > mu |d_t|) proves there is none (the virtual work of s on it would be positive,
-   but A s = 0 makes it zero): walls, arches and domes on the ground pass in microseconds.
-   Otherwise a small QP (solver.self_stress) finds the vertices a self-stress can load.
-2. Non-associative test on those vertices (Panagiotopoulos' fixed point of Tresca problems):
-   the elastic stick field (minimum complementary energy, the RBE QP's objective, no friction
-   limit there) carries no prestress; then friction is bounded by mu times the normal
-   forces of the previous field (Tresca: a bound that no squeeze can raise), and the
-   minimum-energy field is solved again, until a field lies within its own Coulomb cones
-   (it stands without prestress) or none exists (it stands only squeezed).
+1. Gate: a virtual dilation of the blocks that opens an interface with d_n > mu |d_t| leaves
+   it no share in any self-equilibrated compression (its virtual work on the dilation would
+   be positive). Walls, arches and domes on the ground have every interface opened: no test.
+2. On the interfaces left closed: the stick field (elastic contacts sticking, unstressed at
+   the start: the minimum of the RBE QP's complementary energy without friction limit)
+   carries no prestress. If it lies within the vertex cones, the blocks stand. Otherwise
+   the RBE problem is solved again with the friction resultant of every closed interface
+   capped at mu times the stick field's normal resultant there (a Tresca bound, fixed before
+   the solve, that no squeeze can raise: one step of Panagiotopoulos' fixed point). No
+   field: they stand only squeezed.
 """
 from __future__ import annotations
 
@@ -26,94 +25,94 @@ import numpy as np
 
 from .cones import pyramid_facets
 from .model import EquilibriumModel
-from .solver import SolveOptions, self_stress, solve
+from .solver import Solution, SolveOptions, solve
 
-#: Vertical stretch factors of the virtual dilations tried as a certificate of no
-#: self-stress (1: a similarity about a point far below; larger ones open bed joints of
-#: courses whose bricks are long against their height).
+#: Vertical stretch factors of the virtual dilations tried (1: a similarity about a point far
+#: below; larger ones open the bed joints of courses whose bricks are long against their
+#: height); the one that leaves fewest interfaces closed is used.
 DILATIONS = (1.0, 4.0, 16.0)
 #: Depth of the dilation's centre below the scene, in scene lengths.
 CENTRE_DEPTH = 10.0
-#: Tresca iterations before giving up (then the field is taken to need prestress).
-MAX_ITERATIONS = 30
-#: Relaxation of the Tresca bound after the first iteration (1: plain fixed point, which can
-#: alternate between two fields on steep wedges).
-RELAXATION = 0.5
-#: A field lies within its Coulomb cones up to this share of mu fn (the fixed point is
-#: approached, not reached), plus SHARE_TOL of the free weight per vertex.
+#: The stick field lies within a vertex cone up to this share of mu fn, plus SHARE_TOL of
+#: the free weight (the solver's accuracy); the caps are raised by the same share.
 CONE_TOL = 1e-3
 SHARE_TOL = 1e-7
-#: Vertices carrying less than this share of the largest self-stress are not squeezed.
-SUPPORT_SHARE = 1e-4
 
 
 @dataclass(frozen=True)
 class Squeeze:
-    """Vertices a self-stress can load (a boolean mask) and whether the loads alone hold it."""
+    """The vertices (a boolean mask) of the squeezed blocks' closed interfaces where the
+    stick field needed more friction than its normal forces give, when no field within the
+    caps exists; none when the loads alone hold the blocks."""
 
     vertices: np.ndarray
-    stands: bool
+    field: Solution | None = None       # the field without prestress, when they stand
+
+    @property
+    def stands(self) -> bool:
+        return not self.vertices.any()
 
 
-def dilation_certificate(model: EquilibriumModel, mu: float) -> bool:
-    """Whether a virtual dilation of the free blocks (translations, supports fixed) opens
-    every interface with d_n > mu |d_t|: then no self-equilibrated compression exists."""
-    if not model.num_vertices:
-        return True
+def unopened(model: EquilibriumModel, mu: float) -> np.ndarray:
+    """The interfaces (a boolean mask) that the best of the virtual dilations (translations
+    of the free blocks away from a point far below, supports fixed) does not open with
+    d_n > mu |d_t|. None unopened: no self-equilibrated compression exists (its virtual work
+    on the dilation would be positive, yet A s = 0 makes it zero)."""
+    if not len(model.interfaces):
+        return np.zeros(0, dtype=bool)
     blocks = model.blocks
     centroids = np.array([b.centroid for b in blocks])
     free = np.zeros(len(blocks), dtype=bool)
     free[model.free] = True
-    down = -_up(model)
-    centre = centroids[free].mean(axis=0) + CENTRE_DEPTH * model.length_scale * down
+    up = _up(model)
+    centre = centroids[free].mean(axis=0) - CENTRE_DEPTH * model.length_scale * up
     pairs = np.array([(it.a, it.b) for it in model.interfaces], dtype=int)
-    first = np.searchsorted(model.vertex_interface, np.arange(len(pairs)))
-    normal = model.normal[first]
+    normal = model.normal[np.searchsorted(model.vertex_interface, np.arange(len(pairs)))]
+    best = None
     for stretch in DILATIONS:
         offset = centroids - centre
-        offset += (stretch - 1.0) * (offset @ -down)[:, None] * -down[None, :]
+        offset += (stretch - 1.0) * (offset @ up)[:, None] * up[None, :]
         moved = np.where(free[:, None], offset, 0.0)
         d = moved[pairs[:, 1]] - moved[pairs[:, 0]]
         dn = np.einsum("ij,ij->i", d, normal)
-        dt = np.linalg.norm(d - dn[:, None] * normal, axis=1)
-        if np.all(dn > mu * dt):
-            return True
-    return False
+        shut = dn <= mu * np.linalg.norm(d - dn[:, None] * normal, axis=1)
+        if best is None or shut.sum() < best.sum():
+            best = shut
+    return best
 
 
 def squeeze(model: EquilibriumModel, options: SolveOptions, load=None) -> Squeeze | None:
-    """The squeezed vertices of ``model`` under ``load`` (scaled p; default the dead load)
-    and whether a field without prestress holds them; None if no self-stress exists."""
+    """Whether the loads (scaled p; default the dead load) alone hold ``model``'s blocks:
+    None when a dilation opens every interface (no squeeze can arise), else the result of
+    the test on the interfaces it leaves closed (:class:`Squeeze`)."""
     if not math.isfinite(options.mu):     # no friction limit: no squeeze is needed
         return None
-    if dilation_certificate(model, options.mu / _capacity_of_outer(options.cone)):
+    shut = unopened(model, options.mu / _capacity_of_outer(options.cone))
+    if not shut.any():
         return None
-    stress = self_stress(model, options)
-    if stress is None:
-        return None
-    squeezed = stress > SUPPORT_SHARE * stress.max()
-    return Squeeze(squeezed, _stands_unsqueezed(model, options, load, squeezed))
+    return _unsqueezed(model, options, load, shut)
 
 
-def _stands_unsqueezed(model, options: SolveOptions, load, squeezed: np.ndarray) -> bool:
-    """Whether the Tresca fixed point on the ``squeezed`` vertices reaches a field within
-    its own Coulomb cones."""
+def _unsqueezed(model, options: SolveOptions, load, shut: np.ndarray) -> Squeeze:
+    """The stick field (no friction limit); if it leaves a vertex cone, the RBE problem with
+    the friction resultant of every ``shut`` interface capped at mu times the stick field's
+    normal resultant there (a Tresca bound no squeeze can raise)."""
     options = replace(options, objective="qp", friction="net")
-    bound = np.where(squeezed, math.inf, math.nan)
-    tol = SHARE_TOL * model.force_scale
-    for k in range(MAX_ITERATIONS):
-        solution = solve(model, options, load=load, slip_bound=bound)
-        if not solution.solved:
-            return False
-        fn, _, fu, fv = solution.forces
-        limit = options.mu * fn[squeezed]
-        if np.all(_tangential(fu[squeezed], fv[squeezed], options.cone)
-                  <= limit * (1.0 + CONE_TOL) + tol):
-            return True
-        limit = np.maximum(limit, 0.0)
-        bound[squeezed] = limit if k == 0 else (1.0 - RELAXATION) * bound[squeezed] \
-            + RELAXATION * limit
-    return False
+    stick = solve(model, replace(options, mu=math.inf), load=load)
+    if not stick.solved:
+        return Squeeze(shut[model.vertex_interface])
+    fn, _, fu, fv = stick.forces
+    over = (_tangential(fu, fv, options.cone)
+            > options.mu * np.maximum(fn, 0.0) * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale)
+    if not over.any():
+        return Squeeze(over, stick)
+    normal = np.bincount(model.vertex_interface, fn, minlength=len(model.interfaces))
+    cap = np.where(shut, options.mu * np.maximum(normal, 0.0) * (1.0 + CONE_TOL), math.inf)
+    capped = solve(model, options, load=load, friction_cap=cap)
+    if capped.solved:
+        return Squeeze(np.zeros(model.num_vertices, dtype=bool), capped)
+    named = shut[model.vertex_interface] & over      # where the stick field needed more
+    return Squeeze(named if named.any() else shut[model.vertex_interface])
 
 
 def _tangential(fu: np.ndarray, fv: np.ndarray, cone: str) -> np.ndarray:

@@ -162,11 +162,11 @@ def _spent_since(start: float) -> float:
 
 def solve(model: EquilibriumModel, options: SolveOptions = SolveOptions(), *,
           load: np.ndarray | None = None, live_load: np.ndarray | None = None,
-          slip_bound: np.ndarray | None = None) -> Solution:
+          friction_cap: np.ndarray | None = None) -> Solution:
     """Solve the RBE problem of ``model`` under ``load`` (scaled p; default: dead load).
-    ``slip_bound`` (N per vertex, friction-net only) replaces the Coulomb cone of a vertex by
-    a Tresca bound ||(fu, fv)|| <= g where it is finite, drops it where infinite and keeps it
-    where NaN (the prestress test's subproblems, rbe/prestress.py).
+    ``friction_cap`` (N per interface, inf: none) bounds the resultant of each interface's
+    friction forces in the cone's norm, as well as the vertex cones (Tresca bounds of the
+    prestress test, rbe/prestress.py).
     Within a check's time budget (:mod:`rbe_ros.deadline`) the solver gets what is left of it,
     and a solve that runs out of it raises CheckTimeout."""
     checkpoint()
@@ -179,8 +179,8 @@ def solve(model: EquilibriumModel, options: SolveOptions = SolveOptions(), *,
     # weight, which only slows the solver down).
     tension = options.allow_tension and not multiplier and options.friction == "plus"
     v = _Variables(nv, tension, lp, multiplier)
-    bound = None if slip_bound is None else np.asarray(slip_bound, float) / model.force_scale
-    a, b, cones = _constraints(model, options, v, p, live_load, (1.0, MAX_MULTIPLIER), bound)
+    cap = None if friction_cap is None else np.asarray(friction_cap, float) / model.force_scale
+    a, b, cones = _constraints(model, options, v, p, live_load, (1.0, MAX_MULTIPLIER), cap)
     p_diag, q = _objective(options, v, lp, multiplier)
     if lp:
         offsets = (model.points - model.points.mean(axis=0)) @ _TIE_DIRECTION
@@ -306,59 +306,56 @@ def _accept(model: EquilibriumModel, v: _Variables, x: np.ndarray, p, live_load,
 
 
 def _constraints(model: EquilibriumModel, options: SolveOptions, v: _Variables, p, column,
-                 bound: tuple[float, float], slip_bound: np.ndarray | None = None):
+                 bound: tuple[float, float], cap: np.ndarray | None = None):
     """A, b and the cones of A x + s = b, s in K, in Clarabel's order: zero cone, nonnegative
     cone, second-order cones. ``column`` (a load, or None) is the equilibrium column of the
-    multiplier variable, bounded by the row ``bound[0] * x <= bound[1]``. ``slip_bound``
-    (scaled, per vertex; see solve) makes some cones Tresca bounds or drops them. The
+    multiplier variable, bounded by the row ``bound[0] * x <= bound[1]``. ``cap`` (scaled,
+    per interface; see solve) adds a cone on each capped interface's friction resultant. The
     equilibrium rows are taken as columns of model.a_eq's CSC arrays and stacked on the other
     rows, not rebuilt through coordinates (no sort)."""
     nv = v.nv
     neq = model.a_eq.shape[0]
     rows = _Rows(v.count, neq)
-    every = np.arange(nv)
-    coulomb = every if slip_bound is None else np.flatnonzero(np.isnan(slip_bound))
-    tresca = every[:0] if slip_bound is None else np.flatnonzero(np.isfinite(slip_bound))
-    if not math.isfinite(options.mu):
-        coulomb = every[:0]
+    finite_mu = math.isfinite(options.mu)
     # The cones bound the tangential force by mu fn+: friction+ by its definition, and
     # friction-net too, as solve leaves fn- out under it (fn+ is then the net force).
-    fn = v.index(0, every)
+    fn = v.index(0, np.arange(nv))
     # nonnegative rows (s = b - A x >= 0): normal parts, the multiplier bound, pyramid facets.
     # fn+ >= 0 is left out where the friction cone implies it (a pyramid too: its opposite
     # facets sum to 2 h mu fn+ >= 0): the redundant rows are ~10% of the vault's KKT system
     # and cost it an interior-point iteration.
-    unbounded = np.setdiff1d(every, coulomb)
-    if len(unbounded):
-        rows.add_rows([(fn[unbounded], -1.0)], 0.0)
-    if v.base[1] >= 0:
-        rows.add_rows([(v.index(1, every), -1.0)], 0.0)
+    for k in ((0,) if not finite_mu else ()) + ((1,) if v.base[1] >= 0 else ()):
+        rows.add_rows([(v.index(k, np.arange(nv)), -1.0)], 0.0)
     if column is not None:
         rows.add_rows([(np.array([v.lam]), bound[0])], bound[1])
     lp = len(v.t) > 0
-    fu, fv = v.index(2, every), v.index(3, every)
+    fu, fv = v.index(2, np.arange(nv)), v.index(3, np.arange(nv))
+    capped = np.array([], dtype=int) if cap is None else np.flatnonzero(np.isfinite(cap))
+    group = np.full(len(model.interfaces), -1)
+    group[capped] = np.arange(len(capped))
+    group = group[model.vertex_interface]          # row of each vertex's interface cap, or -1
     if options.cone != "soc":
         angles, h = pyramid_facets(options.cone)
         for theta in angles:
             tangential = [(fu, math.cos(theta)), (fv, math.sin(theta))]
-            if len(coulomb):
-                rows.add_rows([(c[coulomb], k) for c, k in tangential]
-                              + [(fn[coulomb], -h * options.mu)], 0.0)
-            if len(tresca):
-                rows.add_rows([(c[tresca], k) for c, k in tangential], h * slip_bound[tresca])
+            if finite_mu:
+                rows.add_rows(tangential + [(fn, -h * options.mu)], 0.0)
             if lp:
                 rows.add_rows(tangential + [(v.t, -1.0)], 0.0)
+            if len(capped):
+                rows.add_sums(group, tangential, h * cap[capped])
     cones = [clarabel.ZeroConeT(neq)] + ([clarabel.NonnegativeConeT(rows.count - neq)]
                                          if rows.count > neq else [])
     # second-order cones (t_i, fu_i, fv_i), rows interleaved per vertex
     if options.cone == "soc":
-        for which, head, rhs in ((coulomb, [(fn, -options.mu)], 0.0),
-                                 (tresca, [], slip_bound[tresca] if len(tresca) else 0.0),
-                                 (every if lp else every[:0], [(v.t, -1.0)], 0.0)):
-            if len(which):
-                rows.add_cones([(cols[which], k) for cols, k in head], fu[which], fv[which],
-                               rhs)
-                cones += [clarabel.SecondOrderConeT(3)] * len(which)
+        for head in ([(fn, -options.mu)] if finite_mu else None,
+                     [(v.t, -1.0)] if lp else None):
+            if head is not None:
+                rows.add_cones(head, fu, fv)
+                cones += [clarabel.SecondOrderConeT(3)] * nv
+        if len(capped):
+            rows.add_sum_cones(group, fu, fv, cap[capped])
+            cones += [clarabel.SecondOrderConeT(3)] * len(capped)
     a = _Csc.stack(_equilibrium_columns(model, v, column), rows.matrix())
     return a, _floats(np.concatenate([-np.asarray(p, dtype=float)] + rows.b)), cones
 
@@ -411,20 +408,18 @@ class _Rows:
         self.first = self.count = first
         self.r, self.c, self.v, self.b = [], [], [], []
 
-    def add_rows(self, terms, rhs) -> None:
-        """One row per vertex: sum of coefficient * variable over ``terms`` (cols, coef),
-        at most ``rhs`` (a number, or one per vertex)."""
+    def add_rows(self, terms, rhs: float) -> None:
+        """One row per vertex: sum of coefficient * variable over ``terms`` (cols, coef)."""
         n = len(terms[0][0])
         for cols, coef in terms:
             self.r.append(self.count + np.arange(n))
             self.c.append(cols)
             self.v.append(np.full(n, coef))
-        self.b.append(np.broadcast_to(np.asarray(rhs, dtype=float), (n,)))
+        self.b.append(np.full(n, rhs))
         self.count += n
 
-    def add_cones(self, head, fu, fv, head_rhs=0.0) -> None:
-        """Rows (head, -fu, -fv) of each vertex's 3-cone, interleaved (s = b - A x; b is
-        ``head_rhs`` on the head rows, a constant bound such as a Tresca one, else 0)."""
+    def add_cones(self, head, fu, fv) -> None:
+        """Rows (head, -fu, -fv) of each vertex's 3-cone, interleaved (s = -A x, b = 0)."""
         n = len(fu)
         base = self.count + 3 * np.arange(n)
         for cols, coef in head:
@@ -435,10 +430,33 @@ class _Rows:
             self.r.append(base + offset)
             self.c.append(cols)
             self.v.append(np.full(n, -1.0))
-        b = np.zeros((n, 3))
-        b[:, 0] = head_rhs
-        self.b.append(b.ravel())
+        self.b.append(np.zeros(3 * n))
         self.count += 3 * n
+
+    def add_sums(self, group, terms, rhs) -> None:
+        """One row per group k: the sum over its vertices (group == k) of coefficient *
+        variable over ``terms`` (cols per vertex, coef), at most rhs[k]."""
+        on = group >= 0
+        for cols, coef in terms:
+            self.r.append(self.count + group[on])
+            self.c.append(cols[on])
+            self.v.append(np.full(int(on.sum()), coef))
+        self.b.append(np.asarray(rhs, dtype=float))
+        self.count += len(rhs)
+
+    def add_sum_cones(self, group, fu, fv, rhs) -> None:
+        """Rows (rhs_k, -sum fu, -sum fv) of one 3-cone per group k (its vertices: group ==
+        k): the resultant of their friction at most rhs_k."""
+        on = group >= 0
+        base = self.count + 3 * group[on]
+        for offset, cols in ((1, fu[on]), (2, fv[on])):
+            self.r.append(base + offset)
+            self.c.append(cols)
+            self.v.append(np.full(len(cols), -1.0))
+        b = np.zeros((len(rhs), 3))
+        b[:, 0] = rhs
+        self.b.append(b.ravel())
+        self.count += 3 * len(rhs)
 
     def matrix(self) -> sp.csc_matrix:
         """The rows collected (numbered from 0), canonical CSC."""
@@ -508,34 +526,3 @@ def _objective(options: SolveOptions, v: _Variables, lp: bool, multiplier: bool)
     if lp:
         q[v.t] = w.friction
     return p_diag, q
-
-
-def self_stress(model: EquilibriumModel, options: SolveOptions = SolveOptions()
-                ) -> np.ndarray | None:
-    """Normal forces (share of their sum, per vertex) of a self-equilibrated compression of
-    ``model``: A f = 0, f in the friction-net cones of ``options``, sum fn = 1; None when
-    there is none (the problem is infeasible). Minimising ||f||^2 spreads it over every
-    vertex some self-stress can load (an interior-point solution: the largest support)."""
-    checkpoint()
-    nv = model.num_vertices
-    if not nv or not len(model.free):
-        return None
-    v = _Variables(nv, False, False, False)
-    options = replace(options, friction="net", objective="qp")
-    a, b, cones = _constraints(model, options, v, np.zeros(model.a_eq.shape[0]), None,
-                               (1.0, MAX_MULTIPLIER))
-    total = sp.csc_matrix((np.ones(nv), (np.zeros(nv, dtype=int), v.index(0, np.arange(nv)))),
-                          shape=(1, v.count))
-    a = _Csc.stack(a.tocsc(), total)
-    start = time.perf_counter()
-    settings = _settings(options, _attempts(False)[1], 0.0, len(b) + 1 + v.count)
-    result = clarabel.DefaultSolver(_Csc.diagonal(np.ones(v.count)), _floats(np.zeros(v.count)),
-                                    a, _floats(np.append(b, 1.0)),
-                                    cones + [clarabel.ZeroConeT(1)], settings).solve()
-    _spent_since(start)
-    status = str(result.status)
-    if status in _INFEASIBLE:
-        return None
-    if status not in _SOLVED:            # numerical trouble: every vertex may be squeezed
-        return np.full(nv, 1.0 / nv)
-    return np.array(result.x)[v.index(0, np.arange(nv))]

@@ -49,10 +49,8 @@ def _verdict(assembly: Assembly, options: CheckOptions) -> Report:
         report = _report(model, primary, options)
         if not report.stable:
             return report
-        field = _without_prestress(model, options, primary)
-        if isinstance(field, Squeeze):
-            return _prestress_report(model, report, field, options)
-        return report if field is primary else _report(model, field, options)
+        found = _squeezed(model, options, primary)
+        return report if found is None else _prestress_report(model, report, found, options)
     if primary.status == "failed":
         return _failed(primary)
     return _explain(model, options)
@@ -108,25 +106,18 @@ def stable_forces(model: EquilibriumModel, options: CheckOptions, load=None
     if any(r.tension or (r.friction_exceeded and counts)
            for r, counts in zip(results, _loaded(model, results, options))):
         return None
-    field = _without_prestress(model, options, solution, load)
-    if isinstance(field, Squeeze):
+    if _squeezed(model, options, solution, load) is not None:
         return None
-    if field is not solution:
-        results = interface_results(model, field, mu_threshold=options.threshold,
-                                    tension_tol=options.tension_tol, mu=options.deciding.mu)
-    return field, results
+    return solution, results
 
 
-def _without_prestress(model: EquilibriumModel, options: CheckOptions, solution: Solution,
-                       load=None) -> Solution | Squeeze:
+def _squeezed(model: EquilibriumModel, options: CheckOptions, solution: Solution,
+              load=None) -> Squeeze | None:
     """The last part of the criterion of check and stable_forces, for a ``solution`` that
-    passed the others: the field to report, ``solution`` itself when no squeeze can arise,
-    else one without prestress (rbe/prestress.py); the Squeeze when the blocks stand only
-    squeezed."""
-    found = squeeze(model, options.deciding, load)
-    if found is None:
-        return solution
-    return found.field if found.stands else found
+    passed the others: the squeeze when its blocks stand only by prestress
+    (rbe/prestress.py), else None. The reported field stays ``solution`` (RBE's)."""
+    found = squeeze(model, options.deciding, solution, load)
+    return None if found is None or found.stands else found
 
 
 def _prestress_report(model, report: Report, found: Squeeze, options: CheckOptions) -> Report:

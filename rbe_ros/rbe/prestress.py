@@ -46,7 +46,6 @@ class Squeeze:
     caps exists; none when the loads alone hold the blocks."""
 
     vertices: np.ndarray
-    field: Solution | None = None       # the field without prestress, when they stand
 
     @property
     def stands(self) -> bool:
@@ -81,38 +80,49 @@ def unopened(model: EquilibriumModel, mu: float) -> np.ndarray:
     return best
 
 
-def squeeze(model: EquilibriumModel, options: SolveOptions, load=None) -> Squeeze | None:
-    """Whether the loads (scaled p; default the dead load) alone hold ``model``'s blocks:
-    None when a dilation opens every interface (no squeeze can arise), else the result of
-    the test on the interfaces it leaves closed (:class:`Squeeze`)."""
+def squeeze(model: EquilibriumModel, options: SolveOptions, solution: Solution,
+            load=None) -> Squeeze | None:
+    """Whether the loads (scaled p; default the dead load) alone hold ``model``'s blocks,
+    of which ``solution`` is an RBE field: None when a dilation opens every interface (no
+    squeeze can arise), else the result of the test on the interfaces it leaves closed."""
     if not math.isfinite(options.mu):     # no friction limit: no squeeze is needed
         return None
     shut = unopened(model, options.mu / _capacity_of_outer(options.cone))
     if not shut.any():
         return None
-    return _unsqueezed(model, options, load, shut)
+    return _unsqueezed(model, options, solution, load, shut)
 
 
-def _unsqueezed(model, options: SolveOptions, load, shut: np.ndarray) -> Squeeze:
-    """The stick field (no friction limit); if it leaves a vertex cone, the RBE problem with
-    the friction resultant of every ``shut`` interface capped at mu times the stick field's
-    normal resultant there (a Tresca bound no squeeze can raise)."""
+def _unsqueezed(model, options: SolveOptions, solution: Solution, load,
+                shut: np.ndarray) -> Squeeze:
+    """Caps on the friction resultant of every ``shut`` interface: mu times the normal
+    resultant of the stick field (no friction limit) there, a Tresca bound no squeeze can
+    raise. They stand if ``solution`` keeps the caps, or the stick field lies within the
+    vertex cones, or the RBE problem solved with the caps has a field."""
     options = replace(options, objective="qp", friction="net")
     stick = solve(model, replace(options, mu=math.inf), load=load)
     if not stick.solved:
         return Squeeze(shut[model.vertex_interface])
+    cap = options.mu * np.maximum(_sums(model, stick.forces[0]), 0.0) * (1.0 + CONE_TOL) \
+        + SHARE_TOL * model.force_scale
+    none = np.zeros(model.num_vertices, dtype=bool)
+    friction = _tangential(*(_sums(model, solution.forces[k]) for k in (2, 3)), options.cone)
+    if np.all(friction[shut] <= cap[shut]):
+        return Squeeze(none)
     fn, _, fu, fv = stick.forces
     over = (_tangential(fu, fv, options.cone)
             > options.mu * np.maximum(fn, 0.0) * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale)
     if not over.any():
-        return Squeeze(over, stick)
-    normal = np.bincount(model.vertex_interface, fn, minlength=len(model.interfaces))
-    cap = np.where(shut, options.mu * np.maximum(normal, 0.0) * (1.0 + CONE_TOL), math.inf)
-    capped = solve(model, options, load=load, friction_cap=cap)
-    if capped.solved:
-        return Squeeze(np.zeros(model.num_vertices, dtype=bool), capped)
+        return Squeeze(none)
+    if solve(model, options, load=load, friction_cap=np.where(shut, cap, math.inf)).solved:
+        return Squeeze(none)
     named = shut[model.vertex_interface] & over      # where the stick field needed more
     return Squeeze(named if named.any() else shut[model.vertex_interface])
+
+
+def _sums(model: EquilibriumModel, values: np.ndarray) -> np.ndarray:
+    """Per-vertex values summed per interface."""
+    return np.bincount(model.vertex_interface, values, minlength=len(model.interfaces))
 
 
 def _tangential(fu: np.ndarray, fv: np.ndarray, cone: str) -> np.ndarray:

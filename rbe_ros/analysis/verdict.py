@@ -131,10 +131,9 @@ def _prestress_report(model, report: Report, found: Squeeze, options: CheckOptio
                   for k, r in enumerate(report.interfaces)]
     one = len(squeezed) == 1
     message = (f"friction exceeded without prestress: {_names(squeezed)} stand{'s' * one} only"
-               f" squeezed between {'its' if one else 'their'} neighbours (a"
-               f" self-equilibrated compression the loads do not produce; with friction up to"
-               f" mu {options.deciding.mu:.3g} times the normal forces the loads produce,"
-               f" no equilibrium)")
+               f" squeezed between {'its' if one else 'their'} neighbours (with the friction"
+               f" of each contact up to mu {options.deciding.mu:.3g} times the normal force the"
+               f" loads alone produce there, no equilibrium)")
     return replace(report, status=Status.FRICTION_EXCEEDED, message=message,
                    interfaces=interfaces, unstable_blocks=squeezed)
 

@@ -239,3 +239,20 @@ def test_compas_cra_samples(samples, name, supports, mu, stands):
         assert report.status == Status.FRICTION_EXCEEDED and "without prestress" in report.message
         assert report.unstable_blocks and all(b in report.message for b in
                                                report.unstable_blocks[:5])
+
+
+@pytest.mark.parametrize("cone", ["soc", "pyramid8", "pyramid4"])
+def test_friction_cap_bounds_the_interface_friction_resultant(cone):
+    """solve's friction_cap on a block on a 20 deg incline (two_blocks): the interface must
+    carry W sin 20 along the slope, so a cap 1 % above that is feasible and 1 % below is
+    not, whatever the vertex cones allow (mu 2 > tan 20); the cap is in the cone's norm (an
+    inscribed pyramid's facets over its inradius), and the slope lies along a facet normal
+    (0 deg) for every pyramid here."""
+    model = _model(two_blocks(incline_deg=20.0))
+    weight = DENSITY * 0.5 * G
+    needed = weight * math.sin(math.radians(20.0))
+    h = math.cos(math.pi / 8) if cone == "pyramid8" else 1.0
+    options = SolveOptions(mu=2.0, cone=cone)
+    assert solve(model, options, friction_cap=np.array([needed * 1.01 / h])).solved
+    assert not solve(model, options, friction_cap=np.array([needed * 0.99 / h])).solved
+    assert solve(model, options, friction_cap=np.array([math.inf])).solved

@@ -331,9 +331,10 @@ def _constraints(model: EquilibriumModel, options: SolveOptions, v: _Variables, 
     lp = len(v.t) > 0
     fu, fv = v.index(2, np.arange(nv)), v.index(3, np.arange(nv))
     capped = np.array([], dtype=int) if cap is None else np.flatnonzero(np.isfinite(cap))
-    group = np.full(len(model.interfaces), -1)
-    group[capped] = np.arange(len(capped))
-    group = group[model.vertex_interface]          # row of each vertex's interface cap, or -1
+    if len(capped):                 # the cap row of each vertex's interface, or -1
+        group = np.full(len(model.interfaces), -1)
+        group[capped] = np.arange(len(capped))
+        group = group[model.vertex_interface]
     if options.cone != "soc":
         angles, h = pyramid_facets(options.cone)
         for theta in angles:

@@ -27,7 +27,7 @@ held) is finally checked step by step with :func:`check_sequence`.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -36,6 +36,7 @@ from ..scene import Hold, Scene, SceneError, make_scene
 from .asbuilt import declared
 from .assembly import Assembly
 from .holds import StabilityOracle, minimal_holds, release_unneeded
+from .insertion import block_insertion
 from .options import CheckOptions
 from .pipeline import check_sequence
 from .steps import supports_present
@@ -135,6 +136,15 @@ class _Planner:
         # tried when no resting one fits, held as they are placed
         return [b for _, b in sorted(resting) + sorted(touching)][:self.plan.candidates]
 
+    def blocked(self, order: tuple[str, ...]) -> str:
+        """Why ``order[-1]`` cannot reach its pose past the blocks present ("" when it can,
+        or when insertion is not checked)."""
+        if not self.options.insertion.enabled:
+            return ""
+        found = block_insertion(self.full, self.present(order, len(order) - 1), order[-1],
+                                self.options, self.scene.approach_of(order[-1]))
+        return "" if found.insertable else found.reason
+
     def holds_for(self, order: tuple[str, ...], previous: tuple[str, ...]):
         """(held blocks, within K) for the step that places ``order[-1]``."""
         k = len(order) - 1
@@ -177,11 +187,16 @@ class _Planner:
         for k in range(n):
             children: dict[frozenset, _Partial] = {}
             best_rejected = None
+            blocked: dict[str, str] = {}
             for partial in beam:
                 found = 0
                 previous = partial.held[-1] if partial.held else ()
                 for rank, b in enumerate(self.candidates(partial.order)):
                     order = (*partial.order, b)
+                    why = self.blocked(order)
+                    if why:
+                        blocked.setdefault(b, why)
+                        continue
                     held, ok = self.holds_for(order, previous)
                     if not ok:
                         if best_rejected is None or len(held) < len(best_rejected[1]):
@@ -202,7 +217,8 @@ class _Planner:
                 why = (f"; the best candidate, {best_rejected[0]}, needs {count} held "
                        f"block{'' if count == 1 else 's'} ({', '.join(best_rejected[1])})"
                        if best_rejected else
-                       "; no unplaced block touches the placed ones")
+                       "; no unplaced block touches the placed ones" if not blocked else "")
+                why += "".join(f"; {b} cannot be inserted: {r}" for b, r in blocked.items())
                 return self._finish(best, False, k, f"no block can be placed at step {k} with "
                                     f"at most {self.plan.max_held} held{why}")
             beam = sorted(children.values(), key=lambda p: (p.score, p.order))[:self.plan.beam]
@@ -236,10 +252,14 @@ class _Planner:
         except SceneError:
             scene = None
         reports = check_sequence(scene, self.options) if scene is not None else []
-        if feasible and not all(r.stable for r in reports):
-            bad = next(r for r in reports if not r.stable)
+        if feasible and not all(r.stable and r.insertable for r in reports):
+            bad = next(r for r in reports if not (r.stable and r.insertable))
             feasible, failed = False, bad.step_index
             message = f"the plan does not re-check stable at step {failed}: {bad.message}"
+        if scene is not None and self.options.insertion.enabled:
+            # each step's direction, as checked (a given one kept), for a robot to follow
+            scene = replace(scene, approach=tuple(
+                r.insertion_direction if r.insertable else None for r in reports[:n]))
         return Plan(feasible, order, held, message, failed, scene, reports, self.checks)
 
 

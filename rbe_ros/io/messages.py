@@ -334,6 +334,8 @@ def report_to_dict(report: Report, header: dict, *, arrays: bool = False) -> dic
         "verdict_sensitive": bool(report.verdict_sensitive),
         "margin_g": float(report.margin_g),
         "margin_direction": _vec(report.margin_direction),
+        "insertable": bool(report.insertable),
+        "insertion_direction": _vec(report.insertion_direction),
     }
 
 
@@ -374,6 +376,9 @@ def report_from_dict(d: Mapping) -> Report:
         margin_g=float(d.get("margin_g", NOT_COMPUTED)),
         margin_direction=np.array(_xyz(d.get("margin_direction", {}), "margin_direction"),
                                   dtype=float),
+        insertable=bool(d.get("insertable", True)),
+        insertion_direction=np.array(_xyz(d.get("insertion_direction", {}),
+                                          "insertion_direction"), dtype=float),
     )
 
 

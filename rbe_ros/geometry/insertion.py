@@ -18,8 +18,8 @@ sweeps exactly the convex hull of its start and end vertices, one convex body, s
 discrete collision test of that body per present block decides the path (python-fcl's GJK,
 after a bounding-box broad phase). Conservative for non-convex blocks: the moving block and
 the present ones are their convex hulls, so a path accepted is free, and a path refused
-through a notch of a non-convex neighbour may still be free. The moving block's hull has its
-faces moved in by a clearance first, so that its neighbours at contact (touching, or
+through a notch of a non-convex neighbour may still be free. The moving block has its faces
+moved in by a clearance first (:func:`shrunk`), so that its neighbours at contact (touching, or
 overlapping as much as the scene validation accepts) do not count as collisions.
 """
 from __future__ import annotations
@@ -30,7 +30,7 @@ from functools import lru_cache
 
 import fcl
 import numpy as np
-from scipy.spatial import ConvexHull, HalfspaceIntersection
+from scipy.spatial import ConvexHull
 
 from .block import PosedBlock
 
@@ -77,25 +77,26 @@ def cone_directions(normals: np.ndarray, down: np.ndarray) -> list[np.ndarray]:
     that a ground-only block also offers horizontal approaches."""
     normals = distinct_normals(normals)
     down = np.asarray(down, dtype=float) / np.linalg.norm(down)
-    raw = [down]
-    for n in normals:
-        raw.append(down - (down @ n) * n)
-        for axis in np.eye(3):
-            in_plane = axis - (axis @ n) * n
-            raw += [in_plane, -in_plane]
-    for i in range(len(normals)):
-        for j in range(i + 1, len(normals)):
-            edge = np.cross(normals[i], normals[j])
-            raw += [edge, -edge]
-    if not len(normals):
-        raw += [*np.eye(3), *-np.eye(3)]
-    found: dict[tuple, np.ndarray] = {}
-    for v in raw:
-        d = _unit(v)
-        if d is not None and in_cone(d, normals):
-            found.setdefault(tuple(np.round(d, 9)), d)
+    raw = [down[None, :]]
+    if len(normals):
+        raw.append(down - (normals @ down)[:, None] * normals)     # onto each face plane
+        axes = np.eye(3)[None, :, :] - normals[:, :, None] * normals[:, None, :]
+        raw += [axes.reshape(-1, 3), -axes.reshape(-1, 3)]          # each plane's axes
+        i, j = np.triu_indices(len(normals), 1)
+        edges = np.cross(normals[i], normals[j])
+        raw += [edges, -edges]
+    else:
+        raw += [np.eye(3), -np.eye(3)]
+    raw = np.concatenate(raw)
+    norms = np.linalg.norm(raw, axis=1)
+    raw = raw[norms >= 1e-9] / norms[norms >= 1e-9, None]
+    if len(normals):
+        raw = raw[np.max(raw @ normals.T, axis=1) <= FEASIBLE_TOL]
     # closest to down first; ties broken by the rounded direction (deterministic)
-    return [found[k] for k in sorted(found, key=lambda k: (-round(float(found[k] @ down), 9), k))]
+    keys = np.round(raw, 9)
+    order = np.lexsort((*keys.T[::-1], -np.round(raw @ down, 9)))
+    _, first = np.unique(keys[order], axis=0, return_index=True)
+    return list(raw[order[np.sort(first)]])
 
 
 @lru_cache(maxsize=4096)
@@ -107,29 +108,31 @@ def _hull_object(key: bytes) -> fcl.Convex:
 
 def _convex(points: np.ndarray) -> fcl.Convex:
     hull = ConvexHull(points)
-    vertices = points[hull.vertices]
-    index = {int(v): k for k, v in enumerate(hull.vertices)}
-    faces = np.array([[3, *(index[int(v)] for v in tri)] for tri in hull.simplices])
-    return fcl.Convex(vertices, len(faces), faces.ravel())
+    index = np.empty(len(points), dtype=np.int64)
+    index[hull.vertices] = np.arange(len(hull.vertices))
+    faces = np.column_stack([np.full(len(hull.simplices), 3), index[hull.simplices]])
+    return fcl.Convex(points[hull.vertices], len(faces), faces.ravel())
 
 
-def shrunk(vertices: np.ndarray, clearance: float) -> np.ndarray:
-    """The vertices of the convex hull of ``vertices`` with every face moved in by
-    ``clearance`` (by at most half the face's distance from the hull's centre)."""
-    hull = ConvexHull(vertices)
-    centre = vertices[hull.vertices].mean(axis=0)
-    depth = -(hull.equations[:, :3] @ centre + hull.equations[:, 3])
-    offset = np.minimum(clearance, 0.5 * depth.min())
-    planes = hull.equations + np.column_stack([np.zeros((len(depth), 3)),
-                                               np.full(len(depth), offset)])
-    return HalfspaceIntersection(planes, centre).intersections
+def shrunk(block: PosedBlock, clearance: float) -> np.ndarray:
+    """``block``'s vertices moved in so that each face plane through a vertex moves in by
+    ``clearance`` (at most a quarter of the faces' least distance from the centroid): per
+    vertex m solves n . m = 1 over the planes through it (least squares where more than
+    three meet), and the vertex moves by -clearance m."""
+    normals, offsets, vertices = block.face_normals, block.face_offsets, block.vertices
+    on = (np.abs(vertices @ normals.T - offsets) <= 1e-6 * block.size).astype(float)
+    depth = float(np.min(offsets - normals @ block.centroid))
+    step = min(clearance, 0.25 * depth)
+    m = np.einsum("vij,vj->vi", np.linalg.pinv(np.einsum("vf,fi,fj->vij", on, normals, normals)),
+                  on @ normals)
+    return vertices - step * m
 
 
 def sweep_blockers(moving: PosedBlock, present: Sequence[PosedBlock], direction: np.ndarray,
                    distance: float, clearance: float) -> tuple[str, ...]:
     """Ids of the ``present`` blocks that the convex hull of ``moving`` (shrunk by
     ``clearance``) hits on its way into its pose along ``direction`` over ``distance`` m."""
-    end = shrunk(moving.vertices, clearance)
+    end = shrunk(moving, clearance)
     swept = np.vstack([end, end - distance * np.asarray(direction, dtype=float)])
     low, high = swept.min(axis=0), swept.max(axis=0)
     if not present:

@@ -5,7 +5,8 @@ when it is viewed), the data as JSON, and a small script: a 3D view of the assem
 chosen step (the blocks in the colours of :mod:`rbe_ros.io.markers`, the force segments,
 interface outlines and kerns of the same :func:`~rbe_ros.io.markers.line_markers`), a step
 slider, the table of steps (verdict, max tension, worst |V|/N, model, margin_g where the
-report has one: ``--margin``, or a bag recorded with it; reason) and the check options. Why
+report has one: ``--margin``, or a bag recorded with it; approach; reason), the placed
+block's insertion direction as an arrow, and the check options. Why
 plotly and not three.js: docs/VIEW.md.
 """
 from __future__ import annotations

@@ -209,6 +209,23 @@ def _independent_sweep_free(scene, present, block, direction, samples=40) -> boo
     return True
 
 
+def test_pocket_under_a_cap_blocked_by_the_cap():
+    """A block in a pocket (walls on four sides) may only come down, and a cap above it that
+    it does not touch blocks that path: not insertable, the cap named."""
+    scene = _ground(box_block("b", (0.2, 0.2, 0.15), (0, 0, 0.075), density=RHO),
+                    box_block("w1", (0.2, 0.6, 0.2), (-0.2, 0, 0.1), density=RHO),
+                    box_block("w2", (0.2, 0.6, 0.2), (0.2, 0, 0.1), density=RHO),
+                    box_block("w3", (0.2, 0.2, 0.2), (0, 0.2, 0.1), density=RHO),
+                    box_block("w4", (0.2, 0.2, 0.2), (0, -0.2, 0.1), density=RHO),
+                    box_block("cap", (0.6, 0.6, 0.1), (0, 0, 0.25), density=RHO))
+    assert cone_directions(_cone(scene, "b"), DOWN) == [pytest.approx(DOWN)]
+    found = _insertion(scene, "b")
+    assert not found.insertable and found.blocked_by == ("cap",)
+    assert found.reason == "1 direction blocked by cap"
+    without_cap = scene.subset([b.id for b in scene.blocks if b.id != "cap"])
+    np.testing.assert_allclose(_insertion(without_cap, "b").direction, DOWN)
+
+
 def test_trapped_sequence_reported_and_planned_around():
     """A block placed after the four walls and the cap around it cannot get in; the planner
     orders it before them."""
@@ -234,6 +251,10 @@ def test_trapped_sequence_reported_and_planned_around():
     assert plan.order.index("b") < plan.order.index("cap")
     assert all(r.insertable for r in plan.reports)
     np.testing.assert_allclose(plan.scene.approach[plan.order.index("b")], DOWN, atol=1e-12)
+    prefix = make_scene("trap", scene.blocks, sequence=["w1", "w2", "w3", "w4", "cap"])
+    stuck = plan_sequence(prefix, max_held=0, keep_sequence=True)
+    assert not stuck.feasible and stuck.failed_step == 5
+    assert "b cannot be inserted: enclosed" in stuck.message, stuck.message
     # the planned scene's directions are checked, not chosen, when it is checked again
     again = check_sequence(plan.scene)
     for r, d in zip(again, plan.scene.approach):

@@ -159,25 +159,38 @@ def insertion(moving: PosedBlock, normals: np.ndarray, present: Sequence[PosedBl
     over ``distance`` is free, or ``given`` (unit) checked alone, within ``angle_tol``
     (radians) of the cone."""
     normals = distinct_normals(normals)
+    down = np.asarray(down, dtype=float) / np.linalg.norm(down)
+    blockers: dict[str, None] = {}
+    tried = 0
     if given is not None:
         given = np.asarray(given, dtype=float) / np.linalg.norm(given)
         if not in_cone(given, normals, np.sin(angle_tol)):
             return Insertion(False, reason=f"the given approach {_fmt(given)} comes out of a "
                              "neighbour (against an interface normal)")
         candidates = [given]
+    elif in_cone(down, normals):
+        # straight down is the closest direction when the cone holds it: its path first,
+        # the other candidates only when it is blocked
+        hits = sweep_blockers(moving, present, down, distance, clearance)
+        if not hits:
+            return Insertion(True, down)
+        blockers.update(dict.fromkeys(hits))
+        tried = 1
+        candidates = cone_directions(normals, down)[1:]
     else:
         candidates = cone_directions(normals, down)
         if not candidates:
             return Insertion(False, reason="enclosed: no direction leaves every interface")
-    blockers: dict[str, None] = {}
     for d in candidates:
         hits = sweep_blockers(moving, present, d, distance, clearance)
         if not hits:
             return Insertion(True, d)
         blockers.update(dict.fromkeys(hits))
-    tried = "the given approach" if given is not None else f"{len(candidates)} directions"
+    count = tried + len(candidates)
+    what = "the given approach" if given is not None else \
+        f"{count} direction{'' if count == 1 else 's'}"
     return Insertion(False, blocked_by=tuple(blockers),
-                     reason=f"{tried} blocked by {', '.join(blockers)}")
+                     reason=f"{what} blocked by {', '.join(blockers)}")
 
 
 def _fmt(v: np.ndarray) -> str:

@@ -16,8 +16,10 @@ from rbe_ros.analysis.insertion import block_insertion, interface_normals
 from rbe_ros.analysis.options import CheckOptions, InsertionOptions
 from rbe_ros.analysis.pipeline import check_scene, check_sequence
 from rbe_ros.analysis.planning import plan_sequence
+from rbe_ros.io.messages import scene_from_state_dict, state_to_dict
+from rbe_ros.io.scene_json import scene_from_dict, scene_to_dict
 from rbe_ros.geometry.insertion import cone_directions, in_cone, sweep_blockers
-from rbe_ros.scene import box_block, make_block, make_scene
+from rbe_ros.scene import SceneError, box_block, make_block, make_scene
 
 DOWN = np.array([0.0, 0.0, -1.0])
 RHO = 2000.0
@@ -287,3 +289,26 @@ def test_plans_of_generated_scenes_are_insertable(name):
         present = [b.id for b in plan.scene.blocks if b.support] + plan.order[:k + 1]
         assert _independent_sweep_free(plan.scene, present, r.block_placed,
                                        r.insertion_direction), r.block_placed
+
+
+def test_given_approach_round_trips_scene_json_and_assembly_state():
+    """A scene's "approach" survives the scene JSON and the AssemblyState dict (a zero vector
+    there: choose), and the check keeps a given direction."""
+    scene = _lintel()
+    seq = ["p1", "p2", "lintel", "brick"]
+    given = make_scene("g", scene.blocks, sequence=seq,
+                       approach=[None, None, [0, 0, -2], [0, -1, 0]])
+    for back in (scene_from_dict(scene_to_dict(given)),
+                 scene_from_state_dict(state_to_dict(given))):
+        assert back.approach[:2] == (None, None)
+        np.testing.assert_allclose(back.approach[2], DOWN)
+        np.testing.assert_allclose(back.approach[3], [0, -1, 0])
+    reports = check_sequence(given)
+    np.testing.assert_allclose(reports[3].insertion_direction, [0, -1, 0])
+    refused = make_scene("g", scene.blocks, sequence=seq, approach=[None, None, None, DOWN])
+    last = check_sequence(refused)[-1]
+    assert not last.insertable and "the given approach blocked by lintel" in last.message
+    with pytest.raises(SceneError, match="one entry per step"):
+        make_scene("g", scene.blocks, sequence=seq, approach=[None])
+    with pytest.raises(SceneError, match="non-zero"):
+        make_scene("g", scene.blocks, sequence=seq, approach=[None, None, None, [0, 0, 0]])

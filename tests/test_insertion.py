@@ -5,6 +5,7 @@ sequence and a plan that avoids it."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -16,9 +17,11 @@ from rbe_ros.analysis.insertion import block_insertion, interface_normals
 from rbe_ros.analysis.options import CheckOptions, InsertionOptions
 from rbe_ros.analysis.pipeline import check_scene, check_sequence
 from rbe_ros.analysis.planning import plan_sequence
+from rbe_ros.geometry.insertion import cone_directions, in_cone, sweep_blockers
+from rbe_ros.io.markers import ARROW, approach_markers, scene_meshes
 from rbe_ros.io.messages import scene_from_state_dict, state_to_dict
 from rbe_ros.io.scene_json import scene_from_dict, scene_to_dict
-from rbe_ros.geometry.insertion import cone_directions, in_cone, sweep_blockers
+from rbe_ros.io.table import approach_text, format_table
 from rbe_ros.scene import SceneError, box_block, make_block, make_scene
 
 DOWN = np.array([0.0, 0.0, -1.0])
@@ -312,3 +315,23 @@ def test_given_approach_round_trips_scene_json_and_assembly_state():
         make_scene("g", scene.blocks, sequence=seq, approach=[None])
     with pytest.raises(SceneError, match="non-zero"):
         make_scene("g", scene.blocks, sequence=seq, approach=[None, None, None, [0, 0, 0]])
+
+
+def test_table_approach_column_and_marker_arrow():
+    """The table says down / side / the vector / none, and the markers' arrow ends at the
+    placed block's centre, pointing along its direction."""
+    scene = make_scene("g", _lintel().blocks, sequence=["p1", "p2", "lintel", "brick"])
+    reports = check_sequence(scene)
+    assert [approach_text(r) for r in reports] == ["down", "down", "down", "side -y"]
+    assert "approach" in format_table(reports).splitlines()[0]
+    tilted = replace(reports[3], insertion_direction=np.array([0.6, 0.0, -0.8]))
+    assert approach_text(tilted) == "(0.6, 0, -0.8)"
+    assert approach_text(replace(reports[3], insertable=False,
+                                 insertion_direction=np.zeros(3))) == "none"
+    header = {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": "world"}
+    (arrow,) = approach_markers(scene_meshes(scene), reports[3], header)
+    assert arrow["type"] == ARROW and arrow["ns"] == "insertion"
+    tail, tip = arrow["points"]
+    np.testing.assert_allclose(tip, [0, 0, (0.6 - 0.05) / 2], atol=1e-9)     # the centre
+    np.testing.assert_allclose((tip - tail) / np.linalg.norm(tip - tail),
+                               reports[3].insertion_direction, atol=1e-12)

@@ -75,6 +75,23 @@ def test_corner_down_and_never_through_the_wall():
     assert not _insertion(scene, "b", given=np.array([1.0, 0, -1])).insertable
 
 
+
+def test_wall_off_vertical_within_the_angle_tolerance_keeps_down():
+    """A block-high wall leaning 0.5 deg over the block (within the 1 deg contact tolerance):
+    its normal points slightly down, so the exact cone's closest direction runs down along
+    the wall's face, 0.5 deg off vertical, yet the block comes straight down (its path is free: the wall overhangs by less
+    than the clearance)."""
+    lean = math.radians(0.5)
+    q = [0.0, math.sin(lean / 2), 0.0, math.cos(lean / 2)]
+    scene = _ground(box_block("wall", (0.2, 2, 0.2), (-0.3, 0, 0.101), q, support=True,
+                              density=RHO),
+                    box_block("b", (0.4, 0.2, 0.2), (0, 0, 0.1), density=RHO))
+    exact = cone_directions(_cone(scene, "b"), DOWN)[0]
+    np.testing.assert_allclose(exact, [-math.sin(lean), 0, -math.cos(lean)], atol=1e-6)
+    found = _insertion(scene, "b")
+    np.testing.assert_allclose(found.direction, DOWN, atol=1e-12)
+
+
 def _prism(block_id, outline, depth, **kw):
     """A prism of the xz ``outline`` extruded over y in [-depth/2, depth/2], its faces
     turned outward whichever way the outline runs."""

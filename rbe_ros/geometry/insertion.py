@@ -156,8 +156,8 @@ def insertion(moving: PosedBlock, normals: np.ndarray, present: Sequence[PosedBl
               given: np.ndarray | None = None, angle_tol: float = 0.0) -> Insertion:
     """How ``moving`` reaches its pose past the ``present`` blocks, ``normals`` (k, 3) those
     of its interfaces, into it: the first direction of :func:`cone_directions` whose path
-    over ``distance`` is free, or ``given`` (unit) checked alone, within ``angle_tol``
-    (radians) of the cone."""
+    over ``distance`` is free (straight down first if it is within ``angle_tol``, radians, of
+    the cone), or ``given`` (unit) checked alone, within ``angle_tol`` of the cone."""
     normals = distinct_normals(normals)
     down = np.asarray(down, dtype=float) / np.linalg.norm(down)
     blockers: dict[str, None] = {}
@@ -168,9 +168,10 @@ def insertion(moving: PosedBlock, normals: np.ndarray, present: Sequence[PosedBl
             return Insertion(False, reason=f"the given approach {_fmt(given)} comes out of a "
                              "neighbour (against an interface normal)")
         candidates = [given]
-    elif in_cone(down, normals):
-        # straight down is the closest direction when the cone holds it: its path first,
-        # the other candidates only when it is blocked
+    elif in_cone(down, normals, np.sin(angle_tol)):
+        # straight down is the closest direction when the cone holds it (within the contact
+        # angle tolerance: a neighbour's face off vertical by less does not tilt the
+        # approach): its path first, the other candidates only when it is blocked
         hits = sweep_blockers(moving, present, down, distance, clearance)
         if not hits:
             return Insertion(True, down)

@@ -92,12 +92,14 @@ def test_wall_off_vertical_within_the_angle_tolerance_keeps_down():
     np.testing.assert_allclose(found.direction, DOWN, atol=1e-12)
 
 
-def _prism(block_id, outline, depth, **kw):
+def _prism(block_id, outline, depth, caps=None, **kw):
     """A prism of the xz ``outline`` extruded over y in [-depth/2, depth/2], its faces
-    turned outward whichever way the outline runs."""
+    turned outward whichever way the outline runs; ``caps``: the end faces as triangles of
+    outline indices (a non-convex outline), else the outline itself."""
     n = len(outline)
     v = np.array([(x, -depth / 2, z) for x, z in outline] + [(x, depth / 2, z) for x, z in outline])
-    faces = [tuple(range(n)), tuple(range(2 * n - 1, n - 1, -1))]
+    caps = [tuple(range(n))] if caps is None else caps
+    faces = [tuple(c) for c in caps] + [tuple(n + i for i in c[::-1]) for c in caps]
     faces += [(i, i + n, (i + 1) % n + n, (i + 1) % n) for i in range(n)]
     volume = sum(float(v[f[0]] @ np.cross(v[f[i]], v[f[i + 1]]))
                  for f in faces for i in range(1, len(f) - 1))
@@ -194,6 +196,7 @@ def test_brick_under_lintel_refused_down_inserted_sideways():
     assert abs(found.direction[1]) == pytest.approx(1.0)     # the pillars close +-x
     assert _independent_sweep_free(scene, [b.id for b in scene.blocks], "brick",
                                    found.direction)
+    assert not _independent_sweep_free(scene, [b.id for b in scene.blocks], "brick", DOWN)
 
 
 def test_non_convex_neighbour_is_its_convex_hull():
@@ -201,11 +204,27 @@ def test_non_convex_neighbour_is_its_convex_hull():
     refused from above (the U's hull covers the notch) though the notch is open upwards."""
     u = [(-0.3, 0), (0.3, 0), (0.3, 0.3), (0.1, 0.3), (0.1, 0.1), (-0.1, 0.1), (-0.1, 0.3),
          (-0.3, 0.3)]
-    scene = make_scene("u", [_prism("u", u, 0.3, support=True),
+    caps = [(0, 1, 4), (0, 4, 5), (1, 2, 3), (1, 3, 4), (0, 5, 6), (0, 6, 7)]
+    scene = make_scene("u", [_prism("u", u, 0.3, caps, support=True),
                              box_block("b", (0.2, 0.3, 0.2), (0, 0, 0.2), density=RHO)])
     assert _independent_sweep_free(scene, ["u", "b"], "b", DOWN)     # truly free
     found = _insertion(scene, "b")
     assert not found.insertable and found.blocked_by == ("u",)
+
+
+def test_non_convex_moving_block_is_its_convex_hull():
+    """Conservative for a non-convex moving block too: an inverted U coming down over a post
+    that fits its notch is refused (its hull would sweep through the post), though the
+    sampled sweep of the true shape is free."""
+    u = [(-0.3, 0.3), (-0.3, 0), (-0.1, 0), (-0.1, 0.2), (0.1, 0.2), (0.1, 0), (0.3, 0),
+         (0.3, 0.3)]
+    scene = _ground(box_block("post", (0.1, 0.3, 0.15), (0, 0, 0.075), support=True,
+                              density=RHO),
+                    _prism("u", u, 0.3, [(0, 1, 2), (0, 2, 3), (0, 3, 7), (3, 4, 7), (4, 5, 6),
+                                         (4, 6, 7)]))
+    assert _independent_sweep_free(scene, ["ground", "post", "u"], "u", DOWN)
+    found = _insertion(scene, "u")
+    assert not found.insertable and "post" in found.blocked_by
 
 
 def _independent_sweep_free(scene, present, block, direction, samples=40) -> bool:

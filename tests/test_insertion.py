@@ -17,12 +17,12 @@ from rbe_ros.analysis.insertion import block_insertion, interface_normals
 from rbe_ros.analysis.options import CheckOptions, InsertionOptions
 from rbe_ros.analysis.pipeline import check_scene, check_sequence
 from rbe_ros.analysis.planning import plan_sequence
-from rbe_ros.geometry.insertion import cone_directions, in_cone, sweep_blockers
+from rbe_ros.geometry.insertion import cone_directions, in_cone, shrunk, sweep_blockers
 from rbe_ros.io.markers import ARROW, approach_markers, scene_meshes
 from rbe_ros.io.messages import scene_from_state_dict, state_to_dict
 from rbe_ros.io.scene_json import scene_from_dict, scene_to_dict
 from rbe_ros.io.table import approach_text, format_table
-from rbe_ros.scene import SceneError, box_block, make_block, make_scene
+from rbe_ros.scene import SceneError, box_block, box_vertices, make_block, make_scene
 
 DOWN = np.array([0.0, 0.0, -1.0])
 RHO = 2000.0
@@ -371,3 +371,22 @@ def test_table_approach_column_and_marker_arrow():
     np.testing.assert_allclose(tip, [0, 0, (0.6 - 0.05) / 2], atol=1e-9)     # the centre
     np.testing.assert_allclose((tip - tail) / np.linalg.norm(tip - tail),
                                reports[3].insertion_direction, atol=1e-12)
+
+
+def test_shrunk_box_is_the_box_offset_inwards():
+    """The clearance moves every face of a box in by exactly that much (closed form)."""
+    corners = box_vertices((0.4, 0.2, 0.1)) + [1.0, 2.0, 3.0]
+    inner = shrunk(corners, 0.01)
+    np.testing.assert_allclose(np.sort(np.unique(np.round(inner - [1, 2, 3], 12), axis=0), 0),
+                               np.sort(box_vertices((0.38, 0.18, 0.08)), 0), atol=1e-12)
+    # capped at a quarter of the least face distance (here 0.05 / 4)
+    np.testing.assert_allclose(np.ptp(shrunk(corners, 1.0), axis=0), [0.375, 0.175, 0.075])
+
+
+def test_ten_thousand_vertex_block_comes_down():
+    """A 10,000-vertex convex dome on the ground: straight down (the shrink and the path are
+    linear in the hull's size, no vertex-by-face table)."""
+    scene = gen.convex_domes(1)
+    found = _insertion(scene, "dome0")
+    assert found.insertable
+    np.testing.assert_allclose(found.direction, DOWN, atol=1e-12)

@@ -10,6 +10,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import trimesh
+from scipy.spatial.transform import Rotation
 
 from rbe_ros import generators as gen
 from rbe_ros.analysis.assembly import Assembly
@@ -18,7 +19,8 @@ from rbe_ros.analysis.options import CheckOptions, InsertionOptions
 from rbe_ros.analysis.pipeline import check_scene, check_sequence
 from rbe_ros.analysis.planning import plan_sequence
 from rbe_ros.geometry.insertion import cone_directions, in_cone, shrunk, sweep_blockers
-from rbe_ros.io.markers import ARROW, approach_markers, scene_meshes
+from rbe_ros.io.foxglove_scene import scene_update, x_onto
+from rbe_ros.io.markers import ARROW, approach_markers, scene_meshes, step_markers
 from rbe_ros.io.messages import scene_from_state_dict, state_to_dict
 from rbe_ros.io.scene_json import scene_from_dict, scene_to_dict
 from rbe_ros.io.table import approach_text, format_table
@@ -371,6 +373,15 @@ def test_table_approach_column_and_marker_arrow():
     np.testing.assert_allclose(tip, [0, 0, (0.6 - 0.05) / 2], atol=1e-9)     # the centre
     np.testing.assert_allclose((tip - tail) / np.linalg.norm(tip - tail),
                                reports[3].insertion_direction, atol=1e-12)
+    assert scene_update(step_markers(scene, reports[3], header)).encode()      # Foxglove too
+
+
+@pytest.mark.parametrize("d", [(0, 0, -1), (0, -1, 0), (-1, 0, 0), (1, 0, 0), (0.6, 0, -0.8)])
+def test_foxglove_arrow_turns_x_onto_the_direction(d):
+    """The Foxglove arrow's orientation turns its x axis onto the direction (checked with
+    scipy's rotation, an independent computation)."""
+    turned = Rotation.from_quat(x_onto(np.array(d, dtype=float))).apply([1.0, 0.0, 0.0])
+    np.testing.assert_allclose(turned, d, atol=1e-12)
 
 
 def test_shrunk_box_is_the_box_offset_inwards():

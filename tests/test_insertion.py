@@ -18,7 +18,7 @@ from rbe_ros.analysis.insertion import block_insertion, interface_normals
 from rbe_ros.analysis.options import CheckOptions, InsertionOptions
 from rbe_ros.analysis.pipeline import check_scene, check_sequence
 from rbe_ros.analysis.planning import plan_sequence
-from rbe_ros.geometry.insertion import cone_directions, in_cone, shrunk, sweep_blockers
+from rbe_ros.geometry.insertion import PathCheck, cone_directions, in_cone, shrunk
 from rbe_ros.io.foxglove_scene import scene_update, x_onto
 from rbe_ros.io.markers import ARROW, approach_markers, scene_meshes, step_markers
 from rbe_ros.io.messages import scene_from_state_dict, state_to_dict
@@ -40,7 +40,9 @@ def _cone(scene, block):
     assembly = Assembly.from_scene(scene)
     ids = [b.id for b in assembly.blocks]
     k = ids.index(block)
-    return interface_normals(assembly, k, set(range(len(ids))) - {k})
+    others = np.ones(len(ids), dtype=bool)
+    others[k] = False
+    return interface_normals(assembly, k, others)
 
 
 def _insertion(scene, block, **kw):
@@ -191,7 +193,7 @@ def test_brick_under_lintel_refused_down_inserted_sideways():
     assembly = Assembly.from_scene(scene)
     brick = next(b for b in assembly.blocks if b.id == "brick")
     others = [b for b in assembly.blocks if b.id != "brick"]
-    assert sweep_blockers(brick, others, DOWN, 1.2, 0.002) == ("lintel",)
+    assert PathCheck(brick, others, 1.2, 0.002).blockers(DOWN) == ("lintel",)
     found = _insertion(scene, "brick")
     assert found.insertable
     assert found.direction[2] == pytest.approx(0.0, abs=1e-12)

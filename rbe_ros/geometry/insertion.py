@@ -124,45 +124,55 @@ def shrunk(vertices: np.ndarray, clearance: float) -> np.ndarray:
     normals = hull.equations[:, :3]
     centre = vertices[hull.vertices].mean(axis=0)
     step = min(clearance, 0.25 * float(np.min(-(hull.equations[:, 3] + normals @ centre))))
-    gram = np.zeros((len(vertices), 3, 3))
-    sums = np.zeros((len(vertices), 3))
-    for corner in hull.simplices.T:
-        np.add.at(gram, corner, normals[:, :, None] * normals[:, None, :])
-        np.add.at(sums, corner, normals)
-    ids = hull.vertices
-    return vertices[ids] - step * np.einsum("vij,vj->vi", np.linalg.pinv(gram[ids]), sums[ids])
+    # per hull vertex, the sums over the facets through it of n n^T and of n
+    per = np.hstack([(normals[:, :, None] * normals[:, None, :]).reshape(-1, 9), normals])
+    corners = hull.simplices.ravel()
+    order = np.argsort(corners, kind="stable")
+    corners = corners[order]
+    starts = np.flatnonzero(np.r_[True, corners[1:] != corners[:-1]])
+    sums = np.add.reduceat(np.repeat(per, 3, axis=0)[order], starts, axis=0)
+    m = np.einsum("vij,vj->vi", np.linalg.pinv(sums[:, :9].reshape(-1, 3, 3)), sums[:, 9:])
+    return vertices[corners[starts]] - step * m
 
 
-def sweep_blockers(moving: PosedBlock, present: Sequence[PosedBlock], direction: np.ndarray,
-                   distance: float, clearance: float) -> tuple[str, ...]:
-    """Ids of the ``present`` blocks that the convex hull of ``moving`` (shrunk by
-    ``clearance``) hits on its way into its pose along ``direction`` over ``distance`` m."""
-    end = shrunk(moving.vertices, clearance)
-    swept = np.vstack([end, end - distance * np.asarray(direction, dtype=float)])
-    low, high = swept.min(axis=0), swept.max(axis=0)
-    if not present:
-        return ()
-    boxes = np.array([b.aabb for b in present])
-    near = np.flatnonzero(np.all(boxes[:, 0] <= high, axis=1) & np.all(boxes[:, 1] >= low, axis=1))
-    if not len(near):
-        return ()
-    body = fcl.CollisionObject(_convex(swept))
-    request, hits = fcl.CollisionRequest(), []
-    for k in near:
-        other = fcl.CollisionObject(_hull_object(np.ascontiguousarray(
-            present[k].vertices, dtype=float).tobytes()))
-        if fcl.collide(body, other, request, fcl.CollisionResult()):
-            hits.append(present[k].id)
-    return tuple(hits)
+class PathCheck:
+    """The swept-path test of one block moving into its pose past fixed ``present`` blocks
+    (their bounding boxes ``boxes``, (n, 2, 3), if known): its convex hull shrunk by
+    ``clearance`` (once), swept over ``distance`` m along each direction asked."""
+
+    def __init__(self, moving: PosedBlock, present: Sequence[PosedBlock], distance: float,
+                 clearance: float, boxes: np.ndarray | None = None):
+        self.end = shrunk(moving.vertices, clearance)
+        self.present = list(present)
+        self.boxes = (np.array([b.aabb for b in self.present]).reshape(-1, 2, 3)
+                      if boxes is None else boxes)
+        self.distance = distance
+
+    def blockers(self, direction: np.ndarray) -> tuple[str, ...]:
+        """Ids of the present blocks the path along unit ``direction`` hits."""
+        swept = np.vstack([self.end, self.end - self.distance * np.asarray(direction, float)])
+        low, high = swept.min(axis=0), swept.max(axis=0)
+        boxes = self.boxes
+        near = np.flatnonzero(np.all(boxes[:, 0] <= high, axis=1)
+                              & np.all(boxes[:, 1] >= low, axis=1))
+        if not len(near):
+            return ()
+        body = fcl.CollisionObject(_convex(swept))
+        request, hits = fcl.CollisionRequest(), []
+        for k in near:
+            other = fcl.CollisionObject(_hull_object(np.ascontiguousarray(
+                self.present[k].vertices, dtype=float).tobytes()))
+            if fcl.collide(body, other, request, fcl.CollisionResult()):
+                hits.append(self.present[k].id)
+        return tuple(hits)
 
 
-def insertion(moving: PosedBlock, normals: np.ndarray, present: Sequence[PosedBlock],
-              down: np.ndarray, distance: float, clearance: float,
+def insertion(normals: np.ndarray, path: PathCheck, down: np.ndarray,
               given: np.ndarray | None = None, angle_tol: float = 0.0) -> Insertion:
-    """How ``moving`` reaches its pose past the ``present`` blocks, ``normals`` (k, 3) those
-    of its interfaces, into it: the first direction of :func:`cone_directions` whose path
-    over ``distance`` is free (straight down first if it is within ``angle_tol``, radians, of
-    the cone), or ``given`` (unit) checked alone, within ``angle_tol`` of the cone."""
+    """How a block reaches its pose, ``normals`` (k, 3) those of its interfaces, into it:
+    the first direction of :func:`cone_directions` whose ``path`` is free (straight down
+    first if it is within ``angle_tol``, radians, of the cone), or ``given`` (unit) checked
+    alone, within ``angle_tol`` of the cone."""
     normals = distinct_normals(normals)
     down = np.asarray(down, dtype=float) / np.linalg.norm(down)
     blockers: dict[str, None] = {}
@@ -177,7 +187,7 @@ def insertion(moving: PosedBlock, normals: np.ndarray, present: Sequence[PosedBl
         # straight down is the closest direction when the cone holds it (within the contact
         # angle tolerance: a neighbour's face off vertical by less does not tilt the
         # approach): its path first, the other candidates only when it is blocked
-        hits = sweep_blockers(moving, present, down, distance, clearance)
+        hits = path.blockers(down)
         if not hits:
             return Insertion(True, down)
         blockers.update(dict.fromkeys(hits))
@@ -188,7 +198,7 @@ def insertion(moving: PosedBlock, normals: np.ndarray, present: Sequence[PosedBl
         if not candidates:
             return Insertion(False, reason="enclosed: no direction leaves every interface")
     for d in candidates:
-        hits = sweep_blockers(moving, present, d, distance, clearance)
+        hits = path.blockers(d)
         if not hits:
             return Insertion(True, d)
         blockers.update(dict.fromkeys(hits))

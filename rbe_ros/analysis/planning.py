@@ -10,7 +10,10 @@ blocks (a scaffold, a centring present for some steps) apply by step index as in
 At each step, the candidates of a partial plan are the unplaced blocks that rest on a
 present block (an interface whose normal into the candidate points up, against gravity),
 then those that only touch one, each group lowest first (centroid along gravity), then the
-largest contact area with present blocks, then scene order. For a candidate the holds are
+largest contact area with present blocks, then scene order; of these the first
+``candidates`` that can reach their pose past the present blocks (insertion, see
+:mod:`rbe_ros.analysis.insertion`; those that cannot are named when the step fails). For a
+candidate the holds are
 found as a robot would keep them: nothing, if the step stands so; else the blocks held at
 the previous step plus the new block, with more blocks added greedily while the step does
 not stand (those the failed check names as moving first), then every hold whose release
@@ -52,7 +55,7 @@ class PlanOptions:
 
     max_held: int = 2            # K: blocks held at any step
     beam: int = 1                # partial plans kept per step (1: greedy)
-    candidates: int = 8          # candidates tried per partial plan and step, lowest first
+    candidates: int = 8          # insertable candidates tried per partial plan and step
     keep_sequence: bool = False  # the scene's sequence is a fixed prefix of the order
 
     def __post_init__(self):
@@ -117,11 +120,13 @@ class _Planner:
         """The supports present at step ``k`` (those with holds while active) and ``order``."""
         return supports_present(self.base, k) + tuple(order)
 
-    def candidates(self, order: tuple[str, ...]) -> list[str]:
+    def candidates(self, order: tuple[str, ...], blocked: dict[str, str]) -> list[str]:
+        """The first ``candidates`` blocks, in rank order, that can reach their pose; those
+        that cannot go into ``blocked`` with the reason."""
         k = len(order)
         prefix = self.scene.sequence if self.plan.keep_sequence else ()
         if k < len(prefix):
-            return [prefix[k]]
+            return self.insertable(order, [prefix[k]], blocked)
         placed = set(order)
         present = set(self.present(order, k))
         left = [b for b in self.free if b not in placed and b not in prefix[k:]]
@@ -134,7 +139,21 @@ class _Planner:
             (resting if any(r for _, r in near) else touching).append((key, b))
         # blocks that only touch (a key-stone's neighbour against the crown) come after:
         # tried when no resting one fits, held as they are placed
-        return [b for _, b in sorted(resting) + sorted(touching)][:self.plan.candidates]
+        return self.insertable(order, [b for _, b in sorted(resting) + sorted(touching)],
+                               blocked)
+
+    def insertable(self, order, ranked, blocked: dict[str, str]) -> list[str]:
+        """The first ``candidates`` of ``ranked`` that can reach their pose after ``order``."""
+        found = []
+        for b in ranked:
+            why = self.blocked((*order, b))
+            if why:
+                blocked.setdefault(b, why)
+                continue
+            found.append(b)
+            if len(found) == self.plan.candidates:
+                break
+        return found
 
     def blocked(self, order: tuple[str, ...]) -> str:
         """Why ``order[-1]`` cannot reach its pose past the blocks present ("" when it can,
@@ -191,12 +210,8 @@ class _Planner:
             for partial in beam:
                 found = 0
                 previous = partial.held[-1] if partial.held else ()
-                for rank, b in enumerate(self.candidates(partial.order)):
+                for rank, b in enumerate(self.candidates(partial.order, blocked)):
                     order = (*partial.order, b)
-                    why = self.blocked(order)
-                    if why:
-                        blocked.setdefault(b, why)
-                        continue
                     held, ok = self.holds_for(order, previous)
                     if not ok:
                         if best_rejected is None or len(held) < len(best_rejected[1]):

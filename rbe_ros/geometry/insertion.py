@@ -100,10 +100,10 @@ def cone_directions(normals: np.ndarray, down: np.ndarray) -> list[np.ndarray]:
 
 
 @lru_cache(maxsize=4096)
-def _hull_object(key: bytes) -> fcl.Convex:
-    """An fcl convex body of the hull of the vertices serialised in ``key`` (cached: a
+def _hull_object(key: bytes) -> fcl.CollisionObject:
+    """An fcl object of the convex hull of the vertices serialised in ``key`` (cached: a
     present block is tested against many moving blocks)."""
-    return _convex(np.frombuffer(key).reshape(-1, 3))
+    return fcl.CollisionObject(_convex(np.frombuffer(key).reshape(-1, 3)))
 
 
 def _convex(points: np.ndarray) -> fcl.Convex:
@@ -160,8 +160,8 @@ class PathCheck:
         body = fcl.CollisionObject(_convex(swept))
         request, hits = fcl.CollisionRequest(), []
         for k in near:
-            other = fcl.CollisionObject(_hull_object(np.ascontiguousarray(
-                self.present[k].vertices, dtype=float).tobytes()))
+            other = _hull_object(np.ascontiguousarray(self.present[k].vertices,
+                                                      dtype=float).tobytes())
             if fcl.collide(body, other, request, fcl.CollisionResult()):
                 hits.append(self.present[k].id)
         return tuple(hits)
@@ -173,7 +173,7 @@ def insertion(normals: np.ndarray, path: PathCheck, down: np.ndarray,
     the first direction of :func:`cone_directions` whose ``path`` is free (straight down
     first if it is within ``angle_tol``, radians, of the cone), or ``given`` (unit) checked
     alone, within ``angle_tol`` of the cone."""
-    normals = distinct_normals(normals)
+    normals = np.asarray(normals, dtype=float).reshape(-1, 3)
     down = np.asarray(down, dtype=float) / np.linalg.norm(down)
     blockers: dict[str, None] = {}
     tried = 0

@@ -45,6 +45,7 @@ bench: setup
 	$(PY) -m pip check --disable-pip-version-check
 	$(PY) benchmarks/bench.py $(BENCH_ARGS)
 	$(MAKE) bench-margin
+	$(MAKE) bench-insertion
 
 # LMGC90 alone (non-smooth contact dynamics, the accuracy reference; about 10 minutes): its
 # verdicts on the near-limit suite and on compas_cra's samples, ours re-timed beside it,
@@ -99,6 +100,12 @@ lock:
 # apt-get as root or with sudo; seconds when already installed).
 # Cost of margin_g against a check, Monte Carlo throughput of 2 workers and of a local
 # 2-CPU Ray against one process: docs/MARGIN.md (a few minutes; also run by make bench).
+# Insertion check against the stability check per step, 140-block dome and 1,020-block wall:
+# docs/INSERTION.md (about 5 minutes, most of it the wall's stability checks).
+.PHONY: bench-insertion
+bench-insertion: setup
+	$(PY) benchmarks/insertion.py
+
 .PHONY: bench-margin
 bench-margin: ray
 	$(PY) benchmarks/margin.py

@@ -10,7 +10,10 @@ blocks (a scaffold, a centring present for some steps) apply by step index as in
 At each step, the candidates of a partial plan are the unplaced blocks that rest on a
 present block (an interface whose normal into the candidate points up, against gravity),
 then those that only touch one, each group lowest first (centroid along gravity), then the
-largest contact area with present blocks, then scene order. For a candidate the holds are
+largest contact area with present blocks, then scene order; of these the first
+``candidates`` that can reach their pose past the present blocks (insertion, see
+:mod:`rbe_ros.analysis.insertion`; those that cannot are named when the step fails). For a
+candidate the holds are
 found as a robot would keep them: nothing, if the step stands so; else the blocks held at
 the previous step plus the new block, with more blocks added greedily while the step does
 not stand (those the failed check names as moving first), then every hold whose release
@@ -28,7 +31,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -37,6 +40,7 @@ from ..scene import Hold, Scene, SceneError, make_scene
 from .asbuilt import declared
 from .assembly import Assembly
 from .holds import StabilityOracle, minimal_holds, release_unneeded
+from .insertion import block_insertion
 from .options import CheckOptions
 from .pipeline import check_sequence
 from .steps import supports_present
@@ -54,7 +58,7 @@ class PlanOptions:
 
     max_held: int = 2            # K: blocks held at any step
     beam: int = 1                # partial plans kept per step (1: greedy)
-    candidates: int = 8          # candidates tried per partial plan and step, lowest first
+    candidates: int = 8          # insertable candidates tried per partial plan and step
     keep_sequence: bool = False  # the scene's sequence is a fixed prefix of the order
 
     def __post_init__(self):
@@ -136,11 +140,13 @@ class _Planner:
         """The supports present at step ``k`` (those with holds while active) and ``order``."""
         return supports_present(self.base, k) + tuple(order)
 
-    def candidates(self, order: tuple[str, ...]) -> list[str]:
+    def candidates(self, order: tuple[str, ...], blocked: dict[str, str]) -> list[str]:
+        """The first ``candidates`` blocks, in rank order, that can reach their pose; those
+        that cannot go into ``blocked`` with the reason."""
         k = len(order)
         prefix = self.scene.sequence if self.plan.keep_sequence else ()
         if k < len(prefix):
-            return [prefix[k]]
+            return self.insertable(order, [prefix[k]], blocked)
         placed = set(order)
         present = set(self.present(order, k))
         left = [b for b in self.free if b not in placed and b not in prefix[k:]]
@@ -153,7 +159,30 @@ class _Planner:
             (resting if any(r for _, r in near) else touching).append((key, b))
         # blocks that only touch (a key-stone's neighbour against the crown) come after:
         # tried when no resting one fits, held as they are placed
-        return [b for _, b in sorted(resting) + sorted(touching)][:self.plan.candidates]
+        return self.insertable(order, [b for _, b in sorted(resting) + sorted(touching)],
+                               blocked)
+
+    def insertable(self, order, ranked, blocked: dict[str, str]) -> list[str]:
+        """The first ``candidates`` of ``ranked`` that can reach their pose after ``order``."""
+        found = []
+        for b in ranked:
+            why = self.blocked((*order, b))
+            if why:
+                blocked.setdefault(b, why)
+                continue
+            found.append(b)
+            if len(found) == self.plan.candidates:
+                break
+        return found
+
+    def blocked(self, order: tuple[str, ...]) -> str:
+        """Why ``order[-1]`` cannot reach its pose past the blocks present ("" when it can,
+        or when insertion is not checked)."""
+        if not self.options.insertion.enabled:
+            return ""
+        found = block_insertion(self.full, self.present(order, len(order) - 1), order[-1],
+                                self.options, self.scene.approach_of(order[-1]))
+        return "" if found.insertable else found.reason
 
     def holds_for(self, order: tuple[str, ...], previous: tuple[str, ...]):
         """(held blocks, within K) for the step that places ``order[-1]``."""
@@ -197,10 +226,11 @@ class _Planner:
         for k in range(n):
             children: dict[frozenset, _Partial] = {}
             best_rejected = None
+            blocked: dict[str, str] = {}
             for partial in beam:
                 found = 0
                 previous = partial.held[-1] if partial.held else ()
-                for rank, b in enumerate(self.candidates(partial.order)):
+                for rank, b in enumerate(self.candidates(partial.order, blocked)):
                     if self.should_stop is not None and self.should_stop():
                         return self._finish(beam[0], False, k,
                                             f"{STOPPED} {k} of {n} blocks")
@@ -225,7 +255,8 @@ class _Planner:
                 why = (f"; the best candidate, {best_rejected[0]}, needs {count} held "
                        f"block{'' if count == 1 else 's'} ({', '.join(best_rejected[1])})"
                        if best_rejected else
-                       "; no unplaced block touches the placed ones")
+                       "; no unplaced block touches the placed ones" if not blocked else "")
+                why += "".join(f"; {b} cannot be inserted: {r}" for b, r in blocked.items())
                 return self._finish(best, False, k, f"no block can be placed at step {k} with "
                                     f"at most {self.plan.max_held} held{why}")
             beam = sorted(children.values(), key=lambda p: (p.score, p.order))[:self.plan.beam]
@@ -262,10 +293,14 @@ class _Planner:
         except SceneError:
             scene = None
         reports = check_sequence(scene, self.options) if scene is not None else []
-        if feasible and not all(r.stable for r in reports):
-            bad = next(r for r in reports if not r.stable)
+        if feasible and not all(r.stable and r.insertable for r in reports):
+            bad = next(r for r in reports if not (r.stable and r.insertable))
             feasible, failed = False, bad.step_index
             message = f"the plan does not re-check stable at step {failed}: {bad.message}"
+        if scene is not None and self.options.insertion.enabled:
+            # each step's direction, as checked (a given one kept), for a robot to follow
+            scene = replace(scene, approach=tuple(
+                r.insertion_direction if r.insertable else None for r in reports[:n]))
         return Plan(feasible, order, held, message, failed, scene, reports, self.checks)
 
 

@@ -133,6 +133,7 @@ def state_to_dict(scene: Scene, frame_id: str = "world", stamp_ns: int = 0) -> d
         "holds": [{"block": h.block, "from_step": int(h.from_step),
                    "until_step": -1 if h.until_step is None else int(h.until_step)}
                   for h in scene.holds],
+        "approach": [_vec(np.zeros(3) if d is None else d) for d in scene.approach],
     }
 
 
@@ -200,8 +201,11 @@ def scene_from_state_dict(d) -> Scene:
     gravity = _xyz(_field(d, "gravity", {}, "AssemblyState"), "AssemblyState.gravity")
     name = _field(_field(d, "header", {}, "AssemblyState"), "frame_id", "", "AssemblyState.header")
     holds = [_hold_from_dict(i, h) for i, h in enumerate(_list(d, "holds", "AssemblyState"))]
+    # a state read without its sequence (a check of the whole) has no steps to approach
+    approach = [_xyz(v, "AssemblyState.approach") for v in _list(d, "approach", "AssemblyState")
+                if sequence]
     return make_scene(str(name) or "assembly", blocks, gravity, sequence,  # zero gravity: default
-                      holds)
+                      holds, approach=[v if any(v) else None for v in approach])
 
 
 def _hold_from_dict(index: int, raw) -> Hold:
@@ -336,6 +340,8 @@ def report_to_dict(report: Report, header: dict, *, arrays: bool = False) -> dic
         "verdict_sensitive": bool(report.verdict_sensitive),
         "margin_g": float(report.margin_g),
         "margin_direction": _vec(report.margin_direction),
+        "insertable": bool(report.insertable),
+        "insertion_direction": _vec(report.insertion_direction),
     }
 
 
@@ -376,6 +382,9 @@ def report_from_dict(d: Mapping) -> Report:
         margin_g=float(d.get("margin_g", NOT_COMPUTED)),
         margin_direction=np.array(_xyz(d.get("margin_direction", {}), "margin_direction"),
                                   dtype=float),
+        insertable=bool(d.get("insertable", True)),
+        insertion_direction=np.array(_xyz(d.get("insertion_direction", {}),
+                                          "insertion_direction"), dtype=float),
     )
 
 

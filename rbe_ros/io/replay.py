@@ -29,6 +29,8 @@ default parameters), unless given.
   infinite;
 * margin_g: within ``force`` (1e-6, a share of g); ``margin_direction`` is not
   compared (directions whose margins tie within rounding, as on a symmetric dome, may swap);
+  ``insertion_direction`` (unit): within ``position`` (1e-6) per component, ``insertable``
+  exact;
 * not compared: ``solve_time`` (wall time), ``dropped_states`` (the node's load) and, unless
   ``Tolerances.message`` is set, the message: it names one of the most loaded interfaces,
   and of equally loaded ones (a symmetric arch) rounding picks which; with a tolerance (e.g.
@@ -455,7 +457,8 @@ class _Comparer:
 _TOP_EXACT = ("step_index", "block_placed", "stable", "status", "num_blocks", "unstable_blocks",
               "held_blocks", "suggested_holds", "model")
 _TOP_DONE = set(_TOP_EXACT) | {"header", "message", "max_tension", "worst_friction_ratio",
-                               "interfaces", "margin_g", "margin_direction"} | IGNORED
+                               "interfaces", "margin_g", "margin_direction",
+                               "insertion_direction"} | IGNORED
 _IF_DONE = {"block_a", "block_b", "normal", "polygon", "normal_forces", "tangential_forces",
             "resultant_force", "normal_resultant", "shear_resultant", "centre_of_pressure",
             "torque", "kern", "friction_ratio", "tension", "friction_exceeded"}
@@ -517,6 +520,10 @@ def compare_report(recorded: dict, replayed: dict, *, run: int = 0, free_weight:
              replayed.get("worst_friction_ratio", 0.0), ratio_tol)
     c.number("", "margin_g", recorded.get("margin_g", NOT_COMPUTED),
              replayed.get("margin_g", NOT_COMPUTED), tolerances.force)
+    if "insertion_direction" in recorded:
+        c.vectors("", "insertion_direction", recorded["insertion_direction"],
+                  replayed.get("insertion_direction", dict.fromkeys("xyz", 0.0)),
+                  tolerances.position)
     for name in sorted(set(recorded) - _TOP_DONE):     # fields added later: exact
         c.exact("", name, recorded.get(name), replayed.get(name))
     return c.out

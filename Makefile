@@ -90,6 +90,13 @@ lock:
 # apt-get as root or with sudo; seconds when already installed).
 # Cost of margin_g against a check, Monte Carlo throughput of 2 workers and of a local
 # 2-CPU Ray against one process: docs/MARGIN.md (a few minutes; also run by make bench).
+# A 10-minute 10 Hz session of a 310-block wall recorded synthetically, then replayed with
+# rbe-ros replay --compare: time against the recorded duration and peak RSS, written to
+# docs/SESSIONS.md (about 15 minutes on 2 busy cores).
+.PHONY: bench-replay
+bench-replay: setup
+	nice -n 10 $(PY) benchmarks/replay_session.py --doc docs/SESSIONS.md
+
 .PHONY: bench-margin
 bench-margin: ray
 	$(PY) benchmarks/margin.py

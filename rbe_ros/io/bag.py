@@ -3,11 +3,12 @@
 A bag is what ``ros2 bag record -s mcap`` makes: a directory ``<name>/`` holding
 ``<name>_0.mcap`` (split by size or duration: ``<name>_1.mcap``, ... as ``ros2 bag record
 --max-bag-size/--max-bag-duration`` names them; profile ``ros2``; one schema per type,
-encoding ``ros2msg`` with the complete concatenated .msg text; channels with message encoding ``cdr`` and metadata
-``offered_qos_profiles``/``topic_type_hash``; a ``rosbag2`` metadata record) and a version-9
-``metadata.yaml``. CDR is written by :mod:`rbe_ros.io.cdr` (the bytes rclpy gives) and read by
-rosbags' deserializer; the container is written with the ``mcap`` library (rosbags' own
-writer keeps up to 1 MiB of messages in memory and writes nothing recoverable before close).
+encoding ``ros2msg`` with the complete concatenated .msg text; channels with message
+encoding ``cdr`` and metadata ``offered_qos_profiles``/``topic_type_hash``; a ``rosbag2``
+metadata record) and a version-9 ``metadata.yaml``. CDR is written by :mod:`rbe_ros.io.cdr`
+(the bytes rclpy gives) and read by rosbags' deserializer; the container is written with
+the ``mcap`` library (rosbags' own writer keeps up to 1 MiB of messages in memory and writes
+nothing recoverable before close).
 Messages go in and come out as *message dicts* (:mod:`rbe_ros.io.messages`); raw CDR bytes
 (``rclpy.serialization.serialize_message``) are accepted as well. Never imports rclpy.
 """

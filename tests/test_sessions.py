@@ -1,0 +1,125 @@
+"""A cell's long sessions: bags split by size and duration (each file complete, the carried
+messages at its start, the files read in split order) and a streamed replay whose memory
+does not grow with the session."""
+from __future__ import annotations
+
+import hashlib
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from rbe_ros import generators
+from rbe_ros.io.bag import BagWriter, mcap_files, read_bag
+from rbe_ros.io.replay import REPORT_TYPE, RunReader, replay_bag
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from replay_session import record_session  # noqa: E402
+
+STRING = "std_msgs/msg/String"
+
+
+def text(i: int) -> dict:
+    """A message that compresses little (the file sizes are compressed sizes)."""
+    return {"data": f"message {i:03d} " + hashlib.sha256(str(i).encode()).hexdigest() * 4}
+
+
+def test_split_by_size_numbers_the_files_and_carries_the_latched_messages(tmp_path):
+    bag = tmp_path / "cell"
+    with BagWriter(bag, max_bytes=1500) as writer:
+        writer.add_topic("/settings", STRING, transient_local=True)
+        writer.add_topic("/data", STRING)
+        writer.write("/settings", {"data": "settings 1"}, 0)
+        writer.carry("/settings", {"data": "settings 1"})
+        for i in range(60):
+            writer.write("/data", text(i), (i + 1) * 1000)
+            if i == 30:
+                writer.write("/settings", {"data": "settings 2"}, (i + 1) * 1000)
+                writer.carry("/settings", lambda: {"data": "settings 2"})
+    files = mcap_files(bag)
+    # x_0 ... x_10 ...: in split order, not in the order of the names' characters
+    assert [f.name for f in files] == [f"cell_{k}.mcap" for k in range(len(files))]
+    assert len(files) > 10
+    data = []
+    for k, f in enumerate(files):
+        alone = [m.data["data"] for m in read_bag(f)]
+        if k < len(files) - 1:      # split once the limit was reached
+            assert f.stat().st_size >= 1500
+        if k:       # every later file begins with the settings in force when it began
+            first_data = next(int(t.split()[1]) for t in alone if t.startswith("message"))
+            assert alone[0] == ("settings 2" if first_data > 31 else "settings 1")
+        data += [int(t.split()[1]) for t in alone if t.startswith("message")]
+    assert data == list(range(60))                  # every message once, in order
+    whole = [m.data["data"] for m in read_bag(bag)]
+    assert [t for t in whole if t.startswith("message")] == [t["data"] for t in map(text,
+                                                                                  range(60))]
+    meta = (bag / "metadata.yaml").read_text()
+    assert all(f.name in meta for f in files)
+
+
+def test_split_by_duration_starts_a_file_per_span(tmp_path):
+    bag = tmp_path / "timed"
+    with BagWriter(bag, max_duration_ns=10_000_000_000) as writer:    # 10 s
+        writer.add_topic("/data", STRING)
+        for i in range(35):                                           # one a second
+            writer.write("/data", text(i), i * 1_000_000_000)
+    spans = [[m.stamp_ns // 1_000_000_000 for m in read_bag(f)] for f in mcap_files(bag)]
+    assert spans == [list(range(0, 10)), list(range(10, 20)), list(range(20, 30)),
+                     list(range(30, 35))]
+    with pytest.raises(ValueError, match="split"):
+        BagWriter(tmp_path / "bad", max_bytes=-1)
+
+
+def peak_rss_replay(bag: Path, out: Path, keep: bool = False) -> tuple[float, dict]:
+    """A replay with comparison in a child process: its own peak RSS (MB) and counts
+    (``keep``: holding every run and report, as replay did before it streamed)."""
+    code = ("import json, resource, sys\n"
+            "from rbe_ros.io.replay import replay_bag\n"
+            f"r = replay_bag({str(bag)!r}, {str(out)!r}, keep={keep!r})\n"
+            "print(json.dumps({'rss': resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,"
+            " 'states': r.states, 'reports': r.reports, 'recorded': r.recorded,"
+            " 'differences': r.difference_count}))")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          check=True)
+    result = json.loads(proc.stdout.strip().splitlines()[-1])
+    return result["rss"] / 1024, result
+
+
+def test_replay_memory_does_not_grow_with_the_session(tmp_path):
+    """A session three times as long (three times the reports) replays in the same peak
+    memory, every recorded report reproduced. Holding the runs and reports (``keep``, as
+    replay did before) grows the peak by about 14 MB here (21 MB from 10 s to 40 s)."""
+    wall = generators.running_bond_wall(courses=3, bricks_per_course=3)
+    runs = {}
+    for seconds in (10, 30):
+        bag = tmp_path / f"s{seconds}"
+        made = record_session(bag, wall, duration_s=seconds, rate_hz=10)
+        runs[seconds] = (made, *peak_rss_replay(bag, tmp_path / f"s{seconds}_replay"))
+    for made, _, result in runs.values():
+        assert result["states"] == made["messages"]
+        assert result["recorded"] == result["reports"] == made["answered"]
+        assert result["differences"] == 0
+    assert runs[30][0]["answered"] >= 3 * runs[10][0]["answered"] - 5
+    growth = runs[30][1] - runs[10][1]
+    assert growth < 6, f"peak RSS {runs[10][1]:.0f} MB -> {runs[30][1]:.0f} MB"
+
+
+def test_the_streamed_runs_are_the_recorded_ones(tmp_path):
+    """RunReader hands on each run with its reports (matched by header stamp), the as-built
+    scene after it, and reads the bag's reports once."""
+    wall = generators.running_bond_wall(courses=2, bricks_per_course=2)
+    made = record_session(tmp_path / "s", wall, duration_s=3, rate_hz=10)
+    runs = list(RunReader(tmp_path / "s"))
+    assert len(runs) == made["messages"]
+    reports = [m.data for m in read_bag(tmp_path / "s", {REPORT_TYPE})]
+    assert [r for run in runs for r in run.reports] == reports
+    for run in runs:
+        assert all(r["header"]["stamp"] == run.state["header"]["stamp"] for r in run.reports)
+        placed = len(run.state.get("ids", []))
+        assert sum(not b.support for b in run.asbuilt.blocks) == placed
+    result = replay_bag(tmp_path / "s", write=False)
+    assert result.matches and result.reports == len(reports)

@@ -179,10 +179,10 @@ class BagWriter:
 
     Splitting (a cell's session runs for hours): with ``max_bytes`` or ``max_duration_ns``
     (0: no limit) the file in progress is finished and ``<name>_<k+1>.mcap`` begun before a
-    write that finds it that large or that long (from its first message); every file is a
-    complete MCAP file with all topics, and the messages given to :meth:`carry` (e.g. the
-    design and the check settings) are written again at the start of each new file, so that
-    one file alone replays.
+    write (on a topic that ``splits``) that finds it that large or that long (from its first
+    message); every file is a complete MCAP file with all topics, and the messages given to
+    :meth:`carry` (e.g. the design and the check settings) are written again at the start
+    of each new file, so that one file alone replays.
     """
 
     def __init__(self, path, *, depth: int = 10, fsync: bool = False,
@@ -240,9 +240,11 @@ class BagWriter:
     def __exit__(self, *exc) -> None:
         self.close()
 
-    def add_topic(self, topic: str, msgtype: str, *, transient_local: bool = False) -> None:
+    def add_topic(self, topic: str, msgtype: str, *, transient_local: bool = False,
+                  splits: bool = True) -> None:
         """Register ``topic`` (QoS offered: reliable, keep_last ``depth``, durability
-        transient_local or volatile)."""
+        transient_local or volatile). ``splits=False``: a new file never begins with a
+        message of this topic (a report stays in the file of the state it answers)."""
         msgtype = _normalize(msgtype)
         if topic in self._topics:
             raise ValueError(f"topic {topic!r} was added already")
@@ -255,7 +257,8 @@ class BagWriter:
                 "avoid_ros_namespace_conventions": False}]
         self._topics[topic] = {"msgtype": msgtype, "qos": qos,
                                "hash": self.store.hash_rihs01(msgtype),
-                               "encode": cdr.encoder(self.store, msgtype), "count": 0}
+                               "encode": cdr.encoder(self.store, msgtype), "count": 0,
+                               "splits": splits}
         self._register(topic)
         self._write_metadata()
 
@@ -275,7 +278,7 @@ class BagWriter:
         if topic not in self._topics:
             raise KeyError(f"topic {topic!r} was not added")
         stamp_ns = int(stamp_ns)
-        if self._full(stamp_ns):
+        if self._topics[topic]["splits"] and self._full(stamp_ns):
             self._split(stamp_ns)
         self._add(topic, message, stamp_ns)
 

@@ -361,9 +361,10 @@ class RbeChecks:
             raise ConfigurationError(f"mcap_path {raw!r}: cannot create the bag {path}: "
                                      f"{exc.strerror or exc}") from None
         self._bag.add_topic(self.state_topic, "rbe_msgs/msg/AssemblyState")
+        # a report and its markers stay in the file of their state (a split file replays)
         self._bag.add_topic(self.report_topic, "rbe_msgs/msg/StabilityReport",
-                            transient_local=True)
-        self._bag.add_topic(self.marker_topic, MARKER_TYPE, transient_local=True)
+                            transient_local=True, splits=False)
+        self._bag.add_topic(self.marker_topic, MARKER_TYPE, transient_local=True, splits=False)
         # added with their first message: a bag of states alone has only their topics
         self.settings_topic = f"{self.get_fully_qualified_name()}/settings"
         self._bag.add_topic(self.settings_topic, SETTINGS_TYPE, transient_local=True)

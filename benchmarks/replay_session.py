@@ -65,6 +65,7 @@ class SimulatedNode:
         self.dropped = 0
         self.answered = 0
         self.distinct = 0
+        self.busy_ns = 0
         self._last = None           # (scene, report dicts, marker dicts, busy ns)
 
     def answer(self, header: dict, scene, start_ns: int) -> None:
@@ -83,6 +84,7 @@ class SimulatedNode:
         self.bag.write(MARKER_TOPIC, markers, done)
         self.free_at = done
         self.answered += 1
+        self.busy_ns += busy
 
 
 def record_session(path, design, *, duration_s: float, rate_hz: float,
@@ -127,6 +129,7 @@ def record_session(path, design, *, duration_s: float, rate_hz: float,
         if slot is not None:
             node.answer(*slot, max(node.free_at, stamp))
     return {"messages": count + 1, "answered": node.answered, "distinct": node.distinct,
+            "node_busy_s": node.busy_ns / 1e9,
             "dropped": node.dropped, "duration_s": duration_s, "rate_hz": rate_hz,
             "blocks": len(order), "bag_mb": sum(f.stat().st_size for f in
                                                  Path(path).glob("*.mcap")) / 1e6}
@@ -139,8 +142,9 @@ def replay(path, out) -> dict:
     proc = subprocess.run([str(cli), "replay", str(path), "--compare", "-o", str(out)],
                           capture_output=True, text=True)
     elapsed = time.perf_counter() - began
-    peak_kib = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-    return {"replay_s": elapsed, "peak_rss_mb": peak_kib / 1024, "exit": proc.returncode,
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return {"replay_s": elapsed, "replay_cpu_s": usage.ru_utime + usage.ru_stime,
+            "peak_rss_mb": usage.ru_maxrss / 1024, "exit": proc.returncode,
             "stdout": proc.stdout.strip().splitlines()[-3:],
             "progress_lines": len(proc.stderr.strip().splitlines())}
 
@@ -181,8 +185,10 @@ def write_doc(path: Path, r: dict, argv: list[str]) -> None:
         f"| bag | {r['bag_mb']:.0f} MB |",
         f"| simulated node | {r['answered']} answered ({r['distinct']} distinct as-built "
         f"scenes), {r['dropped']} dropped |",
-        f"| `rbe-ros replay --compare` | {r['replay_s']:.0f} s = {r['ratio']:.2f} x the "
-        f"recorded duration; exit {r['exit']} |",
+        f"| the simulated node's checks | {r['node_busy_s']:.0f} s busy (check, report, "
+        f"markers; {r['record_s']:.0f} s to write the bag) |",
+        f"| `rbe-ros replay --compare` | {r['replay_s']:.0f} s wall = {r['ratio']:.2f} x the "
+        f"recorded duration; {r['replay_cpu_s']:.0f} s CPU; exit {r['exit']} |",
         f"| peak RSS of the replay | {r['peak_rss_mb']:.0f} MB |",
         f"| load (1, 5, 15 min) | {', '.join(f'{v:.1f}' for v in r['load'])} |",
         f"| replay's last lines | {'; '.join(r['stdout'])} |"])

@@ -12,8 +12,11 @@ from pathlib import Path
 import pytest
 
 from rbe_ros import generators
-from rbe_ros.io.bag import BagWriter, mcap_files, read_bag
-from rbe_ros.io.replay import REPORT_TYPE, RunReader, replay_bag
+from rbe_ros.analysis.pipeline import check_scene
+from rbe_ros.io.bag import BagWriter, mcap_files, read_bag, to_dict, typestore
+from rbe_ros.io.cdr import encoder
+from rbe_ros.io.messages import header_dict, report_to_dict
+from rbe_ros.io.replay import REPORT_TYPE, RunReader, replay_bag, report_repeats
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
@@ -123,3 +126,31 @@ def test_the_streamed_runs_are_the_recorded_ones(tmp_path):
         assert sum(not b.support for b in run.asbuilt.blocks) == placed
     result = replay_bag(tmp_path / "s", write=False)
     assert result.matches and result.reports == len(reports)
+
+
+def test_a_repeated_report_is_patched_and_read_as_the_full_codec_does():
+    """A report that repeats the last but for stamp, solve_time and dropped_states: its CDR
+    patched equals the full encoding, and read back equals rosbags' full decoding; any
+    other change is read in full."""
+    store = typestore()
+    full = encoder(store, REPORT_TYPE)
+    report = report_to_dict(check_scene(generators.running_bond_wall(3, 3)),
+                            header_dict("world", 5))
+
+    def decoded(raw: bytes) -> dict:
+        return to_dict(store, REPORT_TYPE, store.deserialize_cdr(raw, REPORT_TYPE))
+
+    writer, reader = report_repeats(), report_repeats()
+    first = writer.encode(report)
+    assert first == full(report)
+    reader.learn(decoded(first), first)
+    again = {**report, "header": header_dict("world", 7_000_000_123), "solve_time": 0.25,
+             "dropped_states": 9}
+    raw = writer.encode(again)
+    assert raw == full(again)
+    assert reader.decode(raw) == decoded(raw)
+    assert reader.decode(raw)["dropped_states"] == 9
+    for changed in ({**again, "margin_g": 0.5}, {**again, "message": report["message"] + "!"},
+                    {**again, "header": header_dict("cell", 7)}):
+        assert reader.decode(full(changed)) is None
+        assert writer.encode(changed) == full(changed)

@@ -55,7 +55,8 @@ from ..analysis.steps import final_state, sequence_steps
 from ..geometry.block import pose_block
 from ..rbe.result import NOT_COMPUTED, Report
 from ..scene import Scene, SceneError
-from .bag import BagWriter, read_raw, read_custom_data
+from .bag import BagWriter, read_custom_data, read_raw, typestore
+from .cdr import Repeats
 from .markers import MARKER_TOPIC, MARKER_TYPE, run_markers
 from .messages import (header_stamp_ns, poses_from_dict, report_header, report_to_dict,
                        scene_from_state_dict, state_to_dict)
@@ -186,6 +187,7 @@ class RunReader:
         asbuilt = AsBuilt()
         # per topic: the last message's CDR after the stamp, its dict and as-built scene
         last: dict[str, tuple[bytes, dict, Scene | SceneError | None]] = {}
+        repeats = report_repeats()      # a report again but for stamp, time, drops: not read
         for m in read_raw(self.path, {STATE_TYPE, POSES_TYPE, REPORT_TYPE, SETTINGS_TYPE}):
             if m.msgtype == SETTINGS_TYPE:
                 if m.topic.endswith("/settings"):
@@ -196,7 +198,11 @@ class RunReader:
                 if owner < 0:
                     continue
                 run = pending[owner]
-                run.reports.append(m.message().data)
+                report = repeats.decode(m.raw)
+                if report is None:
+                    report = m.message().data
+                    repeats.learn(report, m.raw)
+                run.reports.append(report)
                 run.report_stamps.append(m.stamp_ns)
                 run.report_topic = m.topic
             else:
@@ -231,6 +237,11 @@ class RunReader:
             return {**state, "header": {**state["header"],
                                         "stamp": {"sec": sec, "nanosec": nanosec}}}
         return m.message().data
+
+
+def report_repeats() -> Repeats:
+    """Reports that repeat the last but for the stamp, solve_time and dropped_states."""
+    return Repeats(typestore(), REPORT_TYPE, ("solve_time", "dropped_states"))
 
 
 def read_runs(path) -> list[Run]:
@@ -606,6 +617,7 @@ class RunWriter:
         self.bag = BagWriter(path, custom_data={OPTIONS_KEY: options_to_json(options)})
         self.topics: set[str] = set()
         self._last: tuple | None = None     # the last markers drawn: (content, reports, arrays)
+        self._reports = report_repeats()
 
     def __enter__(self) -> "RunWriter":
         return self
@@ -628,7 +640,7 @@ class RunWriter:
         stamps = run.report_stamps if len(run.report_stamps) == len(reports) else \
             step_stamps(run.stamp_ns, len(reports))
         for report, stamp in zip(reports, stamps):
-            self.bag.write(run.report_topic, report, stamp)
+            self.bag.write(run.report_topic, self._reports.encode(report), stamp)
         if self.markers and reports:
             for array, stamp in zip(self._markers(run, reports), stamps):
                 self.bag.write(MARKER_TOPIC, array, stamp)
@@ -829,5 +841,5 @@ __all__ = ["DESIGN", "Difference", "KEPT_DIFFERENCES", "OPTIONS_KEY", "POSES", "
            "asbuilt_scenes", "bag_options", "compare_report", "compare_run", "compare_runs",
            "default_output", "free_weights", "merge_message", "offline_reports",
            "options_from_json", "options_to_json", "read_runs", "record_bag", "replay_bag",
-           "replay_run", "run_settings", "SETTINGS_TYPE", "state_reports", "step_stamps",
-           "write_runs"]
+           "replay_run", "report_repeats", "run_settings", "SETTINGS_TYPE", "state_reports",
+           "step_stamps", "write_runs"]

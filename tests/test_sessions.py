@@ -15,8 +15,11 @@ from rbe_ros import generators
 from rbe_ros.analysis.pipeline import check_scene
 from rbe_ros.io.bag import BagWriter, mcap_files, read_bag, to_dict, typestore
 from rbe_ros.io.cdr import encoder
-from rbe_ros.io.messages import header_dict, report_to_dict
-from rbe_ros.io.replay import REPORT_TYPE, RunReader, replay_bag, report_repeats
+from rbe_ros.geometry.block import pose_block
+from rbe_ros.io.messages import (header_dict, poses_to_dict, report_to_dict,
+                                 scene_from_state_dict, state_to_dict)
+from rbe_ros.io.replay import (DESIGN_TOPIC, POSES_TOPIC, POSES_TYPE, REPORT_TYPE, STATE_TYPE,
+                               RunReader, replay_bag, report_repeats)
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
@@ -154,3 +157,25 @@ def test_a_repeated_report_is_patched_and_read_as_the_full_codec_does():
                     {**again, "header": header_dict("cell", 7)}):
         assert reader.decode(full(changed)) is None
         assert writer.encode(changed) == full(changed)
+
+
+def test_the_same_poses_after_a_new_design_are_merged_into_it(tmp_path):
+    """Poses that repeat the last ones but follow a new design (which forgets what was
+    measured) are merged again, into the new design: not the scene of before."""
+    short = generators.running_bond_wall(1, 2, brick=(0.4, 0.2, 0.1))
+    long = generators.running_bond_wall(1, 2, brick=(0.6, 0.2, 0.1))
+    poses = {b.id: ([float(v) for v in b.position], [float(v) for v in b.orientation])
+             for b in scene_from_state_dict(state_to_dict(short)).blocks if not b.support}
+    with BagWriter(tmp_path / "b") as bag:
+        bag.add_topic(DESIGN_TOPIC, STATE_TYPE, transient_local=True)
+        bag.add_topic(POSES_TOPIC, POSES_TYPE)
+        bag.write(DESIGN_TOPIC, state_to_dict(short, "world", 1), 1)
+        bag.write(POSES_TOPIC, poses_to_dict(poses, "world", 2), 2)
+        bag.write(DESIGN_TOPIC, state_to_dict(long, "world", 3), 3)
+        bag.write(POSES_TOPIC, poses_to_dict(poses, "world", 4), 4)
+    runs = list(RunReader(tmp_path / "b"))
+    assert [r.kind for r in runs] == ["design", "poses", "design", "poses"]
+    volume = {k: sum(pose_block(b).volume for b in runs[k].asbuilt.blocks if not b.support)
+              for k in (1, 3)}
+    assert volume[1] == pytest.approx(2 * 0.4 * 0.2 * 0.1)
+    assert volume[3] == pytest.approx(2 * 0.6 * 0.2 * 0.1)

@@ -217,7 +217,9 @@ class RunReader:
                         run.asbuilt = merge_message(asbuilt, kind, run.state)
                     except SceneError as exc:
                         run.asbuilt = exc
-                if kind != DESIGN:
+                if kind == DESIGN:      # the measured poses are forgotten: merge again
+                    last.clear()
+                else:
                     last[m.topic] = (m.raw[12:], run.state, run.asbuilt)
                 pending[created], created = run, created + 1
             while done in pending and len(pending[done].reports) == counts[done]:
@@ -225,7 +227,6 @@ class RunReader:
                 done += 1
         for k in sorted(pending):       # (a bag that changed between the passes)
             yield pending[k]
-
 
     @staticmethod
     def _state(m, last) -> dict:

@@ -27,6 +27,7 @@ import argparse
 import json
 import os
 import resource
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -157,17 +158,27 @@ def main(argv=None) -> int:
     parser.add_argument("--rate", type=float, default=10.0, help="poses messages per s")
     parser.add_argument("--out", help="directory for the bags (default: a temporary one)")
     parser.add_argument("--doc", help="write the figures into this markdown page")
+    parser.add_argument("--reuse", action="store_true",
+                        help="with --out: replay the session recorded there before, if any")
     args = parser.parse_args(argv)
     design = generators.running_bond_wall(courses=args.courses, bricks_per_course=args.bricks)
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(args.out or tmp)
         folder.mkdir(parents=True, exist_ok=True)
         bag = folder / f"session_{int(args.duration)}s"
-        began = time.perf_counter()
-        session = record_session(bag, design, duration_s=args.duration, rate_hz=args.rate)
-        session["record_s"] = time.perf_counter() - began
+        made = bag.with_name(bag.name + ".json")
+        if args.reuse and made.is_file():
+            session = json.loads(made.read_text())
+        else:
+            began = time.perf_counter()
+            session = record_session(bag, design, duration_s=args.duration, rate_hz=args.rate)
+            session["record_s"] = time.perf_counter() - began
+            made.write_text(json.dumps(session))
         print(json.dumps(session), flush=True)
-        result = {**session, **replay(bag, folder / f"{bag.name}_replay")}
+        out = folder / f"{bag.name}_replay"
+        if out.exists():
+            shutil.rmtree(out)
+        result = {**session, **replay(bag, out)}
     result["load"] = os.getloadavg()
     result["ratio"] = result["replay_s"] / result["duration_s"]
     print(json.dumps(result, indent=1))

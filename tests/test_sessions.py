@@ -7,12 +7,14 @@ import hashlib
 import json
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
 
 from rbe_ros import generators
 from rbe_ros.analysis.pipeline import check_scene
+from rbe_ros.cli import PROGRESS_S, main
 from rbe_ros.io.bag import BagWriter, mcap_files, read_bag, to_dict, typestore
 from rbe_ros.io.cdr import encoder
 from rbe_ros.geometry.block import pose_block
@@ -179,3 +181,20 @@ def test_the_same_poses_after_a_new_design_are_merged_into_it(tmp_path):
               for k in (1, 3)}
     assert volume[1] == pytest.approx(2 * 0.4 * 0.2 * 0.1)
     assert volume[3] == pytest.approx(2 * 0.6 * 0.2 * 0.1)
+
+
+def test_cli_replay_shows_progress_and_reproduces_a_session(tmp_path, capsys):
+    """`rbe-ros replay --compare` of a session: a few progress lines on stderr (at most one
+    per PROGRESS_S, not one per message), every recorded report reproduced."""
+    made = record_session(tmp_path / "s", generators.running_bond_wall(2, 2), duration_s=10,
+                          rate_hz=10)
+    began = time.monotonic()
+    code = main(["replay", str(tmp_path / "s"), "--compare", "-o", str(tmp_path / "o")])
+    elapsed = time.monotonic() - began
+    out, err = capsys.readouterr()
+    assert code == 0, out
+    assert f"replayed {made['messages']} states ({made['answered']} reports" in out
+    assert "all recorded reports reproduced" in out
+    lines = [line for line in err.splitlines() if line]
+    assert lines[0].startswith(f"  run 1/{made['messages']} ")
+    assert len(lines) <= 1 + elapsed / PROGRESS_S

@@ -502,8 +502,12 @@ class RbeChecks:
                 return
             self._markers_at, self._markers_waiting = now, None
             self._marker_timer.cancel()
-        if waiting is not None:
+        if waiting is None:
+            return
+        try:
             self._send_markers(*waiting)
+        except Exception as exc:    # never out of a timer callback (it would end the spin)
+            self.get_logger().error(f"markers not sent: {type(exc).__name__}: {exc}")
 
     def _send_markers(self, scene: Scene | None, report: Report, header: dict,
                       state: AssemblyState | None) -> None:

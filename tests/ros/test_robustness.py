@@ -471,13 +471,17 @@ def test_overload_keeps_the_newest_state_with_bounded_memory(rclpy_context, tmp_
     assert len(stamps) + dropped[-1] <= count
     assert "dropped unchecked" in output
     # bounded queue: a state waits at most for the one being checked when it came, at any
-    # time of the run: its report comes within two report intervals of its sending (a queue
-    # would make the latency grow by ~1 s per s, here to ~20 s)
+    # time of the run: its report comes within two report intervals of its sending, plus
+    # 3 s for a loaded machine's stalls (a queue would make the latency grow by ~1 s per s,
+    # here to ~20 s), and the latency does not grow over the run (a queue: ~13 s more in
+    # the last third than in the first; on average, robust to one stall)
     checks = [a[3] for a in arrived]
     latency = [a[0] - sent_at[a[1]] for a in arrived]
     gaps = np.diff([a[0] for a in arrived])
     for k in range(2, len(arrived)):
-        assert latency[k] < gaps[k - 1] + gaps[k - 2] + 1.0, (k, latency[k], gaps[k - 2:k])
+        assert latency[k] < gaps[k - 1] + gaps[k - 2] + 3.0, (k, latency[k], gaps[k - 2:k])
+    third = max(1, len(latency) // 3)
+    assert np.mean(latency[-third:]) < np.mean(latency[:third]) + 1.0, latency
     # bounded memory: after a warm-up, the node's RSS stays within a band
     after = [kb for t, kb in rss if t > 5.0]
     assert after and max(after) - min(after) < 40_000, (min(after), max(after))

@@ -106,6 +106,13 @@ lock:
 bench-insertion: setup
 	$(PY) benchmarks/insertion.py
 
+# A 10-minute 10 Hz session of a 310-block wall recorded synthetically, then replayed with
+# rbe-ros replay --compare: time against the recorded duration and peak RSS, written to
+# docs/SESSIONS.md (about 15 minutes on 2 busy cores).
+.PHONY: bench-replay
+bench-replay: setup
+	nice -n 10 $(PY) benchmarks/replay_session.py --doc docs/SESSIONS.md
+
 .PHONY: bench-margin
 bench-margin: ray
 	$(PY) benchmarks/margin.py

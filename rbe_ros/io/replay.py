@@ -42,7 +42,8 @@ from __future__ import annotations
 import json
 import math
 import re
-from collections.abc import Callable
+import struct
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -57,7 +58,8 @@ from ..analysis.steps import final_state, sequence_steps
 from ..geometry.block import pose_block
 from ..rbe.result import NOT_COMPUTED, Report
 from ..scene import Scene, SceneError
-from .bag import BagWriter, read_bag, read_custom_data
+from .bag import BagWriter, read_custom_data, read_raw, typestore
+from .cdr import Repeats
 from .markers import MARKER_TOPIC, MARKER_TYPE, run_markers
 from .messages import (header_stamp_ns, plan_goal_from_dict, plan_result_to_dict,
                        poses_from_dict, report_header, report_to_dict, scene_from_state_dict,
@@ -119,6 +121,8 @@ class Run:
     report_topic: str = REPORT_TOPIC
     kind: str = STATE                               # STATE, DESIGN or POSES
     settings: dict | None = None    # the node's settings when it got the state (~/settings)
+    #: a design or poses run: the as-built scene after it (or why there is none)
+    asbuilt: Scene | SceneError | None = None
 
     @property
     def header(self) -> dict:
@@ -162,48 +166,143 @@ def step_stamps(stamp_ns: int, count: int) -> list[int]:
     return [stamp_ns + (k + 1) * STEP_NS for k in range(count)]
 
 
-def read_runs(path) -> list[Run]:
-    """The runs of a bag: every AssemblyState in log-time order, each with the reports whose
-    header stamp is its stamp (a report goes to the latest such state before it). Other
-    topics (markers) are not read. A plan goal is a run whose one "report" is its result (the
-    result whose planned assembly has the goal's stamp: the first such goal still without
-    one, as a newer goal preempts an older)."""
-    runs: list[Run] = []
-    by_key: dict[tuple[int, int], list[Run]] = {}
-    plans: dict[tuple[int, int], list[Run]] = {}
-    settings = None
-    for m in read_bag(path, msgtypes={STATE_TYPE, POSES_TYPE, REPORT_TYPE, SETTINGS_TYPE,
+def _stamp_key(raw: bytes) -> tuple[int, int]:
+    """(sec, nanosec) of the header stamp of a CDR AssemblyState, BlockPoses or
+    StabilityReport (the header is their first field), read without deserialising."""
+    little = raw[1] == 1                    # encapsulation CDR_LE (0x0001) or CDR_BE
+    return struct.unpack_from("<iI" if little else ">iI", raw, 4)
+
+
+class RunReader:
+    """The runs of a bag, streamed: every AssemblyState and BlockPoses in log-time order,
+    each with the reports whose header stamp is its stamp (a report goes to the latest such
+    state before it), the settings then in force and (design, poses) the as-built scene
+    after it. Other topics (markers) are not read.
+
+    Two passes, so that memory does not grow with the bag: the first reads only the header
+    stamps (from the CDR bytes) to count each run's reports; the second yields a run as soon
+    as its reports are in, so only the runs still waiting for a report are held (the node
+    answers a state within a check's time). Reports whose state is not in the bag (one
+    file of a split bag: the state was in the file before) are counted in
+    :attr:`orphan_reports` and skipped. :attr:`total`: the number of runs (after the first
+    pass)."""
+
+    def __init__(self, path):
+        self.path = Path(path)
+        self.orphan_reports = 0
+        self.total: int | None = None
+
+    def _owners(self) -> tuple[list[int], list[int]]:
+        """Pass 1: the run of each report in bag order (-1: none) and each run's count."""
+        counts: list[int] = []
+        owners: list[int] = []
+        by_key: dict[tuple[int, int], list[tuple[int, int]]] = {}
+        plans: dict[tuple[int, int], list[int]] = {}
+        for m in read_raw(self.path, {STATE_TYPE, POSES_TYPE, REPORT_TYPE, PLAN_GOAL_TYPE,
+                                      PLAN_RESULT_TYPE}):
+            if m.msgtype == PLAN_GOAL_TYPE:     # a goal: its assembly's header comes first
+                plans.setdefault(_stamp_key(m.raw), []).append(len(counts))
+                counts.append(0)
+                continue
+            if m.msgtype == PLAN_RESULT_TYPE:
+                # the result of the first goal with its planned assembly's stamp still
+                # without one (a newer goal preempts an older); results are few: read whole
+                key = _key(m.message().data.get("plan", {}).get("header", {}))
+                owner = next((i for i in plans.get(key, []) if not counts[i]), -1)
+                owners.append(owner)
+                if owner >= 0:
+                    counts[owner] += 1
+                continue
+            key = _stamp_key(m.raw)
+            if m.msgtype != REPORT_TYPE:
+                by_key.setdefault(key, []).append((len(counts), m.stamp_ns))
+                counts.append(0)
+                continue
+            found = by_key.get(key, [])
+            before = next((i for i, t in reversed(found) if t <= m.stamp_ns), None)
+            owner = before if before is not None else found[-1][0] if found else -1
+            owners.append(owner)
+            if owner >= 0:
+                counts[owner] += 1
+        return owners, counts
+
+    def __iter__(self) -> Iterator[Run]:
+        owners, counts = self._owners()
+        self.total, self.orphan_reports = len(counts), owners.count(-1)
+        pending: dict[int, Run] = {}
+        created, done = 0, 0        # runs read, runs yielded
+        reports = 0                 # reports read
+        settings = None
+        asbuilt = AsBuilt()
+        # per topic: the last message's CDR after the stamp, its dict and as-built scene
+        last: dict[str, tuple[bytes, dict, Scene | SceneError | None]] = {}
+        repeats = report_repeats()      # a report again but for stamp, time, drops: not read
+        for m in read_raw(self.path, {STATE_TYPE, POSES_TYPE, REPORT_TYPE, SETTINGS_TYPE,
                                       PLAN_GOAL_TYPE, PLAN_RESULT_TYPE}):
-        if m.msgtype == SETTINGS_TYPE:
-            if m.topic.endswith("/settings"):
-                settings = json.loads(m.data["data"])
-        elif m.msgtype in (STATE_TYPE, POSES_TYPE, PLAN_GOAL_TYPE):
-            kind = POSES if m.msgtype == POSES_TYPE else PLAN if m.msgtype == PLAN_GOAL_TYPE \
-                else DESIGN if m.topic.endswith("/design") else STATE
-            run = Run(m.data, m.stamp_ns, m.topic, kind=kind, settings=settings)
-            runs.append(run)
-            (plans if kind == PLAN else by_key).setdefault(run.key, []).append(run)
-        elif m.msgtype == PLAN_RESULT_TYPE:
-            key = _key(m.data.get("plan", {}).get("header", {}))
-            owner = next((r for r in plans.get(key, []) if not r.reports), None)
-            if owner is None:
-                raise ValueError(f"{path}: a plan result at {m.stamp_ns} ns has no goal with "
-                                 f"its header stamp {key}")
-            owner.reports.append(m.data)
-            owner.report_stamps.append(m.stamp_ns)
-            owner.report_topic = m.topic
-        elif m.msgtype == REPORT_TYPE:
-            stamp = m.data.get("header", {}).get("stamp", {})
-            key = int(stamp.get("sec", 0)), int(stamp.get("nanosec", 0))
-            owners = [r for r in by_key.get(key, []) if r.stamp_ns <= m.stamp_ns] or \
-                by_key.get(key, [])
-            if not owners:
-                raise ValueError(f"{path}: a report at {m.stamp_ns} ns has no state with its "
-                                 f"header stamp {key}")
-            owners[-1].reports.append(m.data)
-            owners[-1].report_stamps.append(m.stamp_ns)
-            owners[-1].report_topic = m.topic
-    return runs
+            if m.msgtype == SETTINGS_TYPE:
+                if m.topic.endswith("/settings"):
+                    settings = json.loads(m.message().data["data"])
+                continue
+            if m.msgtype == PLAN_GOAL_TYPE:
+                pending[created] = Run(m.message().data, m.stamp_ns, m.topic, kind=PLAN,
+                                       settings=settings)
+                created += 1
+            elif m.msgtype in (REPORT_TYPE, PLAN_RESULT_TYPE):
+                owner, reports = owners[reports], reports + 1
+                if owner < 0:
+                    continue
+                run = pending[owner]
+                report = m.message().data if m.msgtype == PLAN_RESULT_TYPE else \
+                    repeats.decode(m.raw)
+                if report is None:
+                    report = m.message().data
+                    repeats.learn(report, m.raw)
+                run.reports.append(report)
+                run.report_stamps.append(m.stamp_ns)
+                run.report_topic = m.topic
+            else:
+                kind = POSES if m.msgtype == POSES_TYPE else \
+                    DESIGN if m.topic.endswith("/design") else STATE
+                run = Run(self._state(m, last), m.stamp_ns, m.topic, kind=kind,
+                          settings=settings)
+                if kind == POSES and last.get(m.topic, (b"",))[0] == m.raw[12:]:
+                    run.asbuilt = last[m.topic][2]     # the same poses again: no change
+                elif kind != STATE:
+                    try:
+                        run.asbuilt = merge_message(asbuilt, kind, run.state)
+                    except SceneError as exc:
+                        run.asbuilt = exc
+                if kind == DESIGN:      # the measured poses are forgotten: merge again
+                    last.clear()
+                else:
+                    last[m.topic] = (m.raw[12:], run.state, run.asbuilt)
+                pending[created], created = run, created + 1
+            while done in pending and len(pending[done].reports) == counts[done]:
+                yield pending.pop(done)
+                done += 1
+        for k in sorted(pending):       # (a bag that changed between the passes)
+            yield pending[k]
+
+    @staticmethod
+    def _state(m, last) -> dict:
+        """The message dict of a state or poses message; one that repeats the last on its
+        topic but for the stamp (a cell sends the same poses at 10 Hz) is not read again."""
+        if m.topic in last and last[m.topic][0] == m.raw[12:]:
+            sec, nanosec = _stamp_key(m.raw)
+            state = last[m.topic][1]
+            return {**state, "header": {**state["header"],
+                                        "stamp": {"sec": sec, "nanosec": nanosec}}}
+        return m.message().data
+
+
+def report_repeats() -> Repeats:
+    """Reports that repeat the last but for the stamp, solve_time and dropped_states."""
+    return Repeats(typestore(), REPORT_TYPE, ("solve_time", "dropped_states"))
+
+
+def read_runs(path) -> list[Run]:
+    """The runs of a bag, all in memory (:class:`RunReader` streams them)."""
+    return list(RunReader(path))
 
 
 def merge_message(asbuilt: AsBuilt, kind: str, message: dict) -> Scene:
@@ -225,7 +324,7 @@ def asbuilt_scenes(runs: list[Run]) -> list[Scene | SceneError | None]:
     asbuilt = AsBuilt()
     out: list[Scene | SceneError | None] = []
     for run in runs:
-        if run.kind == STATE:
+        if run.kind in (STATE, PLAN):
             out.append(None)
             continue
         try:
@@ -311,9 +410,10 @@ def free_weights(state: dict | Scene | SceneError) -> dict[int, float]:
         return {}
     try:
         if isinstance(state, Scene):
-            state = state_to_dict(state)
-        scene = scene_from_state_dict(state)
-        whole = scene_from_state_dict({**state, "sequence": []})
+            scene, whole, state = state, replace(state, sequence=()), {}
+        else:
+            scene = scene_from_state_dict(state)
+            whole = scene_from_state_dict({**state, "sequence": []})
     except SceneError:
         return {}
     g = float(np.linalg.norm(scene.gravity))
@@ -559,35 +659,70 @@ def compare_plan(recorded: dict, replayed: dict, *, run: int = 0,
     return out
 
 
-def compare_runs(runs: list[Run], replayed: list[list[dict]], *,
-                 tolerances: Tolerances = Tolerances()) -> list[Difference]:
-    """Differences between each run's recorded reports and ``replayed[i]`` (the same
-    comparison offline and live)."""
+def compare_run(index: int, run: Run, replayed: list[dict], *,
+                tolerances: Tolerances = Tolerances()) -> list[Difference]:
+    """Differences between ``run``'s recorded reports and ``replayed`` (the same comparison
+    offline and live; ``index``: the run's number in the bag)."""
     out: list[Difference] = []
-    asbuilt = asbuilt_scenes(runs)
-    for i, (run, new) in enumerate(zip(runs, replayed)):
-        if run.kind == PLAN:
-            for rec, rep in zip(run.reports, new):
-                out += compare_plan(rec, rep, run=i, tolerances=tolerances)
-            continue
-        weights = free_weights(run.state if run.kind == STATE else asbuilt[i])
-        for rec, rep in zip(run.reports, new):
+    if run.kind == PLAN:
+        for rec, rep in zip(run.reports, replayed):
+            out += compare_plan(rec, rep, run=index, tolerances=tolerances)
+        return out
+    unequal = [(rec, rep) for rec, rep in zip(run.reports, replayed) if not _equal(rec, rep)]
+    if unequal:
+        weights = free_weights(run.state if run.kind == STATE else _asbuilt(run))
+        for rec, rep in unequal:
             w = weights.get(int(rec.get("step_index", -1)), 1.0)
-            out += compare_report(rec, rep, run=i, free_weight=w, tolerances=tolerances)
-        for rec in run.reports[len(new):]:
-            out.append(Difference(i, int(rec.get("step_index", -1)), rec.get("block_placed", ""),
-                                  "", "report", "recorded", "missing in the replay"))
-        for rep in new[len(run.reports):]:
-            out.append(Difference(i, int(rep.get("step_index", -1)), rep.get("block_placed", ""),
-                                  "", "report", "missing in the recording", "replayed"))
+            out += compare_report(rec, rep, run=index, free_weight=w, tolerances=tolerances)
+    for rec in run.reports[len(replayed):]:
+        out.append(Difference(index, int(rec.get("step_index", -1)),
+                              rec.get("block_placed", ""), "", "report", "recorded",
+                              "missing in the replay"))
+    for rep in replayed[len(run.reports):]:
+        out.append(Difference(index, int(rep.get("step_index", -1)),
+                              rep.get("block_placed", ""), "", "report",
+                              "missing in the recording", "replayed"))
     return out
 
 
-def format_differences(runs: list[Run], differences: list[Difference], limit: int = 50) -> str:
-    """A readable diff: the runs concerned, then one line per differing field."""
+def _equal(recorded: dict, replayed: dict) -> bool:
+    """Whether two report dicts are equal in every compared field (then no tolerance
+    matters; the usual case, and the field by field comparison is what costs)."""
+    return all(recorded.get(k) == replayed.get(k) for k in set(recorded) | set(replayed)
+               if k not in IGNORED)
+
+
+def _asbuilt(run: Run) -> Scene | SceneError:
+    if run.asbuilt is None:
+        raise ValueError("a design or poses run without its as-built scene: read the bag "
+                         "with RunReader (or fill them in with asbuilt_scenes)")
+    return run.asbuilt
+
+
+def _with_asbuilt(runs: list[Run]) -> list[Run]:
+    """``runs`` with the as-built scene of every design and poses run filled in."""
+    if any(r.kind in (DESIGN, POSES) and r.asbuilt is None for r in runs):
+        for run, scene in zip(runs, asbuilt_scenes(runs)):
+            run.asbuilt = scene
+    return runs
+
+
+def compare_runs(runs: list[Run], replayed: list[list[dict]], *,
+                 tolerances: Tolerances = Tolerances()) -> list[Difference]:
+    """Differences between each run's recorded reports and ``replayed[i]``."""
+    out: list[Difference] = []
+    for i, (run, new) in enumerate(zip(_with_asbuilt(runs), replayed)):
+        out += compare_run(i, run, new, tolerances=tolerances)
+    return out
+
+
+def format_differences(described: dict[int, str], differences: list[Difference],
+                       limit: int = 50) -> str:
+    """A readable diff: the runs concerned (``described``: a run's number -> its
+    description, :meth:`Run.describe`), then one line per differing field."""
     lines = []
     for i in sorted({d.run for d in differences}):
-        lines.append(f"run {i}: {runs[i].describe()}")
+        lines.append(f"run {i}: {described.get(i, '')}")
         shown = [d for d in differences if d.run == i]
         lines += [f"  {d}" for d in shown[:limit]]
         if len(shown) > limit:
@@ -597,36 +732,73 @@ def format_differences(runs: list[Run], differences: list[Difference], limit: in
 
 # --- writing ---------------------------------------------------------------------------------
 
+class RunWriter:
+    """A bag of runs written one at a time: each run's state and its reports (at the
+    recorded report times where there are as many, else a step a second after the state:
+    :data:`STEP_NS`); with ``markers`` each report's MarkerArray on
+    :data:`rbe_ros.io.markers.MARKER_TOPIC` at its time; the options in custom_data."""
+
+    def __init__(self, path, options: CheckOptions, *, markers: bool = True):
+        self.options, self.markers = options, markers
+        self.bag = BagWriter(path, custom_data={OPTIONS_KEY: options_to_json(options)})
+        self.topics: set[str] = set()
+        self._last: tuple | None = None     # the last markers drawn: (content, reports, arrays)
+        self._reports = report_repeats()
+
+    def __enter__(self) -> "RunWriter":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def _topic(self, topic: str, msgtype: str, latched: bool) -> None:
+        if topic not in self.topics:
+            self.bag.add_topic(topic, msgtype, transient_local=latched)
+            self.topics.add(topic)
+
+    def write(self, run: Run, reports: list[dict]) -> None:
+        state_type, answer_type = RUN_TYPES[run.kind]
+        self._topic(run.topic, state_type, run.kind == DESIGN)
+        self._topic(run.report_topic, answer_type, True)
+        if self.markers:
+            self._topic(MARKER_TOPIC, MARKER_TYPE, True)
+        self.bag.write(run.topic, run.state, run.stamp_ns)
+        stamps = run.report_stamps if len(run.report_stamps) == len(reports) else \
+            step_stamps(run.stamp_ns, len(reports))
+        for report, stamp in zip(reports, stamps):
+            self.bag.write(run.report_topic, report if run.kind == PLAN else
+                           self._reports.encode(report), stamp)
+        if self.markers and reports and run.kind != PLAN:
+            for array, stamp in zip(self._markers(run, reports), stamps):
+                self.bag.write(MARKER_TOPIC, array, stamp)
+
+    def _markers(self, run: Run, reports: list[dict]) -> list[dict]:
+        """The MarkerArrays of ``reports``; those of the last run again, with the new
+        headers, when the run checked the same state with the same reports (a session's
+        repeated poses)."""
+        content = {**run.state, "header": None} if run.kind == STATE else _asbuilt(run)
+        bare = [{**r, "header": None} for r in reports]
+        if self._last is not None and (content is self._last[0] or (
+                run.kind == STATE and content == self._last[0])) and bare == self._last[1]:
+            return [{"markers": [{**m, "header": r["header"]} for m in array["markers"]]}
+                    for array, r in zip(self._last[2], reports)]
+        # an as-built run is drawn as the state checked: its scene, as a whole
+        drawn = run.state if run.kind == STATE else {} if isinstance(
+            run.asbuilt, SceneError) else {**state_to_dict(run.asbuilt), "sequence": []}
+        arrays = run_markers(drawn, reports, self.options)
+        self._last = (content, bare, arrays)
+        return arrays
+
+    def close(self) -> None:
+        self.bag.close()
+
+
 def write_runs(path, runs: list[Run], replayed: list[list[dict]], options: CheckOptions, *,
                markers: bool = True) -> None:
-    """A bag with every run's state and its ``replayed`` reports (at the recorded report
-    times where there are as many, else a step a second after the state: :data:`STEP_NS`);
-    with ``markers`` each report's MarkerArray on :data:`rbe_ros.io.markers.MARKER_TOPIC` at
-    its time; the options in custom_data."""
-    asbuilt = asbuilt_scenes(runs) if markers else []
-    with BagWriter(path, custom_data={OPTIONS_KEY: options_to_json(options)}) as bag:
-        topics: set[str] = set()
-        for i, (run, reports) in enumerate(zip(runs, replayed)):
-            state_type, answer_type = RUN_TYPES[run.kind]
-            for topic, kind, latched in ((run.topic, state_type, run.kind == DESIGN),
-                                         (run.report_topic, answer_type, True)):
-                if topic not in topics:
-                    bag.add_topic(topic, kind, transient_local=latched)
-                    topics.add(topic)
-            if markers and MARKER_TOPIC not in topics:
-                bag.add_topic(MARKER_TOPIC, MARKER_TYPE, transient_local=True)
-                topics.add(MARKER_TOPIC)
-            bag.write(run.topic, run.state, run.stamp_ns)
-            stamps = run.report_stamps if len(run.report_stamps) == len(reports) else \
-                step_stamps(run.stamp_ns, len(reports))
-            for report, stamp in zip(reports, stamps):
-                bag.write(run.report_topic, report, stamp)
-            if markers and run.kind != PLAN:
-                # an as-built run is drawn as the state checked: its scene, as a whole
-                drawn = run.state if run.kind == STATE else {} if isinstance(
-                    asbuilt[i], SceneError) else {**state_to_dict(asbuilt[i]), "sequence": []}
-                for array, stamp in zip(run_markers(drawn, reports, options), stamps):
-                    bag.write(MARKER_TOPIC, array, stamp)
+    """A bag with every run's state and its ``replayed`` reports (:class:`RunWriter`)."""
+    with RunWriter(path, options, markers=markers) as writer:
+        for run, reports in zip(_with_asbuilt(runs) if markers else runs, replayed):
+            writer.write(run, reports)
 
 
 def record_bag(path, scenes: list[tuple[Scene, str, int]], options: CheckOptions = CheckOptions(),
@@ -650,22 +822,51 @@ def record_bag(path, scenes: list[tuple[Scene, str, int]], options: CheckOptions
 
 # --- the whole replay ------------------------------------------------------------------------
 
+#: Differences kept for the diff (all are counted): a replay of hours that differs
+#: everywhere must not hold them all.
+KEPT_DIFFERENCES = 1000
+
+
 @dataclass
 class ReplayResult:
-    """The runs of a bag, their replayed reports and how they differ from the recorded."""
+    """What a replay found: how many runs and reports it re-checked, the differences from
+    the recorded reports (the first :data:`KEPT_DIFFERENCES`; :attr:`difference_count`
+    counts them all) and, unless streamed (``keep=False``), the runs and their replayed
+    reports."""
 
     runs: list[Run]
     replayed: list[list[dict]]
     differences: list[Difference]
     output: Path | None
     options: CheckOptions
+    states: int = 0                 # runs read
+    reports: int = 0                # reports replayed
+    recorded: int = 0               # reports recorded (compared)
+    difference_count: int = 0
+    orphan_reports: int = 0         # reports whose state is not in the bag (a split file)
+    described: dict[int, str] = field(default_factory=dict)  # runs with differences
 
     @property
     def matches(self) -> bool:
-        return not self.differences
+        return not self.difference_count
 
     def diff(self, limit: int = 50) -> str:
-        return format_differences(self.runs, self.differences, limit)
+        return format_differences(self.described, self.differences, limit)
+
+    def add(self, index: int, run: Run, replayed: list[dict],
+            differences: list[Difference], keep: bool) -> None:
+        self.states += 1
+        self.reports += len(replayed)
+        self.recorded += len(run.reports)
+        if differences:
+            self.difference_count += len(differences)
+            room = KEPT_DIFFERENCES - len(self.differences)
+            if room > 0:
+                self.differences += differences[:room]
+                self.described[index] = run.describe()
+        if keep:
+            self.runs.append(run)
+            self.replayed.append(replayed)
 
 
 def default_output(path) -> Path:
@@ -674,58 +875,99 @@ def default_output(path) -> Path:
     return path.with_name(path.name + "_replay")
 
 
-#: Re-checks runs: ``recheck(runs, options, on_run)`` -> the report dicts of each run.
-Recheck = Callable[[list[Run], CheckOptions, Callable[[int, Run], None] | None], list[list[dict]]]
+#: Re-checks runs: ``recheck(runs, options, on_run)`` -> each run with its report dicts, in
+#: order, as they are made (a generator: a replay holds one run at a time).
+Recheck = Callable[[Iterable[Run], CheckOptions, Callable[[int, Run], None] | None],
+                   Iterator[tuple[Run, list[dict]]]]
 
 
-def offline_reports(runs: list[Run], options: CheckOptions,
-                    on_run: Callable[[int, Run], None] | None = None) -> list[list[dict]]:
-    """The report dicts of re-checking every run here, as the node would."""
-    replayed = []
-    asbuilt = asbuilt_scenes(runs)
+class _LastCheck:
+    """The reports of the last state checked, for the next run if it is the same state
+    with the same settings (a cell sends the same poses at 10 Hz between placements; the
+    check is deterministic, so its reports are the same but for the header)."""
+
+    def __init__(self) -> None:
+        self.what: tuple | None = None
+        self.content: object = None
+        self.reports: list[dict] = []
+
+    def reports_for(self, run: Run, options: CheckOptions) -> list[dict]:
+        run_options, frame_id = run_settings(run, options)
+        header = report_header(run.state.get("header"), frame_id)
+        # a state by its contents; an as-built scene by identity (AsBuilt returns the same
+        # scene for an update that changes nothing)
+        content = {**run.state, "header": None} if run.kind == STATE else run.asbuilt
+        what = (run.kind == STATE, options_to_json(run_options))
+        if self.what != what or not (content is self.content or (
+                run.kind == STATE and content == self.content)):
+            self.what, self.content = what, content
+            check = state_reports(run.state, run_options) if run.kind == STATE else \
+                asbuilt_check(run.asbuilt, run_options).reports
+            self.reports = [report_to_dict(r, header) for r in check]
+        return [{**r, "header": header} for r in self.reports]
+
+
+def offline_reports(runs: Iterable[Run], options: CheckOptions,
+                    on_run: Callable[[int, Run], None] | None = None
+                    ) -> Iterator[tuple[Run, list[dict]]]:
+    """Each run with the report dicts of re-checking it here, as the node would: a state
+    always, a design or poses message only if the node answered it (under overload it
+    checks the newest only); the same state again reuses the last reports."""
+    last = _LastCheck()
     for i, run in enumerate(runs):
-        if run.kind == STATE:
-            replayed.append(replay_run(run, options))
-        elif run.kind == PLAN:
-            replayed.append(replay_plan(run, options))
-        else:   # a design or poses message the node dropped unchecked is not checked
-            run_options, frame_id = run_settings(run, options)
-            header = report_header(run.state.get("header"), frame_id)
-            replayed.append([report_to_dict(r, header) for r in asbuilt_check(
-                asbuilt[i], run_options).reports] if run.reports else [])
+        if run.kind not in (STATE, PLAN) and run.asbuilt is None:
+            raise ValueError("offline_reports takes runs with their as-built scenes "
+                             "(RunReader)")
+        reports = replay_plan(run, options) if run.kind == PLAN else \
+            last.reports_for(run, options) if run.kind == STATE or run.reports else []
         if on_run is not None:
             on_run(i, run)
-    return replayed
+        yield run, reports
 
 
 def replay_bag(path, output=None, *, options: CheckOptions | None = None, compare: bool = True,
                recheck: Recheck = offline_reports, tolerances: Tolerances = Tolerances(),
                write: bool = True, markers: bool = True,
-               on_run: Callable[[int, Run], None] | None = None) -> ReplayResult:
+               on_run: Callable[[int, Run], None] | None = None,
+               keep: bool = True) -> ReplayResult:
     """Re-check every state of the bag at ``path`` with ``recheck`` (offline; or through a
     live rbe_node: :func:`rbe_ros.ros.live.live_recheck`), write the states and the new
     reports to ``output`` (default: path + "_replay"; never overwritten; ``write=False``:
     no bag; ``markers``: with the reports' markers), and with ``compare`` list the
     differences from the recorded reports (markers are drawings of the reports: not
-    compared)."""
-    path = Path(path)
+    compared). Streamed: a run is read, re-checked, written and compared, then let go
+    (``keep``: the result keeps the runs and their replayed reports, memory growing with
+    the bag). ``path`` may be a :class:`RunReader` (whose ``total`` a progress display
+    reads)."""
+    runs = path if isinstance(path, RunReader) else RunReader(path)
+    path = runs.path
     if not path.exists():
         raise FileNotFoundError(f"no bag at {str(path)!r}")
     out = Path(output) if output is not None else default_output(path)
     if write and out.exists():
         raise FileExistsError(f"{str(out)!r} exists already, not overwriting it")
     options = options or bag_options(path)
-    runs = read_runs(path)
-    replayed = recheck(runs, options, on_run)
-    if write:
-        write_runs(out, runs, replayed, options, markers=markers)
-    differences = compare_runs(runs, replayed, tolerances=tolerances) if compare else []
-    return ReplayResult(runs, replayed, differences, out if write else None, options)
+    result = ReplayResult([], [], [], out if write else None, options)
+    writer = RunWriter(out, options, markers=markers) if write else None
+    pairs = recheck(runs, options, on_run)
+    try:
+        for i, (run, reports) in enumerate(pairs):
+            if writer is not None:
+                writer.write(run, reports)
+            found = compare_run(i, run, reports, tolerances=tolerances) if compare else []
+            result.add(i, run, reports, found, keep)
+    finally:
+        getattr(pairs, "close", lambda: None)()
+        if writer is not None:
+            writer.close()
+    result.orphan_reports = runs.orphan_reports
+    return result
 
 
-__all__ = ["DESIGN", "Difference", "OPTIONS_KEY", "PLAN", "POSES", "ReplayResult", "Run",
-           "STATE", "Tolerances", "asbuilt_check", "asbuilt_scenes", "bag_options",
-           "compare_plan", "compare_report", "compare_runs", "default_output", "free_weights",
-           "merge_message", "offline_reports", "options_from_json", "options_to_json",
-           "read_runs", "record_bag", "replay_bag", "replay_plan", "replay_run", "run_settings",
+__all__ = ["DESIGN", "Difference", "KEPT_DIFFERENCES", "OPTIONS_KEY", "PLAN", "POSES",
+           "ReplayResult", "Run", "RunReader", "RunWriter", "STATE", "Tolerances",
+           "asbuilt_check", "asbuilt_scenes", "bag_options", "compare_plan", "compare_report",
+           "compare_run", "compare_runs", "default_output", "free_weights", "merge_message",
+           "offline_reports", "options_from_json", "options_to_json", "read_runs", "record_bag",
+           "replay_bag", "replay_plan", "replay_run", "report_repeats", "run_settings",
            "SETTINGS_TYPE", "state_reports", "step_stamps", "stopped_at", "write_runs"]

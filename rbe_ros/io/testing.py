@@ -40,7 +40,7 @@ def assert_bag_replays(path, *, recheck: Recheck = offline_reports,
                              "compare")
     if result.differences:
         raise AssertionError(f"{path}: the replay{' (live)' if live else ''} differs from the "
-                             f"recorded reports in {len(result.differences)} field(s):\n"
+                             f"recorded reports in {result.difference_count} field(s):\n"
                              f"{result.diff()}")
     return result
 

@@ -243,8 +243,9 @@ def settings_parameters(run: Run, options: CheckOptions) -> dict[str, object]:
 
 
 def live_reports(runs, options: CheckOptions, *, node_name: str | None = None, context=None,
-                 timeout: float = 120.0, on_run=None) -> list[list[dict]]:
-    """The reports a live rbe_node returns for each run's state (message dicts)."""
+                 timeout: float = 120.0, on_run=None):
+    """Each run with the reports a live rbe_node returns for its state (message dicts), as
+    they come (a generator: the node is stopped when it is exhausted or closed)."""
     own_context = context is None
     if own_context:
         context = rclpy.Context()
@@ -264,7 +265,6 @@ def live_reports(runs, options: CheckOptions, *, node_name: str | None = None, c
 
         client = _Client(context, node_name)
         client.wait_ready(60.0 if process is not None else 30.0, alive)
-        out = []
         settings = None
         for i, run in enumerate(runs):
             if run.settings is not None and run.settings != settings:
@@ -274,18 +274,18 @@ def live_reports(runs, options: CheckOptions, *, node_name: str | None = None, c
                 client.set_parameters(wanted, timeout)
                 settings = run.settings
             if run.kind == PLAN:
-                out.append(client.plan(live_goal(run), timeout))
+                answer = client.plan(live_goal(run), timeout)
             else:
                 state = dict_to_message(run.state, client.publishers[run.kind][1])
                 if run.kind == STATE and run.state.get("sequence"):
-                    out.append(client.check_sequence(state, timeout))
+                    answer = client.check_sequence(state, timeout)
                 else:
                     answer = client.check_whole(state, timeout, run.kind)
-                    out.append(answer if run.kind == STATE or run.reports else [])
+                    answer = answer if run.kind == STATE or run.reports else []
             alive()
             if on_run is not None:
                 on_run(i, run)
-        return out
+            yield run, answer
     finally:
         if client is not None:
             try:
@@ -302,7 +302,7 @@ def live_reports(runs, options: CheckOptions, *, node_name: str | None = None, c
 def live_recheck(node_name: str | None = None, context=None, timeout: float = 120.0):
     """A ``recheck`` for :func:`rbe_ros.io.replay.replay_bag`: through a live rbe_node
     (started here, or the running one named ``node_name``; see :func:`live_reports`)."""
-    def recheck(runs, options: CheckOptions, on_run=None) -> list[list[dict]]:
+    def recheck(runs, options: CheckOptions, on_run=None):
         return live_reports(runs, options, node_name=node_name, context=context,
                             timeout=timeout, on_run=on_run)
     return recheck

@@ -44,6 +44,7 @@ Run: ``rbe_node --ros-args -p friction_coefficient:=0.5 -p mcap_path:=bags/run``
 from __future__ import annotations
 
 import os
+import math
 import signal
 import struct
 import json
@@ -81,7 +82,7 @@ from ..io.inputs import load_design
 from ..io.foxglove_scene import SceneServer
 from ..io.markers import MARKER_TYPE, run_markers, step_markers
 from ..io.messages import (plan_feedback_to_dict, plan_goal_from_dict, plan_result_to_dict,
-                           report_header, report_to_dict, state_to_dict)
+                           poses_to_dict, report_header, report_to_dict, state_to_dict)
 from ..io.plans import plan_state
 from ..io.poses import AsBuilt
 from ..io.replay import (DESIGN, OPTIONS_KEY, PLAN_GOAL_TYPE, PLAN_RESULT_TYPE, POSES,
@@ -158,7 +159,26 @@ PARAMETERS = {
     "record_markers": (True, ParameterDescriptor(
         type=ParameterType.PARAMETER_BOOL, description="with mcap_path: record the markers of "
         "every report too (false: a lean log of states and reports)")),
+    "marker_rate_hz": (0.0, ParameterDescriptor(
+        type=ParameterType.PARAMETER_DOUBLE, description="markers of at most this many "
+        "reports a second are drawn, published and recorded (the newest report's always, at "
+        "most 1/rate s late); 0: every report's",
+        floating_point_range=[FloatingPointRange(from_value=0.0, to_value=1000.0, step=0.0)])),
+    "max_bag_size_mb": (0.0, ParameterDescriptor(
+        type=ParameterType.PARAMETER_DOUBLE, read_only=True, description="with mcap_path: "
+        "begin the next file of the bag (name_1.mcap, ...) when one reaches this many MB "
+        "(10^6 bytes); each file replays alone (settings, design and the poses measured so far "
+        "written again at its start); 0: no split by size",
+        floating_point_range=[FloatingPointRange(from_value=0.0, to_value=1e6, step=0.0)])),
+    "max_bag_duration_s": (0.0, ParameterDescriptor(
+        type=ParameterType.PARAMETER_DOUBLE, read_only=True, description="with mcap_path: "
+        "begin the next file of the bag when one spans this many seconds; 0: no split by "
+        "duration",
+        floating_point_range=[FloatingPointRange(from_value=0.0, to_value=1e7, step=0.0)])),
 }
+
+#: How often a report's markers held back by ``marker_rate_hz`` are looked at.
+MARKER_POLL_S = 0.05
 
 
 class ConfigurationError(Exception):
@@ -232,6 +252,14 @@ class RbeChecks:
         self.marker_topic = self._marker_pub.topic_name
         self.plan_goal_topic = self.resolve_topic_name("~/plan/goal")
         self.plan_result_topic = self.resolve_topic_name("~/plan/result")
+        # marker_rate_hz: the markers of the newest report held back, sent when their time
+        # comes (polled while one waits)
+        self._marker_lock = threading.Lock()
+        self._markers_at = -math.inf
+        self._markers_waiting: tuple | None = None
+        self._marker_timer = self.create_timer(MARKER_POLL_S, self._markers_due,
+                                               callback_group=MutuallyExclusiveCallbackGroup())
+        self._marker_timer.cancel()
         self.add_post_set_parameters_callback(self._parameters_set)
         # the report log (_log_report): verdict counts since the last summary line
         self._log_lock = threading.Lock()
@@ -348,14 +376,17 @@ class RbeChecks:
         # the options at the start, so that `rbe-ros replay` re-checks the same way
         try:
             self._bag = BagWriter(
-                path, custom_data={OPTIONS_KEY: options_to_json(self.check_options())})
+                path, custom_data={OPTIONS_KEY: options_to_json(self.check_options())},
+                max_bytes=int(self.get_parameter("max_bag_size_mb").value * 1e6),
+                max_duration_ns=int(self.get_parameter("max_bag_duration_s").value * 1e9))
         except OSError as exc:
             raise ConfigurationError(f"mcap_path {raw!r}: cannot create the bag {path}: "
                                      f"{exc.strerror or exc}") from None
         self._bag.add_topic(self.state_topic, "rbe_msgs/msg/AssemblyState")
+        # a report and its markers stay in the file of their state (a split file replays)
         self._bag.add_topic(self.report_topic, "rbe_msgs/msg/StabilityReport",
-                            transient_local=True)
-        self._bag.add_topic(self.marker_topic, MARKER_TYPE, transient_local=True)
+                            transient_local=True, splits=False)
+        self._bag.add_topic(self.marker_topic, MARKER_TYPE, transient_local=True, splits=False)
         # added with their first message: a bag of states alone has only their topics
         self.settings_topic = f"{self.get_fully_qualified_name()}/settings"
         self._bag.add_topic(self.settings_topic, SETTINGS_TYPE, transient_local=True)
@@ -386,6 +417,13 @@ class RbeChecks:
                 self.health.error(f"recording to {self.bag_path} failed, stopped: {exc}")
                 self._close_bag_locked()
 
+    def _carry(self, topic: str, message) -> None:
+        """Write ``message`` (CDR bytes, or a callable making a message dict) again at the
+        start of every later file of a split bag, so that one file alone replays."""
+        with self._bag_lock:
+            if self._bag is not None and topic not in self._later_topics:
+                self._bag.carry(topic, message)
+
     def _record_settings(self) -> None:
         """Record the check options and frame_id now in force (at the start and after every
         parameter change), so that a replay checks each state with what it was checked with."""
@@ -393,7 +431,9 @@ class RbeChecks:
             return
         settings = {"options": json.loads(options_to_json(self.check_options())),
                     "frame_id": self.get_parameter("frame_id").value}
-        self._record(self.settings_topic, String(data=json.dumps(settings, sort_keys=True)))
+        data = serialize_message(String(data=json.dumps(settings, sort_keys=True)))
+        self._record(self.settings_topic, data)
+        self._carry(self.settings_topic, data)
 
     def _publish_diagnostics(self) -> None:
         self._diagnostics_pub.publish(self.health.message(
@@ -454,6 +494,49 @@ class RbeChecks:
         data = self._encode_report(report_to_dict(report, header, arrays=True))
         self._record(self.report_topic, data)
         self._report_pub.publish(data)
+        self._markers_of(scene, report, header, state)
+        where = f" step {report.step_index} ({report.block_placed})" \
+            if report.step_index >= 0 else ""
+        self._log_report(f"{header['frame_id']}{where}: {report.status.name}: "
+                         f"{report.message}", report)
+        return data
+
+    def _markers_of(self, scene: Scene | None, report: Report, header: dict,
+                    state: AssemblyState | None) -> None:
+        """Send the markers of ``report`` now, or with ``marker_rate_hz`` when their time
+        comes (a newer report's replace them while they wait: drawing, sending and recording
+        a 300-block wall's markers at 10 Hz is most of a bag and of the node's time)."""
+        rate = self.get_parameter("marker_rate_hz").value
+        with self._marker_lock:
+            now = time.monotonic()
+            if rate > 0 and now < self._markers_at + 1.0 / rate:
+                self._markers_waiting = (scene, report, header, state)
+                self._marker_timer.reset()
+                return
+            self._markers_at, self._markers_waiting = now, None
+        self._send_markers(scene, report, header, state)
+
+    def _markers_due(self) -> None:
+        """Timer: send the markers waiting once their time has come."""
+        rate = self.get_parameter("marker_rate_hz").value
+        with self._marker_lock:
+            now = time.monotonic()
+            waiting = self._markers_waiting
+            if waiting is not None and rate > 0 and now < self._markers_at + 1.0 / rate:
+                return
+            self._markers_at, self._markers_waiting = now, None
+            self._marker_timer.cancel()
+        if waiting is None:
+            return
+        try:
+            self._send_markers(*waiting)
+        except Exception as exc:    # never out of a timer callback (it would end the spin)
+            self.get_logger().error(f"markers not sent: {type(exc).__name__}: {exc}")
+
+    def _send_markers(self, scene: Scene | None, report: Report, header: dict,
+                      state: AssemblyState | None) -> None:
+        """Draw, publish (and record) the markers of ``report`` (``state``: drawn as it
+        came, a check that failed)."""
         if state is None:
             markers = step_markers(scene, report, header)
         else:
@@ -465,11 +548,6 @@ class RbeChecks:
         if self.get_parameter("record_markers").value:
             self._record(self.marker_topic, markers)
         self._marker_pub.publish(markers)
-        where = f" step {report.step_index} ({report.block_placed})" \
-            if report.step_index >= 0 else ""
-        self._log_report(f"{header['frame_id']}{where}: {report.status.name}: "
-                         f"{report.message}", report)
-        return data
 
     def _log_report(self, text: str, report: Report) -> None:
         """A failed check at ERROR, an unstable verdict at WARN when it differs from the
@@ -627,10 +705,20 @@ class RbeChecks:
                 scene = merge_message(self._asbuilt, kind, message_to_dict(msg))
             except SceneError as exc:
                 scene = exc
+            # a later file of a split bag begins with the design and the poses measured so
+            # far (stamp 0: no report answers it), so that it replays alone
+            if kind == DESIGN:
+                self._carry(topic, data)
+            else:
+                self._carry(topic, self._measured_poses)
             self._put((header, scene))
         except Exception as exc:
             self.get_logger().error(f"{topic}: message not handled: {type(exc).__name__}: "
                                     f"{exc}")
+
+    def _measured_poses(self) -> dict:
+        """The poses measured so far as one BlockPoses dict (stamp 0)."""
+        return poses_to_dict(self._asbuilt.measured, self.get_parameter("frame_id").value)
 
     def _check_asbuilt(self, header: dict, scene) -> None:
         """Check an as-built scene (or report why there is none) as a whole."""

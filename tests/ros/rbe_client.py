@@ -22,7 +22,9 @@ from rbe_ros.ros.live import NodeProcess
 from rbe_ros.scene import box_block, make_scene
 
 NODE = "/rbe_node"
-TIMEOUT = 15.0
+#: An upper bound against a hang, never a measure: generous for a loaded shared machine (a
+#: wait ends as soon as its condition holds).
+TIMEOUT = 60.0
 
 DENSITY, G = 2000.0, 9.81
 

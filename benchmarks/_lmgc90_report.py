@@ -8,6 +8,8 @@ from bench import DEFAULT, method_label
 
 #: Columns of the agreement table, in order (those present in the results).
 COLUMNS = (DEFAULT, "lmgc90", "pybullet-240", "pybullet-1k", "mujoco-1k")
+#: LMGC90's words on a sample that decide it (else "failed" or "not comparable").
+DECIDED = ("stands", "falls")
 
 
 def _answer(case: dict, m: str) -> str | None:
@@ -73,11 +75,15 @@ def summary(result: dict) -> list[str]:
     if ratios:
         line += f"; LMGC90 takes a median {statistics.median(ratios):.0f}x ours' time"
     samples = result["lmgc90"].get("samples") or {}
-    differ = [f"{k} (LMGC90 {r['lmgc90']}, ours {r['rbe_ros']})" for k, r in samples.items()
-              if "lmgc90" in r and (r["lmgc90"] == "stands") != r["rbe_ros_stable"]]
+    decided = {k: r for k, r in samples.items() if r.get("lmgc90") in DECIDED}
+    differ = [f"{k} (LMGC90 {r['lmgc90']}, ours {r['rbe_ros']})" for k, r in decided.items()
+              if (r["lmgc90"] == "stands") != r["rbe_ros_stable"]]
     if samples:
-        line += (f". On compas_cra's samples ours differs from LMGC90 on {len(differ)} of"
-                 f" {len(samples)}" + (": " + ", ".join(differ) if differ else ""))
+        line += (f". On compas_cra's samples ours differs from LMGC90 on {len(differ)} of the"
+                 f" {len(decided)} it decides" + (": " + ", ".join(differ) if differ else ""))
+        undecided = sorted(set(samples) - set(decided))
+        if undecided:
+            line += f" (not comparable: {', '.join(undecided)})"
     return [line + "."]
 
 
@@ -166,9 +172,14 @@ def _samples(info: dict) -> list[str]:
     if not samples:
         return ["compas_cra's samples: not run (no .venv-compas).", ""]
     L = ["### compas_cra's samples", "",
-         "Supports and mu as compas_cra's example scripts set them (type-a..d have none: the two"
-         " side blocks are the supports, mu as A and H), uniform density; verdicts also in"
-         " `docs/lmgc90_verdicts.json` for tests to cite:", "",
+         "Supports, mu and relative densities as compas_cra's example scripts set them (type-a..d"
+         " have none: the two side blocks are the supports, mu as A and H), density"
+         f" {_density(samples)} kg/m^3; verdicts also in `docs/lmgc90_verdicts.json` for tests to"
+         " cite (tests/test_lmgc90_reference.py). A sample whose free blocks are not convex is"
+         " not comparable: compas_lmgc90 takes one convex polyhedron per body (no clusters of"
+         " them; a non-convex one stops it in POLYR::read_bodies, \"impossible to create the HE"
+         " structure\"), so such a block goes in as its convex hull, which overlaps its"
+         " neighbours where the blocks interlock.", "",
          "| sample | blocks | supports | mu | LMGC90 | largest motion (x size, deg) | rbe_ros (default) |",
          "|---|---|---|---|---|---|---|"]
     for name, r in samples.items():
@@ -177,11 +188,25 @@ def _samples(info: dict) -> list[str]:
             continue
         motion = (f"{r['max_disp']:.1e}, {r['max_rot_deg']:.2g}" if r.get("max_disp") is not None
                   else r.get("error", "-"))
-        slabs = ", ".join(f"{k}: {v} slabs" for k, v in (r.get("slabs") or {}).items())
+        notes = [f"{k}: {v} slabs" for k, v in (r.get("slabs") or {}).items()]
+        if r.get("on_hulls"):
+            notes.append(f"free blocks {', '.join(r['hulls'])} not convex; on their convex hulls,"
+                         f" which overlap the neighbours, it {r['on_hulls']} within"
+                         f" {r['simulated']:g} s")
+        heavier = {}
+        for k, v in (r.get("densities") or {}).items():
+            heavier.setdefault(v, []).append(k)
+        notes += [f"{v:g} kg/m^3 on {', '.join(ks)}" for v, ks in heavier.items()]
         L.append(f"| {name} | {r['blocks']} | {r['supports']} | {r['mu']} | {r['lmgc90']}"
-                 f"{' (' + slabs + ')' if slabs else ''} | {motion} | {r['rbe_ros']} |")
+                 f"{' (' + '; '.join(notes) + ')' if notes else ''} | {motion} | {r['rbe_ros']} |")
     L.append("")
     return L
+
+
+def _density(samples: dict) -> str:
+    """The samples' base density in words (the one they share, else each)."""
+    found = {r["density"] for r in samples.values() if r.get("density")}
+    return ", ".join(f"{d:g}" for d in sorted(found)) or "?"
 
 
 def verdicts(result: dict) -> dict | None:
@@ -192,7 +217,8 @@ def verdicts(result: dict) -> dict | None:
     return {"source": "make bench-lmgc90 (benchmarks/bench.py --only lmgc90); docs/BENCHMARKS.md"
                       " section 4 says how a verdict is decided",
             "date": info["date"], "versions": info["versions"], "settings": info["settings"],
-            "samples": {name: {k: r.get(k) for k in ("file", "supports", "mu", "lmgc90", "stable",
+            "samples": {name: {k: r.get(k) for k in ("file", "supports", "mu", "density",
+                                                       "densities", "lmgc90", "stable",
                                                        "max_disp", "max_rot_deg", "simulated",
-                                                       "slabs", "hulls", "rbe_ros")}
+                                                       "slabs", "hulls", "on_hulls", "rbe_ros")}
                         for name, r in info["samples"].items()}}

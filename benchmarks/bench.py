@@ -43,6 +43,7 @@ sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(ROOT / "tests"))   # the independent references (tests/oracles/)
 
 import _lmgc90 as lmgc90  # noqa: E402
+import compas_compare  # noqa: E402
 import _physics as physics  # noqa: E402
 from machine import machine_summary  # noqa: E402
 from oracles import arch_limit  # noqa: E402
@@ -85,12 +86,13 @@ ARMADILLO_MU = 0.84          # rbe_solve's default mu
 ARMADILLO_REPEAT = 5
 #: LMGC90's tilt capacities are bisected on these families only (a simulation per trial).
 LMGC90_TILT_FAMILIES = ("single block", "yawed block")
-#: compas_cra's samples for LMGC90 (docs/lmgc90_verdicts.json): supports and mu as compas_cra's
-#: example scripts set them (A, H: examples/16_ha.py; shelf: 07_shelf.py; cubes: 02_cubes.py;
-#: type-a..d have no example script: the two side blocks are the supports, mu as A and H).
-LMGC90_SAMPLES = {"A": ([0, 1], 0.84), "H": ([0, 1], 0.84), "shelf": ([0], 0.9),
-                  "cubes": ([0], 0.84), "type-a": ([0, 1], 0.84), "type-b": ([0, 1], 0.84),
-                  "type-c": ([0, 1], 0.84), "type-d": ([0, 1], 0.84)}
+#: compas_cra's samples for LMGC90 (docs/lmgc90_verdicts.json), set up as compas_cra's example
+#: scripts set them up (compas_compare.SAMPLES: supports, mu, the bridge's 3.51 x density on
+#: nodes 11-15); type-a..d have no example script: the two side blocks are the supports, mu
+#: as A and H.
+LMGC90_SAMPLES = {name: compas_compare.SAMPLES[name]
+                  for name in ("A", "H", "shelf", "cubes", "snake", "bridge")} | {
+    f"type-{c}": {"file": f"type-{c}.json", "supports": [0, 1], "mu": 0.84} for c in "abcd"}
 
 
 def method_label(mid: str) -> str:
@@ -346,26 +348,42 @@ def run_lmgc90(case: Case, python: Path) -> None:
     case.results["lmgc90"] = res
 
 
+def sample_densities(spec: dict) -> dict[str, float]:
+    """kg/m^3 of a sample's blocks whose density is not :data:`_lmgc90.DENSITY` (the example
+    script's relative densities times it), by block id (the node key)."""
+    return {key: lmgc90.DENSITY * float(rel) for key, rel in (spec.get("density") or {}).items()
+            if float(rel) != 1.0}
+
+
 def lmgc90_samples(python: Path, samples_dir: Path) -> dict:
-    """LMGC90's and our verdicts on compas_cra's samples (:data:`LMGC90_SAMPLES`), uniform
-    density (their files give none; uniform density does not change a verdict)."""
+    """LMGC90's and our verdicts on compas_cra's samples (:data:`LMGC90_SAMPLES`), density
+    :data:`_lmgc90.DENSITY` (their files give none) times the example script's relative one.
+    A sample with a non-convex free block is not comparable: compas_lmgc90 takes one convex
+    polyhedron per body, and such a block goes in as its hull (see _lmgc90.bodies), which
+    overlaps its neighbours where the blocks interlock."""
     from rbe_ros.io.compas import load_compas_assembly
     out = {}
-    for name, (supports, mu) in LMGC90_SAMPLES.items():
-        path = samples_dir / f"{name}.json"
+    for name, spec in LMGC90_SAMPLES.items():
+        path = samples_dir / spec["file"]
         if not path.exists():
             out[name] = {"error": f"{path} not found"}
             continue
+        supports, mu, densities = spec["supports"], spec["mu"], sample_densities(spec)
         scene = load_compas_assembly(path, supports=supports, density=lmgc90.DENSITY)
+        scene = replace(scene, blocks=tuple(replace(b, density=densities.get(b.id, b.density))
+                                            for b in scene.blocks))
         ours = check_scene(scene, ours_options("qp", "soc", mu))
         res = lmgc90.check(scene, mu, python)
+        word = _word(res)
+        if res.get("hulls") and not res.get("failed"):     # its verdict on the hulls, kept apart
+            res["on_hulls"], res["stable"], word = word, None, "not comparable"
         out[name] = {"file": path.name, "supports": supports, "mu": mu,
-                     "blocks": len(scene.blocks), "lmgc90": _word(res), "rbe_ros": ours.status.name,
+                     "density": lmgc90.DENSITY, "densities": densities,
+                     "blocks": len(scene.blocks), "lmgc90": word, "rbe_ros": ours.status.name,
                      "rbe_ros_stable": bool(ours.stable)} | {
                          k: res.get(k) for k in ("stable", "max_disp", "max_rot_deg", "simulated",
-                                                 "time", "slabs", "hulls", "error")}
-        print(f"[lmgc90] sample {name}: LMGC90 {out[name]['lmgc90']}, rbe_ros {ours.status.name}",
-              flush=True)
+                                                 "time", "slabs", "hulls", "on_hulls", "error")}
+        print(f"[lmgc90] sample {name}: LMGC90 {word}, rbe_ros {ours.status.name}", flush=True)
     return out
 
 

@@ -7,7 +7,8 @@ downward stands for any mu (its normal forces alone carry it: N = W / (2 sin a) 
 without friction); one in an opening that widens downward falls (gravity opens its faces;
 the RBE field, feasible for mu > tan a, squeezes it); a block on an incline pressed by a
 top bar stands exactly when tan(theta) <= mu (the bar carries nothing). compas_cra's samples
-A, H, shelf and snake fall by its own CRA (``cra_solve``: infeasible) and LMGC90 (issue 24).
+A, H, shelf and snake fall by its own CRA (``cra_solve``: infeasible), A, H and shelf by
+LMGC90 too (issue 24; it cannot take snake's non-convex blocks: tests/test_lmgc90_reference.py).
 """
 import math
 from dataclasses import replace

@@ -34,17 +34,27 @@ test-long: setup
 paper: setup
 	$(PY) benchmarks/paper.py
 
-# Speed against accuracy against compas_cra, PyBullet and MuJoCo: docs/BENCHMARKS.md and
-# docs/bench/ (20-30 minutes). The physics engines go into .venv (requirements/bench.txt,
+# Speed against accuracy against compas_cra, PyBullet, MuJoCo and LMGC90: docs/BENCHMARKS.md and
+# docs/bench/ (30-40 minutes). The physics engines go into .venv (requirements/bench.txt,
 # checked with pip check); compas-cra into a scratch venv (RBE_COMPAS_VENV, default
 # .venv-compas, made by make setup). make bench BENCH_ARGS=--quick: a subset in under 3 minutes,
 # written to out/bench-quick/.
-.PHONY: bench
+.PHONY: bench bench-lmgc90
 bench: setup
 	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements/bench.txt
 	$(PY) -m pip check --disable-pip-version-check
 	$(PY) benchmarks/bench.py $(BENCH_ARGS)
 	$(MAKE) bench-margin
+	$(MAKE) bench-insertion
+
+# LMGC90 alone (non-smooth contact dynamics, the accuracy reference; about 10 minutes): its
+# verdicts on the near-limit suite and on compas_cra's samples, ours re-timed beside it,
+# merged into the last full run's docs/bench/results.json; writes docs/BENCHMARKS.md (section
+# 4) and docs/lmgc90_verdicts.json. LMGC90 goes into a scratch venv (RBE_LMGC90_VENV, default
+# .venv-lmgc90, about 1 GB, made on first use from requirements/lmgc90.txt, pip check'ed);
+# make bench runs it too.
+bench-lmgc90: setup
+	nice -n 10 $(PY) benchmarks/bench.py --only lmgc90
 
 # As-built noise suite: perturbed poses under the declared uncertainty, the design rule with
 # raised tolerances and today's defaults; docs/ASBUILT.md and docs/figures/asbuilt.png
@@ -99,6 +109,19 @@ lock:
 # apt-get as root or with sudo; seconds when already installed).
 # Cost of margin_g against a check, Monte Carlo throughput of 2 workers and of a local
 # 2-CPU Ray against one process: docs/MARGIN.md (a few minutes; also run by make bench).
+# Insertion check against the stability check per step, 140-block dome and 1,020-block wall:
+# docs/INSERTION.md (about 5 minutes, most of it the wall's stability checks).
+.PHONY: bench-insertion
+bench-insertion: setup
+	$(PY) benchmarks/insertion.py
+
+# A 10-minute 10 Hz session of a 310-block wall recorded synthetically, then replayed with
+# rbe-ros replay --compare: time against the recorded duration and peak RSS, written to
+# docs/SESSIONS.md (about 15 minutes on 2 busy cores).
+.PHONY: bench-replay
+bench-replay: setup
+	nice -n 10 $(PY) benchmarks/replay_session.py --doc docs/SESSIONS.md
+
 .PHONY: bench-margin
 bench-margin: ray
 	$(PY) benchmarks/margin.py

@@ -27,7 +27,6 @@ from .analysis.options import CheckOptions
 from .analysis.pipeline import check_scene, check_sequence, first_failing_step
 from .analysis.executors import CheckPool, ProcessPool, ray_checks, ray_cluster
 from .analysis.perturb import PoseNoise
-from .analysis.planning import plan_sequence
 from .analysis.robust import RobustJob, estimate, sample_scene, serial
 from .analysis.tilt import DIRECTIONS, tilt_capacity
 from .analysis.validate import validated_assembly
@@ -36,16 +35,21 @@ from .analysis.virtual import ANALYSES, virtual_assembly
 from .generators import GENERATORS
 from .io.figures import draw_report
 from .io.messages import header_dict, json_safe, report_json, report_to_dict, state_to_dict
-from .io.replay import (REPORT_TOPIC, STATE_TOPIC, Run, bag_options, default_output,
-                        offline_reports, read_runs, replay_bag, step_stamps, write_runs)
+from .io.replay import (REPORT_TOPIC, STATE_TOPIC, Run, RunReader, bag_options,
+                        default_output, offline_reports, read_runs, replay_bag, step_stamps,
+                        write_runs)
 from .io.plan_output import ProgressLines, ReportLines, step_summary
 from .io.table import format_table
 from .io.view import ViewRun, checked_runs, write_html
 from .io.scene_json import load_scene, scene_to_dict
 from .io.inputs import load_design
+from .io.plans import PlanLimits, plan_state
 from .io.poses import load_poses, scene_at_poses
 from .io.stored_interfaces import compare_interfaces
 from .scene import Scene, SceneError
+
+#: replay: at most one progress line on stderr per this many seconds
+PROGRESS_S = 2.0
 
 
 def _input_arguments(parser: argparse.ArgumentParser) -> None:
@@ -497,20 +501,19 @@ def _run_plan(args) -> int:
                   if args.ray else
                   functools.partial(CheckPool, workers=args.workers) if args.workers > 1
                   else None)
+    # the plan's --time-limit bounds the whole search, not each check
+    limit = options.solve.time_limit
+    limits = PlanLimits(args.max_held, args.beam, args.candidates, args.keep_sequence,
+                        time_limit=limit if math.isfinite(limit) else 0.0)
+    limits.search()                 # a limit out of range: an error of the command line
+    options = replace(options, solve=replace(options.solve, time_limit=math.inf))
     reports = ReportLines(args.reports) if args.reports else None
     interrupted = []
     previous = signal.signal(signal.SIGINT, lambda *_: interrupted.append(True))
     try:
-        # the plan's --time-limit bounds the whole search, not each check
-        plan = plan_sequence(scene, args.max_held, replace(
-                                 options, solve=replace(options.solve, time_limit=math.inf)),
-                             beam=args.beam, candidates=args.candidates,
-                             keep_sequence=args.keep_sequence,
-                             full_candidates=args.full_candidates,
-                             time_limit=options.solve.time_limit,
-                             progress=ProgressLines(sys.stderr),
-                             should_stop=lambda: bool(interrupted), on_report=reports,
-                             look_ahead=look_ahead)
+        plan = plan_state(lambda: scene, limits, options, progress=ProgressLines(sys.stderr),
+                          should_stop=lambda: bool(interrupted), on_report=reports,
+                          look_ahead=look_ahead, full_candidates=args.full_candidates)
     finally:
         signal.signal(signal.SIGINT, previous)
         if reports is not None:
@@ -541,8 +544,7 @@ def _run_view(args) -> int:
     source = Path(args.scene)
     if source.suffix == ".mcap" or (source / "metadata.yaml").is_file():
         options = bag_options(source)
-        runs = [ViewRun(f"run {k}", run.state, run.reports)
-                for k, run in enumerate(read_runs(source))]
+        runs = [ViewRun(f"run {k}", *run.checked()) for k, run in enumerate(read_runs(source))]
         title = source.name
     else:
         options = _options(args)
@@ -567,29 +569,41 @@ def _run_replay(args) -> int:
         raise FileExistsError(f"output {str(out)!r} exists already, not overwriting it "
                               "(give another -o)")
 
+    started = time.monotonic()
+    shown = [started]
+
     def progress(i: int, run) -> None:
-        print(f"  run {i}: {run.describe()}: {len(run.reports)} recorded reports",
-              file=sys.stderr)
+        """A line on stderr at most every PROGRESS_S (a session bag has thousands of runs)."""
+        now = time.monotonic()
+        if now - shown[0] >= PROGRESS_S or i == 0:
+            shown[0] = now
+            total = f"/{runs.total}" if runs.total else ""
+            print(f"  run {i + 1}{total} ({now - started:.0f} s): {run.describe()}: "
+                  f"{len(run.reports)} recorded reports", file=sys.stderr)
 
     recheck = offline_reports
     if args.live:
         # rclpy is loaded only for --live: every other command runs without ROS
         from .ros.live import live_recheck
         recheck = live_recheck(args.node_name, timeout=args.timeout)
+    runs = RunReader(args.bag)
     try:
-        result = replay_bag(args.bag, out, compare=args.compare, recheck=recheck,
-                            markers=not args.no_markers, on_run=progress)
+        result = replay_bag(runs, out, compare=args.compare, recheck=recheck,
+                            markers=not args.no_markers, on_run=progress, keep=False)
     except RuntimeError as exc:     # the live node failed or exited
         raise ValueError(str(exc)) from None
-    reports = sum(len(r) for r in result.replayed)
-    print(f"replayed {len(result.runs)} states ({reports} reports{', live' if args.live else ''}"
-          f"); bag written to {result.output}")
+    print(f"replayed {result.states} states ({result.reports} reports"
+          f"{', live' if args.live else ''}) in {time.monotonic() - started:.1f} s; bag "
+          f"written to {result.output}")
+    if result.orphan_reports:
+        print(f"{result.orphan_reports} recorded reports answer states not in this bag (a "
+              "file of a split bag: replay the bag directory): not compared")
     if not args.compare:
         return 0
     if result.matches:
         print("all recorded reports reproduced (within the tolerances)")
         return 0
-    print(f"MISMATCH: {len(result.differences)} field(s) differ from the recorded reports:")
+    print(f"MISMATCH: {result.difference_count} field(s) differ from the recorded reports:")
     print(result.diff())
     return 1
 

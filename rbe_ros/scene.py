@@ -156,6 +156,15 @@ class Scene:
     sequence: tuple[str, ...] = ()
     holds: tuple[Hold, ...] = ()
     pose_uncertainty: tuple[float, float] | None = None
+    #: Per step of ``sequence``: the unit direction the block arrives along (checked, not
+    #: chosen), or None (the check chooses one); empty: choose at every step.
+    approach: tuple[np.ndarray | None, ...] = ()
+
+    def approach_of(self, block_id: str) -> np.ndarray | None:
+        """The given approach of ``block_id``'s step (None: none given)."""
+        if block_id in self.sequence and self.approach:
+            return self.approach[self.sequence.index(block_id)]
+        return None
 
     def block(self, block_id: str) -> Block:
         for b in self.blocks:
@@ -167,7 +176,7 @@ class Scene:
         """The scene restricted to the blocks whose ids are in ``ids`` (order kept)."""
         keep = set(ids)
         return replace(self, blocks=tuple(b for b in self.blocks if b.id in keep), sequence=(),
-                       holds=())
+                       holds=(), approach=())
 
 
 BOX_FACES = ((0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (2, 3, 7, 6), (1, 2, 6, 5), (0, 4, 7, 3))
@@ -242,9 +251,10 @@ def finite_array(value, shape, what: str) -> np.ndarray:
 
 
 def make_scene(name: str, blocks, gravity=DEFAULT_GRAVITY, sequence=(), holds=(),
-               pose_uncertainty=None) -> Scene:
+               pose_uncertainty=None, approach=()) -> Scene:
     """A validated scene: unique ids, a support, a sequence of existing free blocks, holds of
-    existing blocks within the steps, a pose uncertainty of two numbers >= 0 (or None)."""
+    existing blocks within the steps, a pose uncertainty of two numbers >= 0 (or None), an
+    approach per step of the sequence (a non-zero vector, made unit, or None) or none."""
     blocks = tuple(blocks)
     if not blocks:
         raise SceneError("the scene has no blocks")
@@ -272,7 +282,30 @@ def make_scene(name: str, blocks, gravity=DEFAULT_GRAVITY, sequence=(), holds=()
         seq_seen.add(s)
     steps = len(seq) or sum(not b.support for b in blocks)
     return Scene(str(name), blocks, g, seq, _check_holds(holds, seen, steps),
-                 _check_uncertainty(pose_uncertainty))
+                 _check_uncertainty(pose_uncertainty), _check_approach(approach, seq))
+
+
+def _check_approach(approach, sequence: tuple[str, ...]) -> tuple[np.ndarray | None, ...]:
+    """Validated approaches: none, or one per step of ``sequence``, each None or a non-zero
+    finite 3-vector (made unit)."""
+    approach = tuple(approach or ())
+    if not approach:
+        return ()
+    if len(approach) != len(sequence):
+        raise SceneError(f'"approach" must have one entry per step of the sequence '
+                         f"({len(sequence)}), has {len(approach)}")
+    out: list[np.ndarray | None] = []
+    for block, d in zip(sequence, approach):
+        if d is None:
+            out.append(None)
+            continue
+        v = finite_array(d, (3,), f"approach of block {block!r}")
+        norm = float(np.linalg.norm(v))
+        if norm < 1e-9:
+            raise SceneError(f"approach of block {block!r} must be a non-zero vector (null: "
+                             "choose one)", [block])
+        out.append(v / norm)
+    return tuple(out)
 
 
 def _check_uncertainty(value) -> tuple[float, float] | None:

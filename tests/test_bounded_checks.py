@@ -114,13 +114,17 @@ def test_the_deadline_names_the_stage_and_nests():
 
 def test_a_time_limit_bounds_the_geometry_stage():
     """Twelve distinct 10,000-vertex meshes: about 7 s of shape analysis unbounded (see
-    docs/BOUNDED_CHECKS.md); with a 0.5 s limit the answer comes within 1 s."""
+    docs/BOUNDED_CHECKS.md); with a 0.5 s limit the answer comes after at most 1 s of work.
+    The limit is wall time, so the bound is on this process's CPU time (which a shared
+    machine's load does not stretch: under load the limit stops the work sooner) and, as
+    wall time, far below the unbounded 7 s."""
     scene = gen.convex_domes(12)
     block_module._shape.cache_clear()
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     report = check_scene(scene, CheckOptions(solve=SolveOptions(time_limit=0.5)))
-    elapsed = time.perf_counter() - start
-    assert elapsed < 1.0, f"{elapsed:.2f} s"
+    elapsed, spent = time.perf_counter() - start, time.process_time() - cpu
+    assert spent < 1.0, f"{spent:.2f} s of CPU"
+    assert elapsed < 4.0, f"{elapsed:.2f} s"
     assert report.status == Status.SOLVER_FAILED and not report.stable
     assert report.message == "solver failed: time limit of 0.5 s exceeded in the geometry stage"
 
@@ -133,19 +137,20 @@ def test_a_time_limit_bounds_each_step_of_a_sequence(monkeypatch):
     assert {r.status for r in reports} == {Status.SOLVER_FAILED}
     assert all(r.message.endswith("exceeded in the geometry stage") for r in reports)
     # a step whose solve starts after its budget is spent (the geometry is not): that step
-    # only is SOLVER_FAILED, and the next steps are checked
+    # only is SOLVER_FAILED, and the next steps are checked (a limit of 1 s: the first step,
+    # a few ms idle, must finish within it on a loaded machine too)
     boxes = stacked_boxes(0.1)
     original = incremental.StepChecker.check
 
     def slow_second_step(self, assembly):
         if len(assembly.blocks) == 3:
-            time.sleep(0.3)
+            time.sleep(1.2)
         return original(self, assembly)
 
     monkeypatch.setattr(incremental.StepChecker, "check", slow_second_step)
-    reports = check_sequence(boxes, CheckOptions(solve=SolveOptions(time_limit=0.2)))
+    reports = check_sequence(boxes, CheckOptions(solve=SolveOptions(time_limit=1.0)))
     assert [r.status for r in reports] == [Status.STABLE, Status.SOLVER_FAILED]
-    assert reports[1].message == "solver failed: time limit of 0.2 s exceeded in the solve stage"
+    assert reports[1].message == "solver failed: time limit of 1 s exceeded in the solve stage"
     assert reports[1].step_index == 1 and reports[1].block_placed == "b"
 
 

@@ -169,6 +169,12 @@ OPTIONS: tuple[Option, ...] = (
            metavar="N"),
     Option("holds.max_checks", int, "suggested holds: sub-assembly checks the exact search may "
            "spend", "--hold-max-checks", "hold_search_max_checks", 0, 1_000_000, metavar="N"),
+    Option("insertion.enabled", bool, "reports say whether the placed block can reach its "
+           "pose (insertable) and along which direction (insertion_direction)",
+           "--no-insertion", "insertion_check"),
+    Option("insertion.approach_distance", float, "insertion: the placed block's path must be "
+           "free over this many m; 0: twice the block's longest extent", "--approach-distance",
+           "approach_distance", 0.0, 100.0, metavar="M"),
     # fixed in the CLI and the node; stored so that a replay uses what a recording used
     Option("solve.weights.compression", float, "objective weight of compression"),
     Option("solve.weights.tension", float, "objective weight of tension (friction+ penalty)"),

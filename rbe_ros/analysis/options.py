@@ -36,6 +36,15 @@ class HoldSearch:
 
 
 @dataclass(frozen=True)
+class InsertionOptions:
+    """Whether a report says from where its placed block can arrive (analysis/insertion.py),
+    and over which distance its path must be free (m; 0: twice the block's longest extent)."""
+
+    enabled: bool = True
+    approach_distance: float = 0.0
+
+
+@dataclass(frozen=True)
 class CheckOptions:
     """Everything that decides a check's result."""
 
@@ -51,6 +60,7 @@ class CheckOptions:
     margin_directions: int = 0
     #: Sane ranges checked before the geometry stage (None: no validation); see validate.py.
     limits: ValidationLimits | None = field(default_factory=ValidationLimits)
+    insertion: InsertionOptions = field(default_factory=InsertionOptions)
 
     @property
     def threshold(self) -> float:

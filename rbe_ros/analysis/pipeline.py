@@ -7,6 +7,8 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
+import numpy as np
+
 from ..deadline import CheckTimeout, stage, time_budget
 from ..rbe.result import Report, Status
 from ..scene import Scene, SceneError
@@ -14,9 +16,10 @@ from .asbuilt import declared, sensitivity
 from .assembly import Assembly
 from .holds import suggested_holds
 from .incremental import StepChecker
+from .insertion import block_insertion
 from .margin import report_margin
 from .options import CheckOptions
-from .steps import final_state, sequence_step, step_count
+from .steps import final_state, last_block, sequence_step, step_count
 from .validate import validated_assembly
 from .verdict import check
 
@@ -36,14 +39,16 @@ def check_scene(scene: Scene, options: CheckOptions = CheckOptions(),
     options = declared(options, scene)
     try:
         with time_budget(options.solve.time_limit):
-            assembly = validated_assembly(scene, options.limits, options.contact, assembly)
-            held: tuple[str, ...] = ()
+            whole = validated_assembly(scene, options.limits, options.contact, assembly)
+            assembly, held = whole, ()
             if scene.holds:
                 present, held = final_state(scene)
-                assembly = assembly.subset(present, held)
+                assembly = whole.subset(present, held)
             with stage("solve"):
                 report = check(assembly, options)
-            report = _completed(report, assembly, held, options)
+            placed = Placed(whole, tuple(b.id for b in assembly.blocks), last_block(scene),
+                            scene.approach_of(last_block(scene)))
+            report = _completed(report, assembly, held, options, placed)
     except CheckTimeout as exc:
         report = timeout_report(exc)
     return replace(report, solve_time=time.perf_counter() - start)
@@ -83,7 +88,9 @@ def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
             with time_budget(limit):
                 with stage("solve"):
                     report = checker.check(assembly)
-                report = _completed(report, assembly, step.held, options)
+                report = _completed(report, assembly, step.held, options,
+                                    Placed(full, step.present, step.block,
+                                           scene.approach_of(step.block)))
         except CheckTimeout as exc:
             report = replace(timeout_report(exc), num_blocks=len(step.present))
         # the step's time, with its share of the contact detection done once for all steps
@@ -95,10 +102,34 @@ def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
     return reports
 
 
-def _completed(report: Report, assembly: Assembly, held, options: CheckOptions) -> Report:
+@dataclass(frozen=True)
+class Placed:
+    """The block placed at a checked state, for its insertion: the whole scene's assembly
+    (its interfaces with supports too), the blocks present, the block ("" none) and the
+    scene's given approach of it (None: choose one)."""
+
+    whole: Assembly
+    present: tuple[str, ...]
+    block: str
+    approach: np.ndarray | None = None
+
+
+def insertion_fields(placed: Placed | None, options: CheckOptions) -> dict:
+    """The report fields of the placed block's insertion (none when not checked)."""
+    if placed is None or not placed.block or not options.insertion.enabled:
+        return {}
+    found = block_insertion(placed.whole, placed.present, placed.block, options,
+                            placed.approach)
+    return {"insertable": found.insertable, "insertion_direction": found.direction,
+            "insertion_reason": found.reason}
+
+
+def _completed(report: Report, assembly: Assembly, held, options: CheckOptions,
+               placed: Placed | None = None) -> Report:
     """The verdict of ``assembly`` completed in one place, each part in its stage of the
     time budget: the near contacts and whether the verdict is sensitive to the contact
-    tolerance (why, in the message), the blocks held, the suggested holds, the margin."""
+    tolerance (why, in the message), the blocks held, the suggested holds, the margin, and
+    from where the placed block can arrive (a block that cannot: why, in the message)."""
     with stage("sensitivity"):
         near, sensitive = sensitivity(report, assembly, options)
     with stage("hold search"):
@@ -107,8 +138,13 @@ def _completed(report: Report, assembly: Assembly, held, options: CheckOptions) 
         found = report_margin(report, assembly, options.deciding, options.margin_directions)
     extra = {} if found is None else {"margin_g": found.margin_g,
                                       "margin_direction": found.direction}
+    with stage("insertion"):
+        extra.update(insertion_fields(placed, options))
+    why = extra.pop("insertion_reason", "")
     return replace(report, near_contacts=near, verdict_sensitive=bool(sensitive),
-                   message=report.message + (f" | sensitive: {sensitive}" if sensitive else ""),
+                   message=report.message + (f" | sensitive: {sensitive}" if sensitive else "")
+                   + ("" if extra.get("insertable", True)
+                      else f" | not insertable: {placed.block}: {why}"),
                    held_blocks=tuple(held), suggested_holds=suggested, **extra)
 
 

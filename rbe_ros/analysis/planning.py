@@ -10,7 +10,10 @@ blocks (a scaffold, a centring present for some steps) apply by step index as in
 At each step, the candidates of a partial plan are the unplaced blocks that rest on a
 present block (an interface whose normal into the candidate points up, against gravity),
 then those that only touch one, each group lowest first (centroid along gravity), then the
-largest contact area with present blocks, then scene order. For a candidate the holds are
+largest contact area with present blocks, then scene order; of these the first
+``candidates`` that can reach their pose past the present blocks (insertion, see
+:mod:`rbe_ros.analysis.insertion`; those that cannot are named when the step fails). For a
+candidate the holds are
 found as a robot would keep them: nothing, if the step stands so; else the blocks held at
 the previous step plus the new block, with more blocks added greedily while the step does
 not stand (those the failed check names as moving first), then every hold whose release
@@ -49,11 +52,14 @@ from .asbuilt import declared
 from .assembly import Assembly
 from .holds import StabilityOracle, minimal_holds, release_unneeded
 from .incremental import StepChecker
+from .insertion import block_insertion
 from .options import CheckOptions
 from .pipeline import check_sequence
 from .steps import supports_present
 from .verdict import UNEXPLAINED, check
 
+#: How the message of a plan stopped by ``should_stop`` begins (a time limit, a cancel).
+STOPPED = "stopped after"
 #: A contact carries a block when its normal into the block points up by at least this
 #: cosine (87 deg from vertical).
 RESTS_ON = 0.05
@@ -66,7 +72,7 @@ class PlanOptions:
 
     max_held: int = 2            # K: blocks held at any step
     beam: int = 1                # partial plans kept per step (1: greedy)
-    candidates: int = 8          # candidates tried per partial plan and step, lowest first
+    candidates: int = 8          # insertable candidates tried per partial plan and step
     keep_sequence: bool = False  # the scene's sequence is a fixed prefix of the order
     #: every candidate check solves the components of the whole partial assembly (the
     #: planner before the incremental checks; for comparison)
@@ -237,11 +243,13 @@ class _Planner:
         """The supports present at step ``k`` (those with holds while active) and ``order``."""
         return supports_present(self.base, k) + tuple(order)
 
-    def candidates(self, order: tuple[str, ...]) -> list[str]:
+    def candidates(self, order: tuple[str, ...], blocked: dict[str, str]) -> list[str]:
+        """The first ``candidates`` blocks, in rank order, that can reach their pose; those
+        that cannot go into ``blocked`` with the reason."""
         k = len(order)
         prefix = self.scene.sequence if self.plan.keep_sequence else ()
         if k < len(prefix):
-            return [prefix[k]]
+            return self.insertable(order, [prefix[k]], blocked)
         placed = set(order)
         present = set(self.present(order, k))
         left = [b for b in self.free if b not in placed and b not in prefix[k:]]
@@ -254,7 +262,35 @@ class _Planner:
             (resting if any(r for _, r in near) else touching).append((key, b))
         # blocks that only touch (a key-stone's neighbour against the crown) come after:
         # tried when no resting one fits, held as they are placed
-        return [b for _, b in sorted(resting) + sorted(touching)][:self.plan.candidates]
+        return self.insertable(order, [b for _, b in sorted(resting) + sorted(touching)],
+                               blocked)
+
+    def insertable(self, order, ranked, blocked: dict[str, str]) -> list[str]:
+        """The first ``candidates`` of ``ranked`` that can reach their pose after ``order``."""
+        found = []
+        for b in ranked:
+            why = self.blocked((*order, b))
+            if why:
+                blocked.setdefault(b, why)
+                continue
+            found.append(b)
+            if len(found) == self.plan.candidates:
+                break
+        return found
+
+    def insertion(self, order: tuple[str, ...]):
+        """How ``order[-1]`` reaches its pose past the blocks present (None when insertion
+        is not checked)."""
+        if not self.options.insertion.enabled:
+            return None
+        return block_insertion(self.full, self.present(order, len(order) - 1), order[-1],
+                               self.options, self.scene.approach_of(order[-1]))
+
+    def blocked(self, order: tuple[str, ...]) -> str:
+        """Why ``order[-1]`` cannot reach its pose past the blocks present ("" when it can,
+        or when insertion is not checked)."""
+        found = self.insertion(order)
+        return "" if found is None or found.insertable else found.reason
 
     def holds_for(self, partial: _Partial, block: str):
         """(held blocks, within K, step report or None, its assembly) for the step that
@@ -332,8 +368,12 @@ class _Planner:
         if report is None:
             assembly = self.full.subset(self.present(order, len(order) - 1), held)
             report = checker.attempt(assembly) or check(assembly, self.options)
+        found = self.insertion(order)
+        extra = {} if found is None else {"insertable": found.insertable,
+                                          "insertion_direction": found.direction}
         return replace(report, step_index=len(order) - 1, block_placed=order[-1],
-                       held_blocks=tuple(held), num_blocks=len(assembly.blocks)), assembly
+                       held_blocks=tuple(held), num_blocks=len(assembly.blocks),
+                       **extra), assembly
 
     def run(self) -> Plan:
         n = len(self.free)
@@ -345,17 +385,19 @@ class _Planner:
                         failed_step=n)
         beam = [_Partial((), (), (0, 0, 0), (), StepChecker(self.options, explain=False))]
         for k in range(n):
+            blocked: dict[str, str] = {}
             try:
-                children, best_rejected = self._children(beam)
+                children, best_rejected = self._children(beam, blocked)
             except _Stopped:
-                return self._finish(beam[0], False, k, f"stopped after {k} of {n} blocks "
+                return self._finish(beam[0], False, k, f"{STOPPED} {k} of {n} blocks "
                                     f"(time limit or asked to stop); step {k} not placed")
             if not children:
                 count = len(best_rejected[1]) if best_rejected else 0
                 why = (f"; the best candidate, {best_rejected[0]}, needs {count} held "
                        f"block{'' if count == 1 else 's'} ({', '.join(best_rejected[1])})"
                        if best_rejected else
-                       "; no unplaced block touches the placed ones")
+                       "; no unplaced block touches the placed ones" if not blocked else "")
+                why += "".join(f"; {b} cannot be inserted: {r}" for b, r in blocked.items())
                 return self._finish(beam[0], False, k, f"no block can be placed at step {k} "
                                     f"with at most {self.plan.max_held} held{why}")
             beam = sorted(children.values(), key=lambda p: (p.score, p.order))[:self.plan.beam]
@@ -367,14 +409,15 @@ class _Planner:
                             f"{max((len(h) for h in best.held), default=0)} held blocks "
                             f"(limit {self.plan.max_held})")
 
-    def _children(self, beam: list[_Partial]):
+    def _children(self, beam: list[_Partial], blocked: dict[str, str]):
         """The feasible children of the partial plans of ``beam`` (by the set of blocks
-        placed), and the rejected candidate needing the fewest holds."""
+        placed), and the rejected candidate needing the fewest holds; candidates that cannot
+        be inserted go into ``blocked``."""
         children: dict[frozenset, _Partial] = {}
         best_rejected = None
         for partial in beam:
             found = 0
-            for rank, b in enumerate(self.candidates(partial.order)):
+            for rank, b in enumerate(self.candidates(partial.order, blocked)):
                 start = time.perf_counter()
                 order = (*partial.order, b)
                 held, ok, report, assembly = self.holds_for(partial, b)
@@ -412,7 +455,7 @@ class _Planner:
         for _ in range(self.pool.workers):
             if not held or order[-1] not in held:
                 break
-            following = self.candidates(order)
+            following = self.candidates(order, {})
             if not following:
                 break
             order = (*order, following[0])
@@ -468,6 +511,10 @@ class _Planner:
                                _planned_under(self.options)) if order else None
         except SceneError:
             scene = None
+        if scene is not None and self.options.insertion.enabled:
+            # each step's direction, as checked (a given one kept), for a robot to follow
+            scene = replace(scene, approach=tuple(
+                r.insertion_direction if r.insertable else None for r in reports[:n]))
         if self.plan.beam > 1 and self.on_report is not None and scene is not None:
             # a beam's steps are the plan's only once it is chosen: its reports are re-made
             check_sequence(scene, self.options, on_step=lambda r, _total: self.on_report(r))
@@ -522,4 +569,4 @@ def plan_sequence(scene: Scene, max_held: int = 2, options: CheckOptions = Check
     return result
 
 
-__all__ = ["LookAhead", "Plan", "PlanOptions", "PlanProgress", "plan_sequence"]
+__all__ = ["LookAhead", "Plan", "PlanOptions", "PlanProgress", "STOPPED", "plan_sequence"]

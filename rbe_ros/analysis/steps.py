@@ -61,6 +61,13 @@ def _order(scene: Scene) -> list[str]:
     return list(scene.sequence) or [b.id for b in scene.blocks if not b.support]
 
 
+def last_block(scene: Scene) -> str:
+    """The block placed last: the sequence's last, else the last free block in scene order
+    (what a check of the whole assembly says the insertion of)."""
+    order = _order(scene)
+    return order[-1] if order else ""
+
+
 def step_count(scene: Scene) -> int:
     """The number of :func:`sequence_steps` (without making them: each costs the scene's
     size, all of them its square)."""

@@ -1,12 +1,14 @@
 """rosbag2-compatible MCAP recording and reading without ROS.
 
 A bag is what ``ros2 bag record -s mcap`` makes: a directory ``<name>/`` holding
-``<name>_0.mcap`` (profile ``ros2``; one schema per type, encoding ``ros2msg`` with the complete
-concatenated .msg text; channels with message encoding ``cdr`` and metadata
-``offered_qos_profiles``/``topic_type_hash``; a ``rosbag2`` metadata record) and a version-9
-``metadata.yaml``. CDR is written by :mod:`rbe_ros.io.cdr` (the bytes rclpy gives) and read by
-rosbags' deserializer; the container is written with the ``mcap`` library (rosbags' own
-writer keeps up to 1 MiB of messages in memory and writes nothing recoverable before close).
+``<name>_0.mcap`` (split by size or duration: ``<name>_1.mcap``, ... as ``ros2 bag record
+--max-bag-size/--max-bag-duration`` names them; profile ``ros2``; one schema per type,
+encoding ``ros2msg`` with the complete concatenated .msg text; channels with message
+encoding ``cdr`` and metadata ``offered_qos_profiles``/``topic_type_hash``; a ``rosbag2``
+metadata record) and a version-9 ``metadata.yaml``. CDR is written by :mod:`rbe_ros.io.cdr`
+(the bytes rclpy gives) and read by rosbags' deserializer; the container is written with
+the ``mcap`` library (rosbags' own writer keeps up to 1 MiB of messages in memory and writes
+nothing recoverable before close).
 Messages go in and come out as *message dicts* (:mod:`rbe_ros.io.messages`); raw CDR bytes
 (``rclpy.serialization.serialize_message``) are accepted as well. Never imports rclpy.
 """
@@ -15,6 +17,7 @@ from __future__ import annotations
 import functools
 import io
 import os
+import re
 import sys
 from collections.abc import Collection, Iterator, Mapping
 from importlib.metadata import version
@@ -34,6 +37,8 @@ from ruamel.yaml import YAML
 from . import cdr
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
+#: The messages of an .action file, in its order (separated by ``---`` lines).
+ACTION_PARTS = ("Goal", "Result", "Feedback")
 _DELIM = "=" * 80
 # RMW_DURATION_INFINITE as rosbag2 (Jazzy, metadata version 9) writes it.
 _INFINITE = {"sec": 9223372036, "nsec": 854775807}
@@ -71,6 +76,12 @@ def typestore() -> Typestore:
     types: dict = {}
     for f in sorted(msg_dir().glob("*.msg")):
         types.update(get_types_from_msg(f.read_text(), f"rbe_msgs/msg/{f.stem}"))
+    # an action's goal, result and feedback are messages of their own (as rosidl makes them),
+    # recorded like any other: rbe_msgs/action/<Name>_Goal, _Result, _Feedback
+    for f in sorted((msg_dir().parent / "action").glob("*.action")):
+        parts = re.split(r"^---[ \t]*$", f.read_text(), flags=re.MULTILINE)
+        for part, text in zip(ACTION_PARTS, parts):
+            types.update(get_types_from_msg(text, f"rbe_msgs/action/{f.stem}_{part}"))
     store.register(types)
     return store
 
@@ -174,28 +185,63 @@ class BagWriter:
     One chunk per message costs ~80 bytes of chunk header and message index on disk and one
     chunk-index entry in memory per message: meant for low-rate topics (states, reports), not
     sensor streams. ``stamp_ns`` may go backwards (chunks are indexed, readers merge by time).
+
+    Splitting (a cell's session runs for hours): with ``max_bytes`` or ``max_duration_ns``
+    (0: no limit) the file in progress is finished and ``<name>_<k+1>.mcap`` begun before a
+    write (on a topic that ``splits``) that finds it that large or that long (from its first
+    message); every file is a complete MCAP file with all topics, and the messages given to
+    :meth:`carry` (e.g. the design and the check settings) are written again at the start
+    of each new file, so that one file alone replays.
     """
 
     def __init__(self, path, *, depth: int = 10, fsync: bool = False,
-                 custom_data: Mapping[str, str] | None = None):
+                 custom_data: Mapping[str, str] | None = None, max_bytes: int = 0,
+                 max_duration_ns: int = 0):
         self.path = Path(path)
         # metadata.yaml custom_data (rosbag2: string to string), e.g. the check options
         self.custom_data = {str(k): str(v) for k, v in (custom_data or {}).items()}
         if self.path.exists():
             raise FileExistsError(f"bag {str(self.path)!r} exists already, not overwriting")
+        if max_bytes < 0 or max_duration_ns < 0:
+            raise ValueError("a bag's split size and duration are >= 0 (0: no split)")
         self.depth, self.fsync = int(depth), fsync
+        self.max_bytes, self.max_duration_ns = int(max_bytes), int(max_duration_ns)
         self.store = typestore()
         self.path.mkdir(parents=True)
-        self.mcap_path = self.path / f"{self.path.name}_0.mcap"
-        self._file = self.mcap_path.open("xb")
+        self._topics: dict[str, dict] = {}  # topic -> msgtype, qos, hash, encode, count
+        self._carried: dict[str, object] = {}   # topic -> message (or a callable making it)
+        self._files: list[dict] = []        # per file: path, start, end, count
+        self._writer = None
+        self._open_file()
+        self._write_metadata()
+
+    @property
+    def mcap_path(self) -> Path:
+        """The MCAP file being written."""
+        return self._files[-1]["path"]
+
+    def _open_file(self) -> None:
+        """Begin the next ``<name>_<k>.mcap``: header, schemas and channels of every topic."""
+        path = self.path / f"{self.path.name}_{len(self._files)}.mcap"
+        self._file = path.open("xb")
         # zstd chunks: a report's markers (block meshes as triangle lists) shrink about 5x
         self._writer = Writer(self._file, compression=CompressionType.ZSTD)
         self._writer.start(profile="ros2", library=f"rbe_ros bag.py, mcap {version('mcap')}")
         self._file.flush()
         self._schemas: dict[str, int] = {}
-        self._topics: dict[str, dict] = {}  # topic -> channel_id, msgtype, qos, hash, count
-        self._start, self._end = None, None
-        self._write_metadata()
+        self._files.append({"path": path, "start": None, "end": None, "count": 0})
+        for topic in self._topics:
+            self._register(topic)
+
+    def _register(self, topic: str) -> None:
+        info = self._topics[topic]
+        msgtype = info["msgtype"]
+        if msgtype not in self._schemas:
+            self._schemas[msgtype] = self._writer.register_schema(
+                msgtype, "ros2msg", message_definition(msgtype, self.store).encode())
+        info["id"] = self._writer.register_channel(topic, "cdr", self._schemas[msgtype], {
+            "offered_qos_profiles": _dump_yaml(info["qos"]).strip(),
+            "topic_type_hash": info["hash"]})
 
     def __enter__(self) -> "BagWriter":
         return self
@@ -203,73 +249,107 @@ class BagWriter:
     def __exit__(self, *exc) -> None:
         self.close()
 
-    def add_topic(self, topic: str, msgtype: str, *, transient_local: bool = False) -> None:
+    def add_topic(self, topic: str, msgtype: str, *, transient_local: bool = False,
+                  splits: bool = True) -> None:
         """Register ``topic`` (QoS offered: reliable, keep_last ``depth``, durability
-        transient_local or volatile)."""
+        transient_local or volatile). ``splits=False``: a new file never begins with a
+        message of this topic (a report stays in the file of the state it answers)."""
         msgtype = _normalize(msgtype)
         if topic in self._topics:
             raise ValueError(f"topic {topic!r} was added already")
         if msgtype not in self.store.fielddefs:
             raise KeyError(f"unknown message type {msgtype!r}")
-        if msgtype not in self._schemas:
-            self._schemas[msgtype] = self._writer.register_schema(
-                msgtype, "ros2msg", message_definition(msgtype, self.store).encode())
         qos = [{"history": "keep_last", "depth": self.depth, "reliability": "reliable",
                 "durability": "transient_local" if transient_local else "volatile",
                 "deadline": dict(_INFINITE), "lifespan": dict(_INFINITE),
                 "liveliness": "automatic", "liveliness_lease_duration": dict(_INFINITE),
                 "avoid_ros_namespace_conventions": False}]
-        digest = self.store.hash_rihs01(msgtype)
-        cid = self._writer.register_channel(topic, "cdr", self._schemas[msgtype], {
-            "offered_qos_profiles": _dump_yaml(qos).strip(), "topic_type_hash": digest})
-        self._topics[topic] = {"id": cid, "msgtype": msgtype, "qos": qos, "hash": digest,
-                               "encode": cdr.encoder(self.store, msgtype), "count": 0}
+        self._topics[topic] = {"msgtype": msgtype, "qos": qos,
+                               "hash": self.store.hash_rihs01(msgtype),
+                               "encode": cdr.encoder(self.store, msgtype), "count": 0,
+                               "splits": splits}
+        self._register(topic)
         self._write_metadata()
 
+    def carry(self, topic: str, message) -> None:
+        """Write ``message`` (a message dict, CDR bytes, or a callable returning one when a
+        new file begins) on ``topic`` again at the start of every later file of a split bag
+        (replacing what was carried on ``topic`` before)."""
+        if topic not in self._topics:
+            raise KeyError(f"topic {topic!r} was not added")
+        self._carried[topic] = message
+
     def write(self, topic: str, message, stamp_ns: int) -> None:
-        """Append ``message`` (a message dict, or raw CDR bytes) to ``topic`` at ``stamp_ns``."""
+        """Append ``message`` (a message dict, or raw CDR bytes) to ``topic`` at ``stamp_ns``
+        (in a new file first if the one in progress is full: see the class docstring)."""
         if self._writer is None:
             raise RuntimeError("bag is closed")
-        info = self._topics.get(topic)
-        if info is None:
+        if topic not in self._topics:
             raise KeyError(f"topic {topic!r} was not added")
+        stamp_ns = int(stamp_ns)
+        if self._topics[topic]["splits"] and self._full(stamp_ns):
+            self._split(stamp_ns)
+        self._add(topic, message, stamp_ns)
+
+    def _full(self, stamp_ns: int) -> bool:
+        current = self._files[-1]
+        if not current["count"]:
+            return False
+        return bool(self.max_bytes and self._file.tell() >= self.max_bytes or
+                    self.max_duration_ns and stamp_ns - current["start"] >= self.max_duration_ns)
+
+    def _split(self, stamp_ns: int) -> None:
+        """Finish the file in progress and begin the next, the carried messages first."""
+        self._finish_file()
+        self._open_file()
+        for topic, message in self._carried.items():
+            self._add(topic, message() if callable(message) else message, stamp_ns)
+        self._write_metadata()
+
+    def _add(self, topic: str, message, stamp_ns: int) -> None:
+        info = self._topics[topic]
         if isinstance(message, (bytes, bytearray, memoryview)):
             data = bytes(message)
         else:
             data = info["encode"](message)
-        stamp_ns = int(stamp_ns)
         self._writer.add_message(info["id"], log_time=stamp_ns, data=data,
                                  publish_time=stamp_ns, sequence=info["count"])
         self._writer.flush()  # finishes the one-message chunk and flushes the file
         if self.fsync:
             os.fsync(self._file.fileno())
         info["count"] += 1
-        self._start = stamp_ns if self._start is None else min(self._start, stamp_ns)
-        self._end = stamp_ns if self._end is None else max(self._end, stamp_ns)
+        current = self._files[-1]
+        current["count"] += 1
+        current["start"] = stamp_ns if current["start"] is None else min(current["start"],
+                                                                         stamp_ns)
+        current["end"] = stamp_ns if current["end"] is None else max(current["end"], stamp_ns)
+
+    def _finish_file(self) -> None:
+        self._writer.add_metadata("rosbag2", {"serialized_metadata": _dump_yaml(
+            self._info()).strip(), "ros_distro": "jazzy"})
+        self._writer.finish()
+        self._file.close()
 
     def close(self) -> None:
         """Finish the MCAP file (summary, footer, ``rosbag2`` metadata record) and write
         the final ``metadata.yaml``. Idempotent."""
         if self._writer is None:
             return
-        info = self._info()
-        self._writer.add_metadata("rosbag2", {"serialized_metadata": _dump_yaml(info).strip(),
-                                              "ros_distro": "jazzy"})
-        self._writer.finish()
-        self._file.close()
+        self._finish_file()
         self._writer = None
-        self._write_metadata(info)
+        self._write_metadata()
 
     def _info(self) -> dict:
-        start = self._start or 0
-        duration = (self._end - self._start) if self._start is not None else 0
-        count = sum(t["count"] for t in self._topics.values())
+        starts = [f["start"] for f in self._files if f["start"] is not None]
+        ends = [f["end"] for f in self._files if f["end"] is not None]
+        start = min(starts, default=0)
+        duration = max(ends) - start if ends else 0
         return {
             "version": 9,
             "storage_identifier": "mcap",
             "duration": {"nanoseconds": duration},
             "starting_time": {"nanoseconds_since_epoch": start},
-            "message_count": count,
+            "message_count": sum(f["count"] for f in self._files),
             "topics_with_message_count": [
                 {"topic_metadata": {"name": topic, "type": t["msgtype"],
                                     "serialization_format": "cdr",
@@ -279,17 +359,19 @@ class BagWriter:
                 for topic, t in self._topics.items()],
             "compression_format": "",
             "compression_mode": "",
-            "relative_file_paths": [self.mcap_path.name],
-            "files": [{"path": self.mcap_path.name,
-                       "starting_time": {"nanoseconds_since_epoch": start},
-                       "duration": {"nanoseconds": duration}, "message_count": count}],
+            "relative_file_paths": [f["path"].name for f in self._files],
+            "files": [{"path": f["path"].name,
+                       "starting_time": {"nanoseconds_since_epoch": f["start"] or 0},
+                       "duration": {"nanoseconds": (f["end"] - f["start"])
+                                    if f["start"] is not None else 0},
+                       "message_count": f["count"]} for f in self._files],
             "custom_data": dict(self.custom_data),
             "ros_distro": "jazzy",
         }
 
-    def _write_metadata(self, info: dict | None = None) -> None:
+    def _write_metadata(self) -> None:
         tmp = self.path / "metadata.yaml.tmp"
-        tmp.write_text(_dump_yaml({"rosbag2_bagfile_information": info or self._info()}))
+        tmp.write_text(_dump_yaml({"rosbag2_bagfile_information": self._info()}))
         tmp.replace(self.path / "metadata.yaml")
 
 
@@ -305,8 +387,16 @@ def read_custom_data(path) -> dict[str, str]:
     return {str(k): str(v) for k, v in data.items()}
 
 
-def _mcap_files(path: Path) -> list[Path]:
-    return sorted(path.glob("*.mcap")) if path.is_dir() else [path]
+def _split_index(path: Path) -> tuple[int, str]:
+    stem, _, k = path.stem.rpartition("_")
+    return (int(k), stem) if k.isdigit() else (-1, path.stem)
+
+
+def mcap_files(path) -> list[Path]:
+    """The MCAP files of a bag directory in split order (``x_0``, ``x_1``, ..., ``x_10``;
+    a single .mcap file: itself)."""
+    path = Path(path)
+    return sorted(path.glob("*.mcap"), key=_split_index) if path.is_dir() else [path]
 
 
 def _finished(mcap_path: Path) -> bool:
@@ -317,6 +407,52 @@ def _finished(mcap_path: Path) -> bool:
         return f.read() == MCAP_MAGIC
 
 
+class RawMessage(NamedTuple):
+    """One message of a bag as CDR bytes, with the typestore that reads it."""
+
+    topic: str
+    msgtype: str
+    stamp_ns: int
+    raw: bytes
+    store: Typestore
+
+    def message(self) -> BagMessage:
+        obj = self.store.deserialize_cdr(self.raw, self.msgtype)
+        return BagMessage(self.topic, self.msgtype, self.stamp_ns,
+                          to_dict(self.store, self.msgtype, obj))
+
+
+def read_raw(path, msgtypes: Collection[str] | None = None) -> Iterator[RawMessage]:
+    """The messages of a bag directory (every file of a split one, in time order) or of a
+    single .mcap file, not deserialised (only those of ``msgtypes`` if given): see
+    :func:`read_bag`. One message in memory at a time (and what the reader buffers of one
+    chunk), however long the bag."""
+    path = Path(path)
+    files = mcap_files(path)
+    if all(_finished(f) for f in files):
+        # a directory whose metadata.yaml predates a split (killed): its files, in order
+        sources = [path] if path.is_file() or _listed(path) == [f.name for f in files] \
+            else files
+        with AnyReader(sources) as reader:
+            connections = [c for c in reader.connections
+                           if msgtypes is None or c.msgtype in msgtypes]
+            for conn, stamp, raw in reader.messages(connections=connections):
+                yield RawMessage(conn.topic, conn.msgtype, stamp, raw, reader.typestore)
+        return
+    for f in files:
+        yield from _scan_mcap(f, msgtypes)
+
+
+def _listed(path: Path) -> list[str]:
+    """The files metadata.yaml names (``relative_file_paths``)."""
+    meta = path / "metadata.yaml"
+    if not meta.is_file():
+        return []
+    info = YAML(typ="safe", pure=True).load(meta.read_text()) or {}
+    return [Path(p).name for p in
+            (info.get("rosbag2_bagfile_information") or {}).get("relative_file_paths") or []]
+
+
 def read_bag(path, msgtypes: Collection[str] | None = None) -> Iterator[BagMessage]:
     """The messages of a bag directory (or a single .mcap file) as message dicts (only
     those of ``msgtypes``, e.g. ``{"rbe_msgs/msg/StabilityReport"}``, if given).
@@ -325,21 +461,11 @@ def read_bag(path, msgtypes: Collection[str] | None = None) -> Iterator[BagMessa
     bag, in time order). An MCAP file without footer (a recording that was killed) is scanned
     record by record in file order up to its last complete chunk.
     """
-    path = Path(path)
-    if all(_finished(f) for f in _mcap_files(path)):
-        with AnyReader([path]) as reader:
-            connections = [c for c in reader.connections
-                           if msgtypes is None or c.msgtype in msgtypes]
-            for conn, stamp, raw in reader.messages(connections=connections):
-                obj = reader.deserialize(raw, conn.msgtype)
-                yield BagMessage(conn.topic, conn.msgtype, stamp,
-                                 to_dict(reader.typestore, conn.msgtype, obj))
-        return
-    for f in _mcap_files(path):
-        yield from _scan_mcap(f, msgtypes)
+    for m in read_raw(path, msgtypes):
+        yield m.message()
 
 
-def _scan_mcap(path: Path, msgtypes: Collection[str] | None = None) -> Iterator[BagMessage]:
+def _scan_mcap(path: Path, msgtypes: Collection[str] | None = None) -> Iterator[RawMessage]:
     store = get_typestore(Stores.EMPTY)
     schemas: dict[int, Schema] = {}
     channels: dict[int, Channel] = {}
@@ -352,7 +478,8 @@ def _scan_mcap(path: Path, msgtypes: Collection[str] | None = None) -> Iterator[
                 return
             if isinstance(rec, Schema):
                 schemas[rec.id] = rec
-                store.register(get_types_from_msg(rec.data.decode(), rec.name))
+                if rec.name not in store.fielddefs:
+                    store.register(get_types_from_msg(rec.data.decode(), rec.name))
             elif isinstance(rec, Channel):
                 channels[rec.id] = rec
             elif isinstance(rec, Message) and rec.channel_id in channels:
@@ -360,9 +487,8 @@ def _scan_mcap(path: Path, msgtypes: Collection[str] | None = None) -> Iterator[
                 msgtype = schemas[ch.schema_id].name
                 if msgtypes is not None and msgtype not in msgtypes:
                     continue
-                obj = store.deserialize_cdr(rec.data, msgtype)
-                yield BagMessage(ch.topic, msgtype, rec.log_time, to_dict(store, msgtype, obj))
+                yield RawMessage(ch.topic, msgtype, rec.log_time, rec.data, store)
 
 
-__all__ = ["BagMessage", "BagWriter", "message_definition", "msg_dir", "read_bag",
-           "read_custom_data", "to_dict", "typestore"]
+__all__ = ["BagMessage", "BagWriter", "RawMessage", "mcap_files", "message_definition",
+           "msg_dir", "read_bag", "read_custom_data", "read_raw", "to_dict", "typestore"]

@@ -29,6 +29,8 @@ default parameters), unless given.
   infinite;
 * margin_g: within ``force`` (1e-6, a share of g); ``margin_direction`` is not
   compared (directions whose margins tie within rounding, as on a symmetric dome, may swap);
+  ``insertion_direction`` (unit): within ``position`` (1e-6) per component, ``insertable``
+  exact;
 * not compared: ``solve_time`` (wall time), ``dropped_states`` (the node's load) and, unless
   ``Tolerances.message`` is set, the message: it names one of the most loaded interfaces,
   and of equally loaded ones (a symmetric arch) rounding picks which; with a tolerance (e.g.
@@ -40,8 +42,9 @@ from __future__ import annotations
 import json
 import math
 import re
-from collections.abc import Callable
-from dataclasses import dataclass, field
+import struct
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -50,14 +53,18 @@ from ..analysis.option_spec import from_json as options_from_json
 from ..analysis.option_spec import to_json as options_to_json
 from ..analysis.options import CheckOptions
 from ..analysis.pipeline import StateCheck, check_state
+from ..analysis.planning import STOPPED
 from ..analysis.steps import final_state, sequence_steps
 from ..geometry.block import pose_block
 from ..rbe.result import NOT_COMPUTED, Report
 from ..scene import Scene, SceneError
-from .bag import BagWriter, read_bag, read_custom_data
+from .bag import BagWriter, read_custom_data, read_raw, typestore
+from .cdr import Repeats
 from .markers import MARKER_TOPIC, MARKER_TYPE, run_markers
-from .messages import (header_stamp_ns, poses_from_dict, report_header, report_to_dict,
-                       scene_from_state_dict, state_to_dict)
+from .messages import (header_stamp_ns, plan_goal_from_dict, plan_result_to_dict,
+                       poses_from_dict, report_header, report_to_dict, scene_from_state_dict,
+                       state_to_dict)
+from .plans import plan_state
 from .poses import AsBuilt
 
 OPTIONS_KEY = "rbe_ros.check_options"
@@ -69,13 +76,22 @@ SETTINGS_TYPE = "std_msgs/msg/String"
 STATE_TYPE = "rbe_msgs/msg/AssemblyState"
 POSES_TYPE = "rbe_msgs/msg/BlockPoses"
 REPORT_TYPE = "rbe_msgs/msg/StabilityReport"
+#: A ~/plan goal and its result, as the node records them (topics ~/plan/goal, ~/plan/result).
+PLAN_GOAL_TYPE = "rbe_msgs/action/PlanSequence_Goal"
+PLAN_RESULT_TYPE = "rbe_msgs/action/PlanSequence_Result"
 #: Topics of bags written here: the names rbe_node uses (node name rbe_node).
 STATE_TOPIC = "/rbe_node/assembly"
 REPORT_TOPIC = "/rbe_node/report"
 DESIGN_TOPIC = "/rbe_node/design"
 POSES_TOPIC = "/rbe_node/poses"
-#: Kinds of run: a state checked as it is, a design (~/design), measured poses (~/poses).
-STATE, DESIGN, POSES = "state", "design", "poses"
+PLAN_GOAL_TOPIC = "/rbe_node/plan/goal"
+PLAN_RESULT_TOPIC = "/rbe_node/plan/result"
+#: Kinds of run: a state checked as it is, a design (~/design), measured poses (~/poses), a
+#: plan goal (~/plan: its "reports" are its one result).
+STATE, DESIGN, POSES, PLAN = "state", "design", "poses", "plan"
+#: The message types of a run's kind and of its answers.
+RUN_TYPES = {STATE: (STATE_TYPE, REPORT_TYPE), DESIGN: (STATE_TYPE, REPORT_TYPE),
+             POSES: (POSES_TYPE, REPORT_TYPE), PLAN: (PLAN_GOAL_TYPE, PLAN_RESULT_TYPE)}
 #: Log-time spacing of the reports (and markers) of a recorded sequence: one step a second,
 #: so that a player's timeline (Foxglove) steps through the sequence one step at a time.
 STEP_NS = 1_000_000_000
@@ -105,22 +121,44 @@ class Run:
     report_topic: str = REPORT_TOPIC
     kind: str = STATE                               # STATE, DESIGN or POSES
     settings: dict | None = None    # the node's settings when it got the state (~/settings)
+    #: a design or poses run: the as-built scene after it (or why there is none)
+    asbuilt: Scene | SceneError | None = None
+
+    @property
+    def header(self) -> dict:
+        """The header of the state (of a plan goal: of its assembly)."""
+        state = self.state.get("assembly", {}) if self.kind == PLAN else self.state
+        return state.get("header", {})
 
     @property
     def key(self) -> tuple[int, int]:
-        stamp = self.state.get("header", {}).get("stamp", {})
-        return int(stamp.get("sec", 0)), int(stamp.get("nanosec", 0))
+        return _key(self.header)
+
+    def checked(self) -> tuple[dict, list[dict]]:
+        """The state checked and its reports: of a plan, the planned assembly and its steps'
+        reports (from its result; nothing without one), else the state and its reports."""
+        if self.kind == PLAN:
+            result = self.reports[0] if self.reports else {}
+            return result.get("plan", {}), result.get("reports", [])
+        return self.state, self.reports
 
     def describe(self) -> str:
-        header = self.state.get("header", {})
+        header = self.header
         seq = self.state.get("sequence") or []
         what = f"{len(seq)}-block sequence" if seq else "whole assembly"
         contents = {STATE: f"{len(self.state.get('blocks', []))} blocks, {what}",
                     DESIGN: f"design of {len(self.state.get('blocks', []))} blocks",
-                    POSES: f"{len(self.state.get('ids', []))} measured poses"}[self.kind]
+                    POSES: f"{len(self.state.get('ids', []))} measured poses",
+                    PLAN: f"plan of {len(self.state.get('assembly', {}).get('blocks', []))}"
+                          f" blocks, at most {self.state.get('max_held')} held"}[self.kind]
         return (f"{'state' if self.kind == STATE else self.kind} stamp "
                 f"{header_stamp_ns(header) / 1e9:.9f} s frame "
                 f"{header.get('frame_id', '')!r} ({contents})")
+
+
+def _key(header: dict) -> tuple[int, int]:
+    stamp = header.get("stamp", {})
+    return int(stamp.get("sec", 0)), int(stamp.get("nanosec", 0))
 
 
 def step_stamps(stamp_ns: int, count: int) -> list[int]:
@@ -128,35 +166,143 @@ def step_stamps(stamp_ns: int, count: int) -> list[int]:
     return [stamp_ns + (k + 1) * STEP_NS for k in range(count)]
 
 
+def _stamp_key(raw: bytes) -> tuple[int, int]:
+    """(sec, nanosec) of the header stamp of a CDR AssemblyState, BlockPoses or
+    StabilityReport (the header is their first field), read without deserialising."""
+    little = raw[1] == 1                    # encapsulation CDR_LE (0x0001) or CDR_BE
+    return struct.unpack_from("<iI" if little else ">iI", raw, 4)
+
+
+class RunReader:
+    """The runs of a bag, streamed: every AssemblyState and BlockPoses in log-time order,
+    each with the reports whose header stamp is its stamp (a report goes to the latest such
+    state before it), the settings then in force and (design, poses) the as-built scene
+    after it. Other topics (markers) are not read.
+
+    Two passes, so that memory does not grow with the bag: the first reads only the header
+    stamps (from the CDR bytes) to count each run's reports; the second yields a run as soon
+    as its reports are in, so only the runs still waiting for a report are held (the node
+    answers a state within a check's time). Reports whose state is not in the bag (one
+    file of a split bag: the state was in the file before) are counted in
+    :attr:`orphan_reports` and skipped. :attr:`total`: the number of runs (after the first
+    pass)."""
+
+    def __init__(self, path):
+        self.path = Path(path)
+        self.orphan_reports = 0
+        self.total: int | None = None
+
+    def _owners(self) -> tuple[list[int], list[int]]:
+        """Pass 1: the run of each report in bag order (-1: none) and each run's count."""
+        counts: list[int] = []
+        owners: list[int] = []
+        by_key: dict[tuple[int, int], list[tuple[int, int]]] = {}
+        plans: dict[tuple[int, int], list[int]] = {}
+        for m in read_raw(self.path, {STATE_TYPE, POSES_TYPE, REPORT_TYPE, PLAN_GOAL_TYPE,
+                                      PLAN_RESULT_TYPE}):
+            if m.msgtype == PLAN_GOAL_TYPE:     # a goal: its assembly's header comes first
+                plans.setdefault(_stamp_key(m.raw), []).append(len(counts))
+                counts.append(0)
+                continue
+            if m.msgtype == PLAN_RESULT_TYPE:
+                # the result of the first goal with its planned assembly's stamp still
+                # without one (a newer goal preempts an older); results are few: read whole
+                key = _key(m.message().data.get("plan", {}).get("header", {}))
+                owner = next((i for i in plans.get(key, []) if not counts[i]), -1)
+                owners.append(owner)
+                if owner >= 0:
+                    counts[owner] += 1
+                continue
+            key = _stamp_key(m.raw)
+            if m.msgtype != REPORT_TYPE:
+                by_key.setdefault(key, []).append((len(counts), m.stamp_ns))
+                counts.append(0)
+                continue
+            found = by_key.get(key, [])
+            before = next((i for i, t in reversed(found) if t <= m.stamp_ns), None)
+            owner = before if before is not None else found[-1][0] if found else -1
+            owners.append(owner)
+            if owner >= 0:
+                counts[owner] += 1
+        return owners, counts
+
+    def __iter__(self) -> Iterator[Run]:
+        owners, counts = self._owners()
+        self.total, self.orphan_reports = len(counts), owners.count(-1)
+        pending: dict[int, Run] = {}
+        created, done = 0, 0        # runs read, runs yielded
+        reports = 0                 # reports read
+        settings = None
+        asbuilt = AsBuilt()
+        # per topic: the last message's CDR after the stamp, its dict and as-built scene
+        last: dict[str, tuple[bytes, dict, Scene | SceneError | None]] = {}
+        repeats = report_repeats()      # a report again but for stamp, time, drops: not read
+        for m in read_raw(self.path, {STATE_TYPE, POSES_TYPE, REPORT_TYPE, SETTINGS_TYPE,
+                                      PLAN_GOAL_TYPE, PLAN_RESULT_TYPE}):
+            if m.msgtype == SETTINGS_TYPE:
+                if m.topic.endswith("/settings"):
+                    settings = json.loads(m.message().data["data"])
+                continue
+            if m.msgtype == PLAN_GOAL_TYPE:
+                pending[created] = Run(m.message().data, m.stamp_ns, m.topic, kind=PLAN,
+                                       settings=settings)
+                created += 1
+            elif m.msgtype in (REPORT_TYPE, PLAN_RESULT_TYPE):
+                owner, reports = owners[reports], reports + 1
+                if owner < 0:
+                    continue
+                run = pending[owner]
+                report = m.message().data if m.msgtype == PLAN_RESULT_TYPE else \
+                    repeats.decode(m.raw)
+                if report is None:
+                    report = m.message().data
+                    repeats.learn(report, m.raw)
+                run.reports.append(report)
+                run.report_stamps.append(m.stamp_ns)
+                run.report_topic = m.topic
+            else:
+                kind = POSES if m.msgtype == POSES_TYPE else \
+                    DESIGN if m.topic.endswith("/design") else STATE
+                run = Run(self._state(m, last), m.stamp_ns, m.topic, kind=kind,
+                          settings=settings)
+                if kind == POSES and last.get(m.topic, (b"",))[0] == m.raw[12:]:
+                    run.asbuilt = last[m.topic][2]     # the same poses again: no change
+                elif kind != STATE:
+                    try:
+                        run.asbuilt = merge_message(asbuilt, kind, run.state)
+                    except SceneError as exc:
+                        run.asbuilt = exc
+                if kind == DESIGN:      # the measured poses are forgotten: merge again
+                    last.clear()
+                else:
+                    last[m.topic] = (m.raw[12:], run.state, run.asbuilt)
+                pending[created], created = run, created + 1
+            while done in pending and len(pending[done].reports) == counts[done]:
+                yield pending.pop(done)
+                done += 1
+        for k in sorted(pending):       # (a bag that changed between the passes)
+            yield pending[k]
+
+    @staticmethod
+    def _state(m, last) -> dict:
+        """The message dict of a state or poses message; one that repeats the last on its
+        topic but for the stamp (a cell sends the same poses at 10 Hz) is not read again."""
+        if m.topic in last and last[m.topic][0] == m.raw[12:]:
+            sec, nanosec = _stamp_key(m.raw)
+            state = last[m.topic][1]
+            return {**state, "header": {**state["header"],
+                                        "stamp": {"sec": sec, "nanosec": nanosec}}}
+        return m.message().data
+
+
+def report_repeats() -> Repeats:
+    """Reports that repeat the last but for the stamp, solve_time and dropped_states."""
+    return Repeats(typestore(), REPORT_TYPE, ("solve_time", "dropped_states"))
+
+
 def read_runs(path) -> list[Run]:
-    """The runs of a bag: every AssemblyState in log-time order, each with the reports whose
-    header stamp is its stamp (a report goes to the latest such state before it). Other
-    topics (markers) are not read."""
-    runs: list[Run] = []
-    by_key: dict[tuple[int, int], list[Run]] = {}
-    settings = None
-    for m in read_bag(path, msgtypes={STATE_TYPE, POSES_TYPE, REPORT_TYPE, SETTINGS_TYPE}):
-        if m.msgtype == SETTINGS_TYPE:
-            if m.topic.endswith("/settings"):
-                settings = json.loads(m.data["data"])
-        elif m.msgtype in (STATE_TYPE, POSES_TYPE):
-            kind = POSES if m.msgtype == POSES_TYPE else \
-                DESIGN if m.topic.endswith("/design") else STATE
-            run = Run(m.data, m.stamp_ns, m.topic, kind=kind, settings=settings)
-            runs.append(run)
-            by_key.setdefault(run.key, []).append(run)
-        elif m.msgtype == REPORT_TYPE:
-            stamp = m.data.get("header", {}).get("stamp", {})
-            key = int(stamp.get("sec", 0)), int(stamp.get("nanosec", 0))
-            owners = [r for r in by_key.get(key, []) if r.stamp_ns <= m.stamp_ns] or \
-                by_key.get(key, [])
-            if not owners:
-                raise ValueError(f"{path}: a report at {m.stamp_ns} ns has no state with its "
-                                 f"header stamp {key}")
-            owners[-1].reports.append(m.data)
-            owners[-1].report_stamps.append(m.stamp_ns)
-            owners[-1].report_topic = m.topic
-    return runs
+    """The runs of a bag, all in memory (:class:`RunReader` streams them)."""
+    return list(RunReader(path))
 
 
 def merge_message(asbuilt: AsBuilt, kind: str, message: dict) -> Scene:
@@ -178,7 +324,7 @@ def asbuilt_scenes(runs: list[Run]) -> list[Scene | SceneError | None]:
     asbuilt = AsBuilt()
     out: list[Scene | SceneError | None] = []
     for run in runs:
-        if run.kind == STATE:
+        if run.kind in (STATE, PLAN):
             out.append(None)
             continue
         try:
@@ -209,6 +355,37 @@ def state_reports(state: dict, options: CheckOptions = CheckOptions()) -> list[R
     return check_state(read, bool(state.get("sequence")), options).reports
 
 
+def stopped_at(run: Run) -> int | None:
+    """How many blocks the recorded plan of a plan run had placed when it was stopped
+    (canceled, preempted, its time limit); None if it was not stopped."""
+    recorded = run.reports[0] if run.reports else {}
+    if not str(recorded.get("message", "")).startswith(STOPPED):
+        return None
+    return len(recorded.get("order", []))
+
+
+def replay_plan(run: Run, options: CheckOptions = CheckOptions()) -> list[dict]:
+    """The result dict of re-planning the goal of a plan run through the node's dispatch
+    (:func:`plan_state`), with the settings the node had then. A recorded plan that was
+    stopped (canceled, preempted, its time limit) is re-planned up to as many blocks as it
+    had placed: the time it took is not part of the result; else without a time limit."""
+    options, frame_id = run_settings(run, options)
+    state, limits = plan_goal_from_dict(run.state)
+    limits = replace(limits, time_limit=0.0)
+    until = stopped_at(run)
+    placed = [0]
+
+    def count(progress) -> None:
+        placed[0] = progress.placed
+
+    def stop() -> bool:
+        return until is not None and placed[0] >= until
+
+    plan = plan_state(lambda: scene_from_state_dict(state), limits, options,
+                      progress=count, should_stop=stop)
+    return [plan_result_to_dict(plan, report_header(state.get("header"), frame_id))]
+
+
 def run_settings(run: Run, options: CheckOptions) -> tuple[CheckOptions, str]:
     """The options and frame_id ``run`` was checked with: those the node recorded as its
     settings then (``run.settings``), else ``options`` and the default frame."""
@@ -233,9 +410,10 @@ def free_weights(state: dict | Scene | SceneError) -> dict[int, float]:
         return {}
     try:
         if isinstance(state, Scene):
-            state = state_to_dict(state)
-        scene = scene_from_state_dict(state)
-        whole = scene_from_state_dict({**state, "sequence": []})
+            scene, whole, state = state, replace(state, sequence=()), {}
+        else:
+            scene = scene_from_state_dict(state)
+            whole = scene_from_state_dict({**state, "sequence": []})
     except SceneError:
         return {}
     g = float(np.linalg.norm(scene.gravity))
@@ -379,7 +557,8 @@ class _Comparer:
 _TOP_EXACT = ("step_index", "block_placed", "stable", "status", "num_blocks", "unstable_blocks",
               "held_blocks", "suggested_holds", "model")
 _TOP_DONE = set(_TOP_EXACT) | {"header", "message", "max_tension", "worst_friction_ratio",
-                               "interfaces", "margin_g", "margin_direction"} | IGNORED
+                               "interfaces", "margin_g", "margin_direction",
+                               "insertion_direction"} | IGNORED
 _IF_DONE = {"block_a", "block_b", "normal", "polygon", "normal_forces", "tangential_forces",
             "resultant_force", "normal_resultant", "shear_resultant", "centre_of_pressure",
             "torque", "kern", "friction_ratio", "tension", "friction_exceeded"}
@@ -441,36 +620,109 @@ def compare_report(recorded: dict, replayed: dict, *, run: int = 0, free_weight:
              replayed.get("worst_friction_ratio", 0.0), ratio_tol)
     c.number("", "margin_g", recorded.get("margin_g", NOT_COMPUTED),
              replayed.get("margin_g", NOT_COMPUTED), tolerances.force)
+    if "insertion_direction" in recorded:
+        c.vectors("", "insertion_direction", recorded["insertion_direction"],
+                  replayed.get("insertion_direction", dict.fromkeys("xyz", 0.0)),
+                  tolerances.position)
     for name in sorted(set(recorded) - _TOP_DONE):     # fields added later: exact
         c.exact("", name, recorded.get(name), replayed.get(name))
     return c.out
 
 
-def compare_runs(runs: list[Run], replayed: list[list[dict]], *,
+#: Plan result fields compared exactly (the reports are compared as reports).
+_PLAN_EXACT = ("feasible", "message", "order", "holds", "failed_step")
+
+
+def compare_plan(recorded: dict, replayed: dict, *, run: int = 0,
                  tolerances: Tolerances = Tolerances()) -> list[Difference]:
-    """Differences between each run's recorded reports and ``replayed[i]`` (the same
-    comparison offline and live)."""
-    out: list[Difference] = []
-    asbuilt = asbuilt_scenes(runs)
-    for i, (run, new) in enumerate(zip(runs, replayed)):
-        weights = free_weights(run.state if run.kind == STATE else asbuilt[i])
-        for rec, rep in zip(run.reports, new):
-            w = weights.get(int(rec.get("step_index", -1)), 1.0)
-            out += compare_report(rec, rep, run=i, free_weight=w, tolerances=tolerances)
-        for rec in run.reports[len(new):]:
-            out.append(Difference(i, int(rec.get("step_index", -1)), rec.get("block_placed", ""),
-                                  "", "report", "recorded", "missing in the replay"))
-        for rep in new[len(run.reports):]:
-            out.append(Difference(i, int(rep.get("step_index", -1)), rep.get("block_placed", ""),
-                                  "", "report", "missing in the recording", "replayed"))
+    """The differences between two PlanSequence result dicts: the plan (feasibility,
+    message, order, holds, failed step; the planned assembly's header, sequence, holds and
+    blocks) exactly, each step's report as :func:`compare_report` does (free weight: the
+    planned assembly's at that step)."""
+    c = _Comparer(run, -1, "", 1.0, tolerances)
+    for name in _PLAN_EXACT:
+        c.exact("plan result", name, recorded.get(name), replayed.get(name))
+    a, b = recorded.get("plan", {}), replayed.get("plan", {})
+    for name in ("header", "sequence", "holds"):
+        c.exact("planned assembly", name, a.get(name), b.get(name))
+    c.exact("planned assembly", "blocks", [x["id"] for x in a.get("blocks", [])],
+            [x["id"] for x in b.get("blocks", [])])
+    out = c.out
+    weights = free_weights(a) if a.get("blocks") else {}
+    reports_a, reports_b = recorded.get("reports", []), replayed.get("reports", [])
+    if len(reports_a) != len(reports_b):
+        out.append(Difference(run, -1, "", "plan result", "reports (count)", len(reports_a),
+                              len(reports_b)))
+    for rec, rep in zip(reports_a, reports_b):
+        out += compare_report(rec, rep, run=run, tolerances=tolerances,
+                              free_weight=weights.get(int(rec.get("step_index", -1)), 1.0))
     return out
 
 
-def format_differences(runs: list[Run], differences: list[Difference], limit: int = 50) -> str:
-    """A readable diff: the runs concerned, then one line per differing field."""
+def compare_run(index: int, run: Run, replayed: list[dict], *,
+                tolerances: Tolerances = Tolerances()) -> list[Difference]:
+    """Differences between ``run``'s recorded reports and ``replayed`` (the same comparison
+    offline and live; ``index``: the run's number in the bag)."""
+    out: list[Difference] = []
+    if run.kind == PLAN:
+        for rec, rep in zip(run.reports, replayed):
+            out += compare_plan(rec, rep, run=index, tolerances=tolerances)
+        return out
+    unequal = [(rec, rep) for rec, rep in zip(run.reports, replayed) if not _equal(rec, rep)]
+    if unequal:
+        weights = free_weights(run.state if run.kind == STATE else _asbuilt(run))
+        for rec, rep in unequal:
+            w = weights.get(int(rec.get("step_index", -1)), 1.0)
+            out += compare_report(rec, rep, run=index, free_weight=w, tolerances=tolerances)
+    for rec in run.reports[len(replayed):]:
+        out.append(Difference(index, int(rec.get("step_index", -1)),
+                              rec.get("block_placed", ""), "", "report", "recorded",
+                              "missing in the replay"))
+    for rep in replayed[len(run.reports):]:
+        out.append(Difference(index, int(rep.get("step_index", -1)),
+                              rep.get("block_placed", ""), "", "report",
+                              "missing in the recording", "replayed"))
+    return out
+
+
+def _equal(recorded: dict, replayed: dict) -> bool:
+    """Whether two report dicts are equal in every compared field (then no tolerance
+    matters; the usual case, and the field by field comparison is what costs)."""
+    return all(recorded.get(k) == replayed.get(k) for k in set(recorded) | set(replayed)
+               if k not in IGNORED)
+
+
+def _asbuilt(run: Run) -> Scene | SceneError:
+    if run.asbuilt is None:
+        raise ValueError("a design or poses run without its as-built scene: read the bag "
+                         "with RunReader (or fill them in with asbuilt_scenes)")
+    return run.asbuilt
+
+
+def _with_asbuilt(runs: list[Run]) -> list[Run]:
+    """``runs`` with the as-built scene of every design and poses run filled in."""
+    if any(r.kind in (DESIGN, POSES) and r.asbuilt is None for r in runs):
+        for run, scene in zip(runs, asbuilt_scenes(runs)):
+            run.asbuilt = scene
+    return runs
+
+
+def compare_runs(runs: list[Run], replayed: list[list[dict]], *,
+                 tolerances: Tolerances = Tolerances()) -> list[Difference]:
+    """Differences between each run's recorded reports and ``replayed[i]``."""
+    out: list[Difference] = []
+    for i, (run, new) in enumerate(zip(_with_asbuilt(runs), replayed)):
+        out += compare_run(i, run, new, tolerances=tolerances)
+    return out
+
+
+def format_differences(described: dict[int, str], differences: list[Difference],
+                       limit: int = 50) -> str:
+    """A readable diff: the runs concerned (``described``: a run's number -> its
+    description, :meth:`Run.describe`), then one line per differing field."""
     lines = []
     for i in sorted({d.run for d in differences}):
-        lines.append(f"run {i}: {runs[i].describe()}")
+        lines.append(f"run {i}: {described.get(i, '')}")
         shown = [d for d in differences if d.run == i]
         lines += [f"  {d}" for d in shown[:limit]]
         if len(shown) > limit:
@@ -480,36 +732,73 @@ def format_differences(runs: list[Run], differences: list[Difference], limit: in
 
 # --- writing ---------------------------------------------------------------------------------
 
+class RunWriter:
+    """A bag of runs written one at a time: each run's state and its reports (at the
+    recorded report times where there are as many, else a step a second after the state:
+    :data:`STEP_NS`); with ``markers`` each report's MarkerArray on
+    :data:`rbe_ros.io.markers.MARKER_TOPIC` at its time; the options in custom_data."""
+
+    def __init__(self, path, options: CheckOptions, *, markers: bool = True):
+        self.options, self.markers = options, markers
+        self.bag = BagWriter(path, custom_data={OPTIONS_KEY: options_to_json(options)})
+        self.topics: set[str] = set()
+        self._last: tuple | None = None     # the last markers drawn: (content, reports, arrays)
+        self._reports = report_repeats()
+
+    def __enter__(self) -> "RunWriter":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def _topic(self, topic: str, msgtype: str, latched: bool) -> None:
+        if topic not in self.topics:
+            self.bag.add_topic(topic, msgtype, transient_local=latched)
+            self.topics.add(topic)
+
+    def write(self, run: Run, reports: list[dict]) -> None:
+        state_type, answer_type = RUN_TYPES[run.kind]
+        self._topic(run.topic, state_type, run.kind == DESIGN)
+        self._topic(run.report_topic, answer_type, True)
+        if self.markers:
+            self._topic(MARKER_TOPIC, MARKER_TYPE, True)
+        self.bag.write(run.topic, run.state, run.stamp_ns)
+        stamps = run.report_stamps if len(run.report_stamps) == len(reports) else \
+            step_stamps(run.stamp_ns, len(reports))
+        for report, stamp in zip(reports, stamps):
+            self.bag.write(run.report_topic, report if run.kind == PLAN else
+                           self._reports.encode(report), stamp)
+        if self.markers and reports and run.kind != PLAN:
+            for array, stamp in zip(self._markers(run, reports), stamps):
+                self.bag.write(MARKER_TOPIC, array, stamp)
+
+    def _markers(self, run: Run, reports: list[dict]) -> list[dict]:
+        """The MarkerArrays of ``reports``; those of the last run again, with the new
+        headers, when the run checked the same state with the same reports (a session's
+        repeated poses)."""
+        content = {**run.state, "header": None} if run.kind == STATE else _asbuilt(run)
+        bare = [{**r, "header": None} for r in reports]
+        if self._last is not None and (content is self._last[0] or (
+                run.kind == STATE and content == self._last[0])) and bare == self._last[1]:
+            return [{"markers": [{**m, "header": r["header"]} for m in array["markers"]]}
+                    for array, r in zip(self._last[2], reports)]
+        # an as-built run is drawn as the state checked: its scene, as a whole
+        drawn = run.state if run.kind == STATE else {} if isinstance(
+            run.asbuilt, SceneError) else {**state_to_dict(run.asbuilt), "sequence": []}
+        arrays = run_markers(drawn, reports, self.options)
+        self._last = (content, bare, arrays)
+        return arrays
+
+    def close(self) -> None:
+        self.bag.close()
+
+
 def write_runs(path, runs: list[Run], replayed: list[list[dict]], options: CheckOptions, *,
                markers: bool = True) -> None:
-    """A bag with every run's state and its ``replayed`` reports (at the recorded report
-    times where there are as many, else a step a second after the state: :data:`STEP_NS`);
-    with ``markers`` each report's MarkerArray on :data:`rbe_ros.io.markers.MARKER_TOPIC` at
-    its time; the options in custom_data."""
-    asbuilt = asbuilt_scenes(runs) if markers else []
-    with BagWriter(path, custom_data={OPTIONS_KEY: options_to_json(options)}) as bag:
-        topics: set[str] = set()
-        for i, (run, reports) in enumerate(zip(runs, replayed)):
-            for topic, kind, latched in ((run.topic, POSES_TYPE if run.kind == POSES else
-                                          STATE_TYPE, run.kind == DESIGN),
-                                         (run.report_topic, REPORT_TYPE, True)):
-                if topic not in topics:
-                    bag.add_topic(topic, kind, transient_local=latched)
-                    topics.add(topic)
-            if markers and MARKER_TOPIC not in topics:
-                bag.add_topic(MARKER_TOPIC, MARKER_TYPE, transient_local=True)
-                topics.add(MARKER_TOPIC)
-            bag.write(run.topic, run.state, run.stamp_ns)
-            stamps = run.report_stamps if len(run.report_stamps) == len(reports) else \
-                step_stamps(run.stamp_ns, len(reports))
-            for report, stamp in zip(reports, stamps):
-                bag.write(run.report_topic, report, stamp)
-            if markers:
-                # an as-built run is drawn as the state checked: its scene, as a whole
-                drawn = run.state if run.kind == STATE else {} if isinstance(
-                    asbuilt[i], SceneError) else {**state_to_dict(asbuilt[i]), "sequence": []}
-                for array, stamp in zip(run_markers(drawn, reports, options), stamps):
-                    bag.write(MARKER_TOPIC, array, stamp)
+    """A bag with every run's state and its ``replayed`` reports (:class:`RunWriter`)."""
+    with RunWriter(path, options, markers=markers) as writer:
+        for run, reports in zip(_with_asbuilt(runs) if markers else runs, replayed):
+            writer.write(run, reports)
 
 
 def record_bag(path, scenes: list[tuple[Scene, str, int]], options: CheckOptions = CheckOptions(),
@@ -533,22 +822,51 @@ def record_bag(path, scenes: list[tuple[Scene, str, int]], options: CheckOptions
 
 # --- the whole replay ------------------------------------------------------------------------
 
+#: Differences kept for the diff (all are counted): a replay of hours that differs
+#: everywhere must not hold them all.
+KEPT_DIFFERENCES = 1000
+
+
 @dataclass
 class ReplayResult:
-    """The runs of a bag, their replayed reports and how they differ from the recorded."""
+    """What a replay found: how many runs and reports it re-checked, the differences from
+    the recorded reports (the first :data:`KEPT_DIFFERENCES`; :attr:`difference_count`
+    counts them all) and, unless streamed (``keep=False``), the runs and their replayed
+    reports."""
 
     runs: list[Run]
     replayed: list[list[dict]]
     differences: list[Difference]
     output: Path | None
     options: CheckOptions
+    states: int = 0                 # runs read
+    reports: int = 0                # reports replayed
+    recorded: int = 0               # reports recorded (compared)
+    difference_count: int = 0
+    orphan_reports: int = 0         # reports whose state is not in the bag (a split file)
+    described: dict[int, str] = field(default_factory=dict)  # runs with differences
 
     @property
     def matches(self) -> bool:
-        return not self.differences
+        return not self.difference_count
 
     def diff(self, limit: int = 50) -> str:
-        return format_differences(self.runs, self.differences, limit)
+        return format_differences(self.described, self.differences, limit)
+
+    def add(self, index: int, run: Run, replayed: list[dict],
+            differences: list[Difference], keep: bool) -> None:
+        self.states += 1
+        self.reports += len(replayed)
+        self.recorded += len(run.reports)
+        if differences:
+            self.difference_count += len(differences)
+            room = KEPT_DIFFERENCES - len(self.differences)
+            if room > 0:
+                self.differences += differences[:room]
+                self.described[index] = run.describe()
+        if keep:
+            self.runs.append(run)
+            self.replayed.append(replayed)
 
 
 def default_output(path) -> Path:
@@ -557,56 +875,99 @@ def default_output(path) -> Path:
     return path.with_name(path.name + "_replay")
 
 
-#: Re-checks runs: ``recheck(runs, options, on_run)`` -> the report dicts of each run.
-Recheck = Callable[[list[Run], CheckOptions, Callable[[int, Run], None] | None], list[list[dict]]]
+#: Re-checks runs: ``recheck(runs, options, on_run)`` -> each run with its report dicts, in
+#: order, as they are made (a generator: a replay holds one run at a time).
+Recheck = Callable[[Iterable[Run], CheckOptions, Callable[[int, Run], None] | None],
+                   Iterator[tuple[Run, list[dict]]]]
 
 
-def offline_reports(runs: list[Run], options: CheckOptions,
-                    on_run: Callable[[int, Run], None] | None = None) -> list[list[dict]]:
-    """The report dicts of re-checking every run here, as the node would."""
-    replayed = []
-    asbuilt = asbuilt_scenes(runs)
+class _LastCheck:
+    """The reports of the last state checked, for the next run if it is the same state
+    with the same settings (a cell sends the same poses at 10 Hz between placements; the
+    check is deterministic, so its reports are the same but for the header)."""
+
+    def __init__(self) -> None:
+        self.what: tuple | None = None
+        self.content: object = None
+        self.reports: list[dict] = []
+
+    def reports_for(self, run: Run, options: CheckOptions) -> list[dict]:
+        run_options, frame_id = run_settings(run, options)
+        header = report_header(run.state.get("header"), frame_id)
+        # a state by its contents; an as-built scene by identity (AsBuilt returns the same
+        # scene for an update that changes nothing)
+        content = {**run.state, "header": None} if run.kind == STATE else run.asbuilt
+        what = (run.kind == STATE, options_to_json(run_options))
+        if self.what != what or not (content is self.content or (
+                run.kind == STATE and content == self.content)):
+            self.what, self.content = what, content
+            check = state_reports(run.state, run_options) if run.kind == STATE else \
+                asbuilt_check(run.asbuilt, run_options).reports
+            self.reports = [report_to_dict(r, header) for r in check]
+        return [{**r, "header": header} for r in self.reports]
+
+
+def offline_reports(runs: Iterable[Run], options: CheckOptions,
+                    on_run: Callable[[int, Run], None] | None = None
+                    ) -> Iterator[tuple[Run, list[dict]]]:
+    """Each run with the report dicts of re-checking it here, as the node would: a state
+    always, a design or poses message only if the node answered it (under overload it
+    checks the newest only); the same state again reuses the last reports."""
+    last = _LastCheck()
     for i, run in enumerate(runs):
-        if run.kind == STATE:
-            replayed.append(replay_run(run, options))
-        else:   # a design or poses message the node dropped unchecked is not checked
-            run_options, frame_id = run_settings(run, options)
-            header = report_header(run.state.get("header"), frame_id)
-            replayed.append([report_to_dict(r, header) for r in asbuilt_check(
-                asbuilt[i], run_options).reports] if run.reports else [])
+        if run.kind not in (STATE, PLAN) and run.asbuilt is None:
+            raise ValueError("offline_reports takes runs with their as-built scenes "
+                             "(RunReader)")
+        reports = replay_plan(run, options) if run.kind == PLAN else \
+            last.reports_for(run, options) if run.kind == STATE or run.reports else []
         if on_run is not None:
             on_run(i, run)
-    return replayed
+        yield run, reports
 
 
 def replay_bag(path, output=None, *, options: CheckOptions | None = None, compare: bool = True,
                recheck: Recheck = offline_reports, tolerances: Tolerances = Tolerances(),
                write: bool = True, markers: bool = True,
-               on_run: Callable[[int, Run], None] | None = None) -> ReplayResult:
+               on_run: Callable[[int, Run], None] | None = None,
+               keep: bool = True) -> ReplayResult:
     """Re-check every state of the bag at ``path`` with ``recheck`` (offline; or through a
     live rbe_node: :func:`rbe_ros.ros.live.live_recheck`), write the states and the new
     reports to ``output`` (default: path + "_replay"; never overwritten; ``write=False``:
     no bag; ``markers``: with the reports' markers), and with ``compare`` list the
     differences from the recorded reports (markers are drawings of the reports: not
-    compared)."""
-    path = Path(path)
+    compared). Streamed: a run is read, re-checked, written and compared, then let go
+    (``keep``: the result keeps the runs and their replayed reports, memory growing with
+    the bag). ``path`` may be a :class:`RunReader` (whose ``total`` a progress display
+    reads)."""
+    runs = path if isinstance(path, RunReader) else RunReader(path)
+    path = runs.path
     if not path.exists():
         raise FileNotFoundError(f"no bag at {str(path)!r}")
     out = Path(output) if output is not None else default_output(path)
     if write and out.exists():
         raise FileExistsError(f"{str(out)!r} exists already, not overwriting it")
     options = options or bag_options(path)
-    runs = read_runs(path)
-    replayed = recheck(runs, options, on_run)
-    if write:
-        write_runs(out, runs, replayed, options, markers=markers)
-    differences = compare_runs(runs, replayed, tolerances=tolerances) if compare else []
-    return ReplayResult(runs, replayed, differences, out if write else None, options)
+    result = ReplayResult([], [], [], out if write else None, options)
+    writer = RunWriter(out, options, markers=markers) if write else None
+    pairs = recheck(runs, options, on_run)
+    try:
+        for i, (run, reports) in enumerate(pairs):
+            if writer is not None:
+                writer.write(run, reports)
+            found = compare_run(i, run, reports, tolerances=tolerances) if compare else []
+            result.add(i, run, reports, found, keep)
+    finally:
+        getattr(pairs, "close", lambda: None)()
+        if writer is not None:
+            writer.close()
+    result.orphan_reports = runs.orphan_reports
+    return result
 
 
-__all__ = ["DESIGN", "Difference", "OPTIONS_KEY", "POSES", "ReplayResult", "Run", "STATE",
-           "Tolerances", "asbuilt_check", "asbuilt_scenes", "bag_options", "compare_report",
-           "compare_runs", "default_output", "free_weights", "merge_message", "offline_reports",
-           "options_from_json", "options_to_json", "read_runs", "record_bag", "replay_bag",
-           "replay_run", "run_settings", "SETTINGS_TYPE", "state_reports", "step_stamps",
-           "write_runs"]
+__all__ = ["DESIGN", "Difference", "KEPT_DIFFERENCES", "OPTIONS_KEY", "PLAN", "POSES",
+           "ReplayResult", "Run", "RunReader", "RunWriter", "STATE", "Tolerances",
+           "asbuilt_check", "asbuilt_scenes", "bag_options", "compare_plan", "compare_report",
+           "compare_run", "compare_runs", "default_output", "free_weights", "merge_message",
+           "offline_reports", "options_from_json", "options_to_json", "read_runs", "record_bag",
+           "replay_bag", "replay_plan", "replay_run", "report_repeats", "run_settings",
+           "SETTINGS_TYPE", "state_reports", "step_stamps", "stopped_at", "write_runs"]

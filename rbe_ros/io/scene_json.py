@@ -27,7 +27,16 @@ def scene_from_dict(data: dict, base_dir: Path | None = None) -> Scene:
         raise SceneError('"holds" must be a list of {"block", "from_step", "until_step"}')
     return make_scene(data.get("name", "scene"), blocks, data.get("gravity", DEFAULT_GRAVITY), seq,
                       [_hold_from_dict(i, h) for i, h in enumerate(holds)],
-                      data.get("pose_uncertainty"))
+                      data.get("pose_uncertainty"), _approach_from(data.get("approach")))
+
+
+def _approach_from(raw) -> tuple:
+    """The "approach" list (one [x, y, z] or null per step of the sequence), or none."""
+    if raw is None:
+        return ()
+    if not isinstance(raw, (list, tuple)):
+        raise SceneError('"approach" must be a list of [x, y, z] or null, one per step')
+    return tuple(raw)
 
 
 def _hold_from_dict(index: int, raw) -> Hold:
@@ -118,4 +127,6 @@ def scene_to_dict(scene: Scene) -> dict:
                         for h in scene.holds]
     if scene.pose_uncertainty is not None:
         out["pose_uncertainty"] = list(scene.pose_uncertainty)
+    if scene.approach:
+        out["approach"] = [None if d is None else [float(x) for x in d] for d in scene.approach]
     return out

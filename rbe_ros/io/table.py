@@ -4,7 +4,27 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from ..rbe.result import Report
+
+_AXES = {(1, 0, 0): "+x", (-1, 0, 0): "-x", (0, 1, 0): "+y", (0, -1, 0): "-y"}
+
+
+def approach_text(r: Report) -> str:
+    """The table's approach of a report: "down", "side +x" (and the other horizontal axes),
+    the direction "(x, y, z)", "none" when the block cannot get in, "-" when not checked."""
+    if not r.insertable:
+        return "none"
+    d = np.asarray(r.insertion_direction, dtype=float)
+    if not np.any(d):
+        return "-"
+    rounded = tuple(int(x) for x in np.round(d)) if np.allclose(d, np.round(d), atol=1e-9) else ()
+    if rounded == (0, 0, -1):
+        return "down"
+    if rounded in _AXES:
+        return f"side {_AXES[rounded]}"
+    return "(" + ", ".join(f"{x:.3g}" for x in d + 0.0) + ")"
 
 
 def hold_note(r: Report) -> str:
@@ -17,17 +37,20 @@ def hold_note(r: Report) -> str:
 
 
 def format_table(reports: list[Report]) -> str:
-    """One row per report: step, block, verdict, max tension, worst |V|/N, time and reason;
-    the reason notes the blocks held at the step and, when unstable, the ones to hold."""
+    """One row per report: step, block, verdict, max tension, worst |V|/N, time, margin
+    (when computed), approach (when checked: :func:`approach_text`) and reason; the reason
+    notes the blocks held at the step and, when unstable, the ones to hold."""
     margin = any(r.margin_g >= 0 for r in reports)
+    approach = any(not r.insertable or np.any(r.insertion_direction) for r in reports)
     head = ("step", "block", "verdict", "max tension N", "worst |V|/N", "solve ms") \
-        + ("margin g",) * margin + ("reason",)
+        + ("margin g",) * margin + ("approach",) * approach + ("reason",)
     rows = [head]
     for r in reports:
         ratio = f"{r.worst_friction_ratio:.3f}" if math.isfinite(r.worst_friction_ratio) else "inf"
         rows.append((str(r.step_index) if r.step_index >= 0 else "-", r.block_placed or "-",
                      r.status.name, f"{r.max_tension:.1f}", ratio, f"{1e3 * r.solve_time:.1f}")
-                    + (f"{r.margin_g:.3f}",) * margin + (r.message + hold_note(r),))
+                    + (f"{r.margin_g:.3f}",) * margin + (approach_text(r),) * approach
+                    + (r.message + hold_note(r),))
     widths = [max(len(row[i]) for row in rows) for i in range(len(head) - 1)]
     lines = ["  ".join(c.ljust(w) if i < 3 else c.rjust(w)
                        for i, (c, w) in enumerate(zip(row, widths)))

@@ -5,7 +5,8 @@ when it is viewed), the data as JSON, and a small script: a 3D view of the assem
 chosen step (the blocks in the colours of :mod:`rbe_ros.io.markers`, the force segments,
 interface outlines and kerns of the same :func:`~rbe_ros.io.markers.line_markers`), a step
 slider, the table of steps (verdict, max tension, worst |V|/N, model, margin_g where the
-report has one: ``--margin``, or a bag recorded with it; reason) and the check options. Why
+report has one: ``--margin``, or a bag recorded with it; approach; reason), the placed
+block's insertion direction as an arrow, and the check options. Why
 plotly and not three.js: docs/VIEW.md.
 """
 from __future__ import annotations
@@ -21,9 +22,10 @@ from plotly.offline import get_plotlyjs
 
 from ..analysis.options import CheckOptions
 from ..rbe.result import Status
-from .markers import ROLE_COLOURS, ROLES, line_markers, run_roles
+from .markers import ROLE_COLOURS, ROLES, approach_markers, line_markers, run_roles
 from .messages import report_from_dict
 from .replay import Run, options_to_json, replay_run
+from .table import approach_text
 
 #: Coordinates in the page are rounded to 0.1 mm.
 DECIMALS = 4
@@ -74,6 +76,15 @@ def _margin(report: dict) -> float | None:
     return None if margin < 0 else margin
 
 
+def _arrow(meshes, report, d: dict) -> dict | None:
+    """The insertion arrow of a report (:func:`approach_markers`): tail, tip, colour."""
+    for m in approach_markers(meshes, report, d["header"]):
+        tail, tip = np.asarray(m["points"], dtype=float)
+        return {"tail": tail.tolist(), "tip": tip.tolist(),
+                "colour": _rgba(tuple(m["color"][k] for k in "rgba"))}
+    return None
+
+
 def view_data(runs: Sequence[ViewRun], options: CheckOptions, title: str) -> dict:
     """The page's data: per run the block meshes, per report its row, block roles and lines."""
     out_runs, steps = [], []
@@ -98,6 +109,7 @@ def view_data(runs: Sequence[ViewRun], options: CheckOptions, title: str) -> dic
                 "max_tension": _number(report.max_tension),
                 "worst_friction_ratio": _number(report.worst_friction_ratio),
                 "model": report.model, "margin": _margin(d), "message": report.message,
+                "approach": approach_text(report), "arrow": _arrow(meshes, report, d),
                 "roles": {bid: ROLES.index(role) for bid, role in role.items()},
                 "lines": lines})
     return {"title": title, "runs": out_runs, "steps": steps,
@@ -146,7 +158,8 @@ tr { cursor: pointer; }
 <div class="legend" id="legend"></div>
 <div id="plot"></div>
 <table id="steps"><thead><tr><th>run</th><th>step</th><th>block</th><th>verdict</th>
-<th>max tension N</th><th>worst |V|/N</th><th>model</th><th>margin g</th><th>reason</th>
+<th>max tension N</th><th>worst |V|/N</th><th>model</th><th>margin g</th><th>approach</th>
+<th>reason</th>
 </tr></thead><tbody></tbody></table>
 <h3>Check options</h3><table id="options"><tbody></tbody></table>
 <script id="data" type="application/json">@DATA@</script>
@@ -197,6 +210,19 @@ function lineTraces(step) {
     showlegend: false}));
 }
 
+function arrowTraces(step) {
+  const a = step.arrow;
+  if (!a) return [];
+  const d = a.tip.map((v, k) => v - a.tail[k]);
+  return [{type: "scatter3d", mode: "lines", name: "insertion", hoverinfo: "name",
+           x: [a.tail[0], a.tip[0]], y: [a.tail[1], a.tip[1]], z: [a.tail[2], a.tip[2]],
+           line: {color: a.colour, width: 8}, showlegend: false},
+          {type: "cone", name: "insertion", x: [a.tip[0]], y: [a.tip[1]], z: [a.tip[2]],
+           u: [d[0]], v: [d[1]], w: [d[2]], anchor: "tip", sizemode: "absolute",
+           sizeref: 0.2 * Math.hypot(d[0], d[1], d[2]), showscale: false,
+           colorscale: [[0, a.colour], [1, a.colour]], hoverinfo: "name"}];
+}
+
 function show(index) {
   const step = DATA.steps[index];
   slider.value = index;
@@ -210,7 +236,7 @@ function show(index) {
                   scene: {aspectmode: "data", xaxis: {title: "x [m]"}, yaxis: {title: "y [m]"},
                           zaxis: {title: "z [m]"}, camera: {eye: {x: 1.4, y: -1.6, z: 0.9}}}};
   // data-drawn: the step on screen, once plotly has drawn it (the browser test waits for it)
-  return Plotly.react(plot, meshTraces(step).concat(lineTraces(step)), layout,
+  return Plotly.react(plot, meshTraces(step).concat(lineTraces(step), arrowTraces(step)), layout,
                       {displaylogo: false, responsive: true})
     .then(() => { document.body.dataset.drawn = index; });
 }
@@ -228,6 +254,7 @@ function build() {
     cell(tr, fmt(s.worst_friction_ratio, 3), "num");
     cell(tr, s.model);
     cell(tr, fmt(s.margin, 3), "num");
+    cell(tr, s.approach);
     cell(tr, s.message);
     tr.addEventListener("click", () => show(k));
     body.appendChild(tr);

@@ -80,6 +80,11 @@ class Report:
     #: when no margin was asked for.
     margin_g: float = NOT_COMPUTED
     margin_direction: np.ndarray = field(default_factory=lambda: np.zeros(3))  # body force, unit
+    #: Whether the placed block can reach its pose past the present blocks (true when not
+    #: checked: no block placed, the check off, or no verdict), along insertion_direction
+    #: (unit, its motion into the pose; zeros when it cannot or nothing was checked).
+    insertable: bool = True
+    insertion_direction: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     def __post_init__(self):
         for name in ("interfaces", "unstable_blocks", "held_blocks", "suggested_holds",

@@ -18,7 +18,14 @@ Interfaces (relative to the node, e.g. ``/rbe_node/report``):
   (:mod:`rbe_ros.io.foxglove_scene`);
 * serves ``~/check`` (rbe_msgs/srv/CheckAssembly): the assembly as a whole, sequence ignored;
 * serves the action ``~/check_sequence`` (rbe_msgs/action/CheckSequence): feedback per step,
-  all reports and the first failing step as result; cancellable between steps.
+  all reports and the first failing step as result; cancellable between steps;
+* serves the action ``~/plan`` (rbe_msgs/action/PlanSequence): plans an insertion order with
+  at most ``max_held`` blocks held (as ``rbe-ros plan``, through the same
+  :func:`rbe_ros.io.plans.plan_state`), feedback after each placed step, the plan, its holds
+  and each step's report as result. Cancellable between candidate checks (the result is the
+  best partial plan, status CANCELED); a newer goal preempts a running one (ABORTED, "stopped
+  after K of N blocks"); plans run one at a time. A goal that cannot be planned (invalid
+  input) SUCCEEDS with ``feasible`` false and the reason, as an infeasible plan does.
 
 Bad input never stops the node: a state that cannot be checked (outside the limits of
 :class:`rbe_ros.scene.ValidationLimits`, ``max_blocks`` among them) gives a report with status
@@ -27,7 +34,9 @@ SOLVER_FAILED naming the solver's status or the stage, and any other error in a 
 logged and gives SOLVER_FAILED with the exception text. With ``mcap_path`` set, every checked
 state and every report is recorded (CDR, receive/publish time) in a rosbag2 MCAP bag, each
 message flushed before the report is published (a report seen on DDS is on disk, even after
-SIGKILL); the bag is closed on shutdown (SIGINT, SIGTERM).
+SIGKILL); the bag is closed on shutdown (SIGINT, SIGTERM). A ``~/plan`` goal and its result
+are recorded on ``~/plan/goal`` and ``~/plan/result`` (rbe_msgs/action/PlanSequence_Goal,
+_Result), and ``rbe-ros replay`` re-plans the goal.
 
 Run: ``rbe_node --ros-args -p friction_coefficient:=0.5 -p mcap_path:=bags/run``
 (or ``python -m rbe_ros.ros.node``).
@@ -35,6 +44,7 @@ Run: ``rbe_node --ros-args -p friction_coefficient:=0.5 -p mcap_path:=bags/run``
 from __future__ import annotations
 
 import os
+import math
 import signal
 import struct
 import json
@@ -55,7 +65,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
 from rclpy.signals import SignalHandlerOptions
-from rbe_msgs.action import CheckSequence
+from rbe_msgs.action import CheckSequence, PlanSequence
 from rbe_msgs.msg import AssemblyState, BlockPoses, StabilityReport
 from rbe_msgs.srv import CheckAssembly
 from std_msgs.msg import String
@@ -64,16 +74,19 @@ from visualization_msgs.msg import MarkerArray
 from ..analysis.option_spec import BY_PARAM, OPTIONS, Option, from_outer
 from ..analysis.options import CheckOptions
 from ..analysis.pipeline import StateCheck, check_state
+from ..analysis.planning import STOPPED
 from ..analysis.steps import sequence_step
 from ..io import cdr
 from ..io.bag import BagWriter, typestore
 from ..io.inputs import load_design
 from ..io.foxglove_scene import SceneServer
 from ..io.markers import MARKER_TYPE, run_markers, step_markers
-from ..io.messages import report_header, report_to_dict, state_to_dict
+from ..io.messages import (plan_feedback_to_dict, plan_goal_from_dict, plan_result_to_dict,
+                           poses_to_dict, report_header, report_to_dict, state_to_dict)
+from ..io.plans import plan_state
 from ..io.poses import AsBuilt
-from ..io.replay import (DESIGN, OPTIONS_KEY, POSES, SETTINGS_TYPE,
-                         asbuilt_check, merge_message, options_to_json)
+from ..io.replay import (DESIGN, OPTIONS_KEY, PLAN_GOAL_TYPE, PLAN_RESULT_TYPE, POSES,
+                         SETTINGS_TYPE, asbuilt_check, merge_message, options_to_json)
 from ..rbe.result import Report, Status
 from ..scene import Scene, SceneError
 from .convert import dict_to_message, message_to_dict, scene_from_msg
@@ -146,7 +159,26 @@ PARAMETERS = {
     "record_markers": (True, ParameterDescriptor(
         type=ParameterType.PARAMETER_BOOL, description="with mcap_path: record the markers of "
         "every report too (false: a lean log of states and reports)")),
+    "marker_rate_hz": (0.0, ParameterDescriptor(
+        type=ParameterType.PARAMETER_DOUBLE, description="markers of at most this many "
+        "reports a second are drawn, published and recorded (the newest report's always, at "
+        "most 1/rate s late); 0: every report's",
+        floating_point_range=[FloatingPointRange(from_value=0.0, to_value=1000.0, step=0.0)])),
+    "max_bag_size_mb": (0.0, ParameterDescriptor(
+        type=ParameterType.PARAMETER_DOUBLE, read_only=True, description="with mcap_path: "
+        "begin the next file of the bag (name_1.mcap, ...) when one reaches this many MB "
+        "(10^6 bytes); each file replays alone (settings, design and the poses measured so far "
+        "written again at its start); 0: no split by size",
+        floating_point_range=[FloatingPointRange(from_value=0.0, to_value=1e6, step=0.0)])),
+    "max_bag_duration_s": (0.0, ParameterDescriptor(
+        type=ParameterType.PARAMETER_DOUBLE, read_only=True, description="with mcap_path: "
+        "begin the next file of the bag when one spans this many seconds; 0: no split by "
+        "duration",
+        floating_point_range=[FloatingPointRange(from_value=0.0, to_value=1e7, step=0.0)])),
 }
+
+#: How often a report's markers held back by ``marker_rate_hz`` are looked at.
+MARKER_POLL_S = 0.05
 
 
 class ConfigurationError(Exception):
@@ -162,7 +194,10 @@ class RbeChecks:
         """Declare the parameters; the state, publishers and diagnostics of the node."""
         self._closing = False
         self._destroyed = False
-        self._action = None
+        self._actions: list = []
+        # ~/plan: one plan at a time; the newest goal preempts the one running
+        self._plan_lock = threading.Lock()
+        self._plan_newest = None
         self._interfaces: list = []     # subscriptions and service, while open
         self._bag = None
         self._bag_lock = threading.Lock()
@@ -199,6 +234,7 @@ class RbeChecks:
         # building the rclpy message (an object per Point) and serialising it
         self._encode_report = cdr.encoder(typestore(), "rbe_msgs/msg/StabilityReport")
         self._encode_markers = cdr.encoder(typestore(), MARKER_TYPE)
+        self._encode_plan = cdr.encoder(typestore(), PLAN_RESULT_TYPE)
         self._report_pub = self.create_publisher(StabilityReport, "~/report", LATCHED_QOS)
         self._marker_pub = self.create_publisher(MarkerArray, "~/markers", LATCHED_QOS)
 
@@ -214,6 +250,16 @@ class RbeChecks:
         self.design_topic = self.resolve_topic_name("~/design")
         self.poses_topic = self.resolve_topic_name("~/poses")
         self.marker_topic = self._marker_pub.topic_name
+        self.plan_goal_topic = self.resolve_topic_name("~/plan/goal")
+        self.plan_result_topic = self.resolve_topic_name("~/plan/result")
+        # marker_rate_hz: the markers of the newest report held back, sent when their time
+        # comes (polled while one waits)
+        self._marker_lock = threading.Lock()
+        self._markers_at = -math.inf
+        self._markers_waiting: tuple | None = None
+        self._marker_timer = self.create_timer(MARKER_POLL_S, self._markers_due,
+                                               callback_group=MutuallyExclusiveCallbackGroup())
+        self._marker_timer.cancel()
         self.add_post_set_parameters_callback(self._parameters_set)
         # the report log (_log_report): verdict counts since the last summary line
         self._log_lock = threading.Lock()
@@ -228,7 +274,8 @@ class RbeChecks:
             self.get_logger().info(f"Foxglove WebSocket server on port {self.foxglove.port}")
 
     def _start_interfaces(self) -> None:
-        """Subscribe the state topics, serve ~/check and ~/check_sequence, start the worker."""
+        """Subscribe the state topics, serve ~/check, ~/check_sequence and ~/plan, start the
+        worker."""
         self._closing = False
         # raw: the callback gets the CDR bytes; a state is converted to a message only when
         # the worker checks it (converting every state that arrives would hold the GIL and
@@ -245,11 +292,14 @@ class RbeChecks:
                                          callback_group=self._topic_group, raw=True)]
         self._interfaces = [self.create_service(CheckAssembly, "~/check", self._on_check,
                                                 callback_group=self._service_group)]
-        self._action = ActionServer(
-            self, CheckSequence, "~/check_sequence", execute_callback=self._execute_sequence,
+        self._actions = [ActionServer(
+            self, action, name, execute_callback=execute,
             goal_callback=lambda _goal: GoalResponse.ACCEPT,
             cancel_callback=lambda _goal: CancelResponse.ACCEPT,
             callback_group=self._action_group)
+            for action, name, execute in ((CheckSequence, "~/check_sequence",
+                                           self._execute_sequence),
+                                          (PlanSequence, "~/plan", self._execute_plan))]
         self._worker = threading.Thread(target=self._work, name="rbe_state_worker", daemon=True)
         self._worker.start()
         with self._slot_cond:
@@ -286,9 +336,9 @@ class RbeChecks:
             for subscription in self._topics:
                 self.destroy_subscription(subscription)
             self._topics = []
-        if self._action is not None:
-            self._action.destroy()
-            self._action = None
+        for action in self._actions:
+            action.destroy()
+        self._actions = []
 
     # --- parameters -------------------------------------------------------------------------
 
@@ -326,19 +376,24 @@ class RbeChecks:
         # the options at the start, so that `rbe-ros replay` re-checks the same way
         try:
             self._bag = BagWriter(
-                path, custom_data={OPTIONS_KEY: options_to_json(self.check_options())})
+                path, custom_data={OPTIONS_KEY: options_to_json(self.check_options())},
+                max_bytes=int(self.get_parameter("max_bag_size_mb").value * 1e6),
+                max_duration_ns=int(self.get_parameter("max_bag_duration_s").value * 1e9))
         except OSError as exc:
             raise ConfigurationError(f"mcap_path {raw!r}: cannot create the bag {path}: "
                                      f"{exc.strerror or exc}") from None
         self._bag.add_topic(self.state_topic, "rbe_msgs/msg/AssemblyState")
+        # a report and its markers stay in the file of their state (a split file replays)
         self._bag.add_topic(self.report_topic, "rbe_msgs/msg/StabilityReport",
-                            transient_local=True)
-        self._bag.add_topic(self.marker_topic, MARKER_TYPE, transient_local=True)
+                            transient_local=True, splits=False)
+        self._bag.add_topic(self.marker_topic, MARKER_TYPE, transient_local=True, splits=False)
         # added with their first message: a bag of states alone has only their topics
         self.settings_topic = f"{self.get_fully_qualified_name()}/settings"
         self._bag.add_topic(self.settings_topic, SETTINGS_TYPE, transient_local=True)
         self._later_topics = {self.design_topic: ("rbe_msgs/msg/AssemblyState", True),
-                              self.poses_topic: ("rbe_msgs/msg/BlockPoses", False)}
+                              self.poses_topic: ("rbe_msgs/msg/BlockPoses", False),
+                              self.plan_goal_topic: (PLAN_GOAL_TYPE, False),
+                              self.plan_result_topic: (PLAN_RESULT_TYPE, False)}
         self.bag_path = path
         self.get_logger().info(f"recording states and reports to {path}")
 
@@ -362,6 +417,13 @@ class RbeChecks:
                 self.health.error(f"recording to {self.bag_path} failed, stopped: {exc}")
                 self._close_bag_locked()
 
+    def _carry(self, topic: str, message) -> None:
+        """Write ``message`` (CDR bytes, or a callable making a message dict) again at the
+        start of every later file of a split bag, so that one file alone replays."""
+        with self._bag_lock:
+            if self._bag is not None and topic not in self._later_topics:
+                self._bag.carry(topic, message)
+
     def _record_settings(self) -> None:
         """Record the check options and frame_id now in force (at the start and after every
         parameter change), so that a replay checks each state with what it was checked with."""
@@ -369,7 +431,9 @@ class RbeChecks:
             return
         settings = {"options": json.loads(options_to_json(self.check_options())),
                     "frame_id": self.get_parameter("frame_id").value}
-        self._record(self.settings_topic, String(data=json.dumps(settings, sort_keys=True)))
+        data = serialize_message(String(data=json.dumps(settings, sort_keys=True)))
+        self._record(self.settings_topic, data)
+        self._carry(self.settings_topic, data)
 
     def _publish_diagnostics(self) -> None:
         self._diagnostics_pub.publish(self.health.message(
@@ -430,6 +494,49 @@ class RbeChecks:
         data = self._encode_report(report_to_dict(report, header, arrays=True))
         self._record(self.report_topic, data)
         self._report_pub.publish(data)
+        self._markers_of(scene, report, header, state)
+        where = f" step {report.step_index} ({report.block_placed})" \
+            if report.step_index >= 0 else ""
+        self._log_report(f"{header['frame_id']}{where}: {report.status.name}: "
+                         f"{report.message}", report)
+        return data
+
+    def _markers_of(self, scene: Scene | None, report: Report, header: dict,
+                    state: AssemblyState | None) -> None:
+        """Send the markers of ``report`` now, or with ``marker_rate_hz`` when their time
+        comes (a newer report's replace them while they wait: drawing, sending and recording
+        a 300-block wall's markers at 10 Hz is most of a bag and of the node's time)."""
+        rate = self.get_parameter("marker_rate_hz").value
+        with self._marker_lock:
+            now = time.monotonic()
+            if rate > 0 and now < self._markers_at + 1.0 / rate:
+                self._markers_waiting = (scene, report, header, state)
+                self._marker_timer.reset()
+                return
+            self._markers_at, self._markers_waiting = now, None
+        self._send_markers(scene, report, header, state)
+
+    def _markers_due(self) -> None:
+        """Timer: send the markers waiting once their time has come."""
+        rate = self.get_parameter("marker_rate_hz").value
+        with self._marker_lock:
+            now = time.monotonic()
+            waiting = self._markers_waiting
+            if waiting is not None and rate > 0 and now < self._markers_at + 1.0 / rate:
+                return
+            self._markers_at, self._markers_waiting = now, None
+            self._marker_timer.cancel()
+        if waiting is None:
+            return
+        try:
+            self._send_markers(*waiting)
+        except Exception as exc:    # never out of a timer callback (it would end the spin)
+            self.get_logger().error(f"markers not sent: {type(exc).__name__}: {exc}")
+
+    def _send_markers(self, scene: Scene | None, report: Report, header: dict,
+                      state: AssemblyState | None) -> None:
+        """Draw, publish (and record) the markers of ``report`` (``state``: drawn as it
+        came, a check that failed)."""
         if state is None:
             markers = step_markers(scene, report, header)
         else:
@@ -441,11 +548,6 @@ class RbeChecks:
         if self.get_parameter("record_markers").value:
             self._record(self.marker_topic, markers)
         self._marker_pub.publish(markers)
-        where = f" step {report.step_index} ({report.block_placed})" \
-            if report.step_index >= 0 else ""
-        self._log_report(f"{header['frame_id']}{where}: {report.status.name}: "
-                         f"{report.message}", report)
-        return data
 
     def _log_report(self, text: str, report: Report) -> None:
         """A failed check at ERROR, an unstable verdict at WARN when it differs from the
@@ -603,10 +705,20 @@ class RbeChecks:
                 scene = merge_message(self._asbuilt, kind, message_to_dict(msg))
             except SceneError as exc:
                 scene = exc
+            # a later file of a split bag begins with the design and the poses measured so
+            # far (stamp 0: no report answers it), so that it replays alone
+            if kind == DESIGN:
+                self._carry(topic, data)
+            else:
+                self._carry(topic, self._measured_poses)
             self._put((header, scene))
         except Exception as exc:
             self.get_logger().error(f"{topic}: message not handled: {type(exc).__name__}: "
                                     f"{exc}")
+
+    def _measured_poses(self) -> dict:
+        """The poses measured so far as one BlockPoses dict (stamp 0)."""
+        return poses_to_dict(self._asbuilt.measured, self.get_parameter("frame_id").value)
 
     def _check_asbuilt(self, header: dict, scene) -> None:
         """Check an as-built scene (or report why there is none) as a whole."""
@@ -680,6 +792,54 @@ class RbeChecks:
         else:  # the state could not be checked, or shutting down
             goal_handle.abort()
         return result
+
+    def _execute_plan(self, goal_handle) -> PlanSequence.Result:
+        """Plan the goal's assembly (the goal and its result recorded), one plan at a time:
+        a newer goal stops this one between two candidate checks (ABORTED), as a cancel does
+        (CANCELED); the result is then the best partial plan."""
+        try:
+            return self._plan_goal(goal_handle)
+        except Exception as exc:   # publishing or recording failed (e.g. during shutdown)
+            message = f"plan failed: {type(exc).__name__}: {exc}"
+            self.get_logger().error(f"plan goal not handled: {message}")
+            goal_handle.abort()
+            return PlanSequence.Result(message=message, failed_step=0)
+
+    def _plan_goal(self, goal_handle) -> PlanSequence.Result:
+        self._plan_newest = goal_handle
+        goal = goal_handle.request
+        self._record(self.plan_goal_topic, goal)
+        header = report_header(message_to_dict(goal.assembly.header),
+                               self.get_parameter("frame_id").value)
+        _, limits = plan_goal_from_dict(message_to_dict(goal))
+
+        def stopped() -> bool:
+            return self._closing or goal_handle.is_cancel_requested or \
+                self._plan_newest is not goal_handle
+
+        def progress(p) -> None:
+            goal_handle.publish_feedback(
+                dict_to_message(plan_feedback_to_dict(p), PlanSequence.Feedback))
+
+        def read() -> Scene:
+            return scene_from_msg(goal.assembly, limits=options.limits)
+
+        with self._plan_lock:
+            start = time.monotonic()
+            options = self.check_options()
+            plan = plan_state(read, limits, options, progress=progress, should_stop=stopped)
+            data = self._encode_plan(plan_result_to_dict(plan, header))
+            self._record(self.plan_result_topic, data)
+        self.get_logger().info(f"plan of {header['frame_id']} ({len(goal.assembly.blocks)} "
+                               f"blocks, at most {limits.max_held} held) in "
+                               f"{time.monotonic() - start:.1f} s: {plan.message}")
+        if not plan.message.startswith(STOPPED) or not stopped():
+            goal_handle.succeed()       # planned, infeasible, invalid, or its time limit
+        elif goal_handle.is_cancel_requested:
+            goal_handle.canceled()
+        else:
+            goal_handle.abort()         # preempted by a newer goal, or shutting down
+        return deserialize_message(data, PlanSequence.Result)
 
 
 class RbeNode(RbeChecks, Node):

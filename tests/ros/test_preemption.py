@@ -86,8 +86,9 @@ def test_a_newer_state_supersedes_a_long_topic_sequence(rbe):
     waited = time.monotonic() - sent
     assert answer.status == StabilityReport.STABLE
     # not behind the remaining 3,000 steps (about a minute): within the time the idle node
-    # takes and a few step times (the GIL is shared with the running sequence)
-    assert waited <= idle + 10 * step_time, \
+    # takes and 100 step times (the GIL is shared with the running sequence; a loaded
+    # machine stretches a wait more than the mean step time it measured)
+    assert waited <= idle + 100 * step_time, \
         f"{waited:.3f} s, idle {idle:.3f} s, step time {step_time:.3f} s"
     # the long sequence's last report says it was superseded, at the first step not checked
     reports = sorted(step_reports(client, long), key=lambda r: r.step_index)
@@ -97,7 +98,7 @@ def test_a_newer_state_supersedes_a_long_topic_sequence(rbe):
                                    f" of {COLUMNS ** 2} steps")
     assert [r.step_index for r in reports] == list(range(last.step_index + 1))
     assert all(r.status == StabilityReport.STABLE for r in reports[:-1])
-    assert 45 <= last.step_index < 300
+    assert 45 <= last.step_index < 1000
     assert last.block_placed == long.sequence[last.step_index]
 
 
@@ -116,8 +117,9 @@ def test_a_service_call_is_answered_while_a_long_topic_check_runs(rbe):
     answer = client.call_check(state_msg(stacked_boxes(0.6)))
     waited = time.monotonic() - start
     assert answer.status == StabilityReport.TENSION_REQUIRED
-    # served beside the sequence, which goes on meanwhile
-    assert waited <= 2 * max(idle) + 10 * step_time, \
+    # served beside the sequence, which goes on meanwhile (100 step times: a thirtieth of the
+    # ~3,000 left, robust to a loaded machine's stretched waits)
+    assert waited <= 2 * max(idle) + 100 * step_time, \
         f"{waited:.3f} s, idle {max(idle):.3f} s, step time {step_time:.3f} s"
     assert len(step_reports(client, long)) < COLUMNS ** 2
     client.publish(state_msg(stacked_boxes(0.0)))       # ends the long sequence

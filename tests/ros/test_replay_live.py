@@ -65,8 +65,8 @@ def test_running_node_gets_its_parameters_back(node):
         for run in runs:                      # as a node records them: ~/settings
             run.settings = {"options": json.loads(options_to_json(CheckOptions())),
                             "frame_id": "world"}
-        replayed = live_reports(runs, CheckOptions(), node_name=node.name,
-                                context=node.context)
+        replayed = [r for _, r in live_reports(runs, CheckOptions(), node_name=node.name,
+                                               context=node.context)]
         assert [r["stable"] for r in replayed[0]] == [r["stable"] for r in runs[0].reports]
         values = call(parameters.get_parameters(["friction_coefficient", "frame_id"])).values
         assert [parameter_value_to_python(v) for v in values] == [0.45, "cell"]

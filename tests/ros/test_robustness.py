@@ -324,7 +324,7 @@ def test_sigkill_mid_sequence_keeps_every_completed_step(rclpy_context, tmp_path
     node = start(tmp_path, "kill", rclpy_context, f"mcap_path:={tmp_path / 'bag'}")
     try:
         feedback: list = []
-        state = state_msg(tower(150))
+        state = state_msg(tower(400))      # killed after 20 steps, long before the end
         node.client.send_goal(state, feedback)
         wait_until(lambda: len(feedback) >= 20, TIMEOUT, "20 steps")
         node.proc.proc.send_signal(signal.SIGKILL)
@@ -343,7 +343,7 @@ def test_sigkill_mid_sequence_keeps_every_completed_step(rclpy_context, tmp_path
     assert [canonical(s) for s in states] == [canonical(state)]
     recorded = bag_reports(tmp_path / "bag")
     steps = [r["step_index"] for r in recorded]
-    assert steps == list(range(len(steps))) and 20 <= len(steps) < 150
+    assert steps == list(range(len(steps))) and 20 <= len(steps) < 400
     assert set(received) <= {canonical(r) for r in recorded}
     assert all(r["status"] == StabilityReport.STABLE for r in recorded)
 
@@ -355,7 +355,7 @@ def test_sigint_sigterm_mid_sequence_leave_a_complete_bag(rclpy_context, tmp_pat
         first = state_msg(stacked_boxes(0.55))
         first_report = node.client.call_check(first)
         assert first_report.status == StabilityReport.TENSION_REQUIRED
-        state = state_msg(tower(120))
+        state = state_msg(tower(300))      # stopped after 12 steps, long before the end
         state.sequence = [b.id for b in state.blocks[1:]]   # on the topic: steps if a sequence
         node.client.publish(state)
         wait_until(lambda: len(node.client.reports) >= 12, TIMEOUT, "10 steps on the topic")
@@ -388,7 +388,7 @@ def test_sigint_sigterm_mid_sequence_leave_a_complete_bag(rclpy_context, tmp_pat
     with node.client.lock:
         received = {canonical(r) for r in node.client.reports}
     recorded = {canonical(r) for r in bag_reports(path)}
-    assert received <= recorded and 12 <= len(recorded) < 1 + 120   # stopped mid-sequence
+    assert received <= recorded and 12 <= len(recorded) < 1 + 300   # stopped mid-sequence
 
 
 # --- overload --------------------------------------------------------------------------------
@@ -471,13 +471,17 @@ def test_overload_keeps_the_newest_state_with_bounded_memory(rclpy_context, tmp_
     assert len(stamps) + dropped[-1] <= count
     assert "dropped unchecked" in output
     # bounded queue: a state waits at most for the one being checked when it came, at any
-    # time of the run: its report comes within two report intervals of its sending (a queue
-    # would make the latency grow by ~1 s per s, here to ~20 s)
+    # time of the run: its report comes within two report intervals of its sending, plus
+    # 3 s for a loaded machine's stalls (a queue would make the latency grow by ~1 s per s,
+    # here to ~20 s), and the latency does not grow over the run (a queue: ~13 s more in
+    # the last third than in the first; on average, robust to one stall)
     checks = [a[3] for a in arrived]
     latency = [a[0] - sent_at[a[1]] for a in arrived]
     gaps = np.diff([a[0] for a in arrived])
     for k in range(2, len(arrived)):
-        assert latency[k] < gaps[k - 1] + gaps[k - 2] + 1.0, (k, latency[k], gaps[k - 2:k])
+        assert latency[k] < gaps[k - 1] + gaps[k - 2] + 3.0, (k, latency[k], gaps[k - 2:k])
+    third = max(1, len(latency) // 3)
+    assert np.mean(latency[-third:]) < np.mean(latency[:third]) + 1.0, latency
     # bounded memory: after a warm-up, the node's RSS stays within a band
     after = [kb for t, kb in rss if t > 5.0]
     assert after and max(after) - min(after) < 40_000, (min(after), max(after))

@@ -1,0 +1,99 @@
+"""Insertion of the block placed at a step: from which direction it can arrive past the
+blocks present (:mod:`rbe_ros.geometry.insertion`), with the interfaces of the whole
+assembly, so that a held block's contacts with supports count too (a step's own assembly
+drops interfaces between two supports)."""
+from __future__ import annotations
+
+import threading
+import weakref
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..geometry.insertion import Insertion, PathCheck, insertion
+from ..scene import ValidationLimits
+from .assembly import Assembly
+from .options import CheckOptions
+
+#: The moving block is shrunk by this many times the interpenetration the scene validation
+#: accepts (its penetration_tol), so that neighbours in contact do not block its path.
+CLEARANCE = 2.0
+
+#: The approach distance when none is given: this many times the block's longest extent.
+DEFAULT_APPROACH = 2.0
+
+
+@dataclass(frozen=True)
+class _Index:
+    """What every step's insertion asks of one assembly, as arrays: block ids, bounding
+    boxes, the interfaces' blocks and normals (from a into b)."""
+
+    ids: dict[str, int]
+    boxes: np.ndarray       # (n, 2, 3)
+    a: np.ndarray           # (m,)
+    b: np.ndarray
+    normals: np.ndarray     # (m, 3)
+
+    @classmethod
+    def of(cls, assembly: Assembly) -> "_Index":
+        its = assembly.interfaces
+        return cls({blk.id: k for k, blk in enumerate(assembly.blocks)},
+                   np.array([blk.aabb for blk in assembly.blocks]).reshape(-1, 2, 3),
+                   np.array([it.a for it in its], dtype=int),
+                   np.array([it.b for it in its], dtype=int),
+                   np.array([it.frame.n for it in its], dtype=float).reshape(-1, 3))
+
+
+_LOCK = threading.Lock()
+_LAST: list = [None, None]      # (weak reference to the assembly, its _Index)
+
+
+def _index(assembly: Assembly) -> _Index:
+    """The :class:`_Index` of ``assembly`` (kept for the last assembly asked: a sequence or
+    a plan asks of one assembly at every step)."""
+    with _LOCK:
+        ref, index = _LAST
+        if ref is not None and ref() is assembly:
+            return index
+    index = _Index.of(assembly)
+    with _LOCK:
+        _LAST[:] = [weakref.ref(assembly), index]
+    return index
+
+
+def interface_normals(assembly: Assembly, block: int, present: np.ndarray) -> np.ndarray:
+    """(k, 3) normals, into block ``block``, of its interfaces with the blocks ``present``
+    (a boolean mask over the assembly's blocks)."""
+    index = _index(assembly)
+    into = (index.b == block) & present[index.a]
+    out = (index.a == block) & present[index.b]
+    return np.concatenate([index.normals[into], -index.normals[out]])
+
+
+def approach_distance(assembly: Assembly, block: int, options: CheckOptions) -> float:
+    """m: the option's, else DEFAULT_APPROACH times the block's longest bounding-box edge."""
+    if options.insertion.approach_distance > 0:
+        return options.insertion.approach_distance
+    box = assembly.blocks[block].aabb
+    return DEFAULT_APPROACH * float(np.max(box[1] - box[0]))
+
+
+def block_insertion(assembly: Assembly, present: Sequence[str], block: str,
+                    options: CheckOptions, given=None) -> Insertion:
+    """How ``block`` reaches its pose in ``assembly`` (the whole scene's) past the blocks
+    ``present`` (it among them or not); ``given``: a direction to check instead of choosing."""
+    index = _index(assembly)
+    k = index.ids[block]
+    mask = np.zeros(len(assembly.blocks), dtype=bool)
+    mask[[index.ids[b] for b in present]] = True
+    mask[k] = False
+    others = np.flatnonzero(mask)
+    moving = assembly.blocks[k]
+    limits = options.limits or ValidationLimits()
+    path = PathCheck(moving, [assembly.blocks[j] for j in others],
+                     approach_distance(assembly, k, options),
+                     CLEARANCE * limits.penetration_tol * moving.size, index.boxes[others])
+    return insertion(interface_normals(assembly, k, mask), path,
+                     np.asarray(assembly.gravity, dtype=float), given,
+                     np.radians(options.contact.angle_tol_deg))

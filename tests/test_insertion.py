@@ -1,0 +1,405 @@
+"""Insertion directions against closed forms (issue 22): the cone of a block on the ground,
+in a corner, a keystone's wedge, a slot's axis, an enclosed block, a brick under a lintel;
+the path check against an independent sampled sweep (trimesh's collision manager); a trapped
+sequence and a plan that avoids it."""
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import trimesh
+from scipy.spatial.transform import Rotation
+
+from rbe_ros import generators as gen
+from rbe_ros.analysis.assembly import Assembly
+from rbe_ros.analysis.insertion import block_insertion, interface_normals
+from rbe_ros.analysis.options import CheckOptions, InsertionOptions
+from rbe_ros.analysis.pipeline import check_scene, check_sequence
+from rbe_ros.analysis.planning import plan_sequence
+from rbe_ros.geometry.insertion import PathCheck, cone_directions, in_cone, shrunk
+from rbe_ros.io.foxglove_scene import scene_update, x_onto
+from rbe_ros.io.markers import ARROW, approach_markers, scene_meshes, step_markers
+from rbe_ros.io.messages import scene_from_state_dict, state_to_dict
+from rbe_ros.io.scene_json import scene_from_dict, scene_to_dict
+from rbe_ros.io.table import approach_text, format_table
+from rbe_ros.scene import SceneError, box_block, box_vertices, make_block, make_scene
+
+DOWN = np.array([0.0, 0.0, -1.0])
+RHO = 2000.0
+
+
+def _directions(count=4000, seed=1):
+    d = np.random.default_rng(seed).normal(size=(count, 3))
+    return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+def _cone(scene, block):
+    """The interface normals into ``block`` from every other block of ``scene``."""
+    assembly = Assembly.from_scene(scene)
+    ids = [b.id for b in assembly.blocks]
+    k = ids.index(block)
+    others = np.ones(len(ids), dtype=bool)
+    others[k] = False
+    return interface_normals(assembly, k, others)
+
+
+def _insertion(scene, block, **kw):
+    assembly = Assembly.from_scene(scene)
+    return block_insertion(assembly, [b.id for b in scene.blocks], block, CheckOptions(), **kw)
+
+
+def _ground(*blocks):
+    return make_scene("s", [box_block("ground", (4, 4, 0.2), (0, 0, -0.1), support=True,
+                                      density=RHO), *blocks])
+
+
+def test_block_on_ground_lower_half_space_and_straight_down():
+    scene = _ground(box_block("b", (0.4, 0.2, 0.2), (0, 0, 0.1), density=RHO))
+    normals = _cone(scene, "b")
+    d = _directions()
+    inside = np.array([in_cone(x, normals) for x in d])
+    np.testing.assert_array_equal(inside, d[:, 2] <= 0)
+    found = _insertion(scene, "b")
+    assert found.insertable
+    np.testing.assert_allclose(found.direction, DOWN, atol=1e-12)
+
+
+def test_corner_down_and_never_through_the_wall():
+    # wall at -x: the block may move towards it or along it, never come out of it (d_x > 0)
+    scene = _ground(box_block("wall", (0.2, 2, 1), (-0.3, 0, 0.5), support=True, density=RHO),
+                    box_block("b", (0.4, 0.2, 0.2), (0, 0, 0.1), density=RHO))
+    normals = _cone(scene, "b")
+    d = _directions()
+    inside = np.array([in_cone(x, normals) for x in d])
+    np.testing.assert_array_equal(inside, (d[:, 2] <= 0) & (d[:, 0] <= 0))
+    found = _insertion(scene, "b")
+    np.testing.assert_allclose(found.direction, DOWN, atol=1e-12)
+    assert not _insertion(scene, "b", given=np.array([1.0, 0, -1])).insertable
+
+
+
+def test_wall_off_vertical_within_the_angle_tolerance_keeps_down():
+    """A block-high wall leaning 0.5 deg over the block (within the 1 deg contact tolerance):
+    its normal points slightly down, so the exact cone's closest direction runs down along
+    the wall's face, 0.5 deg off vertical, yet the block comes straight down (its path is free: the wall overhangs by less
+    than the clearance)."""
+    lean = math.radians(0.5)
+    q = [0.0, math.sin(lean / 2), 0.0, math.cos(lean / 2)]
+    scene = _ground(box_block("wall", (0.2, 2, 0.2), (-0.3, 0, 0.101), q, support=True,
+                              density=RHO),
+                    box_block("b", (0.4, 0.2, 0.2), (0, 0, 0.1), density=RHO))
+    exact = cone_directions(_cone(scene, "b"), DOWN)[0]
+    np.testing.assert_allclose(exact, [-math.sin(lean), 0, -math.cos(lean)], atol=1e-6)
+    found = _insertion(scene, "b")
+    np.testing.assert_allclose(found.direction, DOWN, atol=1e-12)
+
+
+def _prism(block_id, outline, depth, caps=None, **kw):
+    """A prism of the xz ``outline`` extruded over y in [-depth/2, depth/2], its faces
+    turned outward whichever way the outline runs; ``caps``: the end faces as triangles of
+    outline indices (a non-convex outline), else the outline itself."""
+    n = len(outline)
+    v = np.array([(x, -depth / 2, z) for x, z in outline] + [(x, depth / 2, z) for x, z in outline])
+    caps = [tuple(range(n))] if caps is None else caps
+    faces = [tuple(c) for c in caps] + [tuple(n + i for i in c[::-1]) for c in caps]
+    faces += [(i, i + n, (i + 1) % n + n, (i + 1) % n) for i in range(n)]
+    volume = sum(float(v[f[0]] @ np.cross(v[f[i]], v[f[i + 1]]))
+                 for f in faces for i in range(1, len(f) - 1))
+    if volume < 0:
+        faces = [f[::-1] for f in faces]
+    return make_block(block_id, v, faces, density=RHO, **kw)
+
+
+def _keystone(a):
+    """A keystone (bottom 0.2, height 0.3) between two voussoirs whose faces lean at +-a."""
+    h, wb = 0.3, 0.2
+    wt = wb + 2 * h * math.tan(a)
+    key = [(-wb / 2, 0), (wb / 2, 0), (wt / 2, h), (-wt / 2, h)]
+    left = [(-0.6, 0), (-wb / 2, 0), (-wt / 2, h), (-0.6, h)]
+    right = [(wb / 2, 0), (0.6, 0), (0.6, h), (wt / 2, h)]
+    return make_scene("keystone", [_prism("left", left, 0.3, support=True),
+                                   _prism("right", right, 0.3, support=True),
+                                   _prism("key", key, 0.3)])
+
+
+@pytest.mark.parametrize("a_deg", [10.0, 25.0])
+def test_keystone_exactly_the_wedge(a_deg):
+    a = math.radians(a_deg)
+    scene = _keystone(a)
+    normals = _cone(scene, "key")
+    assert len(normals) == 2
+    phi = np.linspace(-math.pi, math.pi, 721)
+    for p in phi:                   # in the xz-plane, p from straight down towards +x
+        d = np.array([math.sin(p), 0.0, -math.cos(p)])
+        if abs(abs(p) - a) > 1e-6:
+            assert in_cone(d, normals) == (abs(p) < a), p
+    found = _insertion(scene, "key")
+    np.testing.assert_allclose(found.direction, DOWN, atol=1e-9)
+    for p in (-0.9 * a, 0.9 * a):   # inside the wedge: the path is free too
+        assert _insertion(scene, "key", given=np.array([math.sin(p), 0, -math.cos(p)])).insertable
+    for p in (-1.3 * a, 1.3 * a):
+        assert not _insertion(scene, "key",
+                              given=np.array([math.sin(p), 0, -math.cos(p)])).insertable
+
+
+def _slot(closed_ends=False):
+    blocks = [box_block("left", (0.6, 0.2, 0.2), (0, -0.2, 0.1), support=True, density=RHO),
+              box_block("right", (0.6, 0.2, 0.2), (0, 0.2, 0.1), support=True, density=RHO),
+              box_block("top", (0.6, 0.6, 0.1), (0, 0, 0.25), support=True, density=RHO),
+              box_block("b", (0.4, 0.2, 0.2), (0, 0, 0.1), density=RHO)]
+    if closed_ends:
+        blocks += [box_block("end1", (0.2, 0.6, 0.3), (0.3 + 0.0, 0, 0.15), support=True,
+                             density=RHO),
+                   box_block("end2", (0.2, 0.6, 0.3), (-0.3, 0, 0.15), support=True,
+                             density=RHO)]
+        blocks[0] = box_block("left", (0.4, 0.2, 0.2), (0, -0.2, 0.1), support=True, density=RHO)
+        blocks[1] = box_block("right", (0.4, 0.2, 0.2), (0, 0.2, 0.1), support=True, density=RHO)
+        blocks[2] = box_block("top", (0.4, 0.6, 0.1), (0, 0, 0.25), support=True, density=RHO)
+    return _ground(*blocks)
+
+
+def test_slot_only_its_axis():
+    scene = _slot()
+    normals = _cone(scene, "b")
+    candidates = cone_directions(normals, DOWN)
+    assert {tuple(np.round(c, 12)) for c in candidates} == {(1.0, 0, 0), (-1.0, 0, 0)}
+    d = _directions()
+    off_axis = np.abs(d[:, 0]) < 0.9999
+    assert not any(in_cone(x, normals) for x in d[off_axis])
+    found = _insertion(scene, "b")
+    assert found.insertable and abs(found.direction[0]) == pytest.approx(1.0)
+
+
+def test_enclosed_not_insertable():
+    found = _insertion(_slot(closed_ends=True), "b")
+    assert not found.insertable
+    np.testing.assert_array_equal(found.direction, np.zeros(3))
+    assert "enclosed" in found.reason
+
+
+def _lintel(gap=0.05):
+    """A brick on the ground between two pillars, under a lintel it does not touch."""
+    return _ground(box_block("p1", (0.2, 0.4, 0.6), (-0.4, 0, 0.3), density=RHO),
+                   box_block("p2", (0.2, 0.4, 0.6), (0.4, 0, 0.3), density=RHO),
+                   box_block("lintel", (1.0, 0.4, 0.2), (0, 0, 0.7), density=RHO),
+                   box_block("brick", (0.4, 0.2, 0.6 - gap), (0, 0, (0.6 - gap) / 2),
+                             density=RHO))
+
+
+def test_brick_under_lintel_refused_down_inserted_sideways():
+    scene = _lintel()
+    assembly = Assembly.from_scene(scene)
+    brick = next(b for b in assembly.blocks if b.id == "brick")
+    others = [b for b in assembly.blocks if b.id != "brick"]
+    assert PathCheck(brick, others, 1.2, 0.002).blockers(DOWN) == ("lintel",)
+    found = _insertion(scene, "brick")
+    assert found.insertable
+    assert found.direction[2] == pytest.approx(0.0, abs=1e-12)
+    assert abs(found.direction[1]) == pytest.approx(1.0)     # the pillars close +-x
+    assert _independent_sweep_free(scene, [b.id for b in scene.blocks], "brick",
+                                   found.direction)
+    assert not _independent_sweep_free(scene, [b.id for b in scene.blocks], "brick", DOWN)
+
+
+def test_non_convex_neighbour_is_its_convex_hull():
+    """Conservative for non-convex blocks: a block in the notch of a U-shaped neighbour is
+    refused from above (the U's hull covers the notch) though the notch is open upwards."""
+    u = [(-0.3, 0), (0.3, 0), (0.3, 0.3), (0.1, 0.3), (0.1, 0.1), (-0.1, 0.1), (-0.1, 0.3),
+         (-0.3, 0.3)]
+    caps = [(0, 1, 4), (0, 4, 5), (1, 2, 3), (1, 3, 4), (0, 5, 6), (0, 6, 7)]
+    scene = make_scene("u", [_prism("u", u, 0.3, caps, support=True),
+                             box_block("b", (0.2, 0.3, 0.2), (0, 0, 0.2), density=RHO)])
+    assert _independent_sweep_free(scene, ["u", "b"], "b", DOWN)     # truly free
+    found = _insertion(scene, "b")
+    assert not found.insertable and found.blocked_by == ("u",)
+
+
+def test_non_convex_moving_block_is_its_convex_hull():
+    """Conservative for a non-convex moving block too: an inverted U coming down over a post
+    that fits its notch is refused (its hull would sweep through the post), though the
+    sampled sweep of the true shape is free."""
+    u = [(-0.3, 0.3), (-0.3, 0), (-0.1, 0), (-0.1, 0.2), (0.1, 0.2), (0.1, 0), (0.3, 0),
+         (0.3, 0.3)]
+    scene = _ground(box_block("post", (0.1, 0.3, 0.15), (0, 0, 0.075), support=True,
+                              density=RHO),
+                    _prism("u", u, 0.3, [(0, 1, 2), (0, 2, 3), (0, 3, 7), (3, 4, 7), (4, 5, 6),
+                                         (4, 6, 7)]))
+    assert _independent_sweep_free(scene, ["ground", "post", "u"], "u", DOWN)
+    found = _insertion(scene, "u")
+    assert not found.insertable and "post" in found.blocked_by
+
+
+def _independent_sweep_free(scene, present, block, direction, samples=40) -> bool:
+    """The oracle: the block's mesh, scaled by 0.98 about its centroid, at sampled positions
+    along its path over twice its longest extent, collides with no present mesh."""
+    def mesh(b):
+        posed = Assembly.from_scene(scene.subset([b.id])).blocks[0]
+        tris = [(f[0], f[i], f[i + 1]) for f in b.faces for i in range(1, len(f) - 1)]
+        return trimesh.Trimesh(posed.vertices, tris, process=False)
+    manager = trimesh.collision.CollisionManager()
+    for b in scene.blocks:
+        if b.id in present and b.id != block:
+            manager.add_object(b.id, mesh(b))
+    moving = mesh(scene.block(block))
+    centre = moving.vertices.mean(axis=0)
+    moving.vertices = centre + 0.98 * (moving.vertices - centre)
+    extent = float(np.max(np.ptp(moving.vertices, axis=0)))
+    for t in np.linspace(0.0, 2.0 * extent / 0.98, samples):
+        tf = np.eye(4)
+        tf[:3, 3] = -t * np.asarray(direction)
+        if manager.in_collision_single(moving, transform=tf):
+            return False
+    return True
+
+
+def test_pocket_under_a_cap_blocked_by_the_cap():
+    """A block in a pocket (walls on four sides) may only come down, and a cap above it that
+    it does not touch blocks that path: not insertable, the cap named."""
+    scene = _ground(box_block("b", (0.2, 0.2, 0.15), (0, 0, 0.075), density=RHO),
+                    box_block("w1", (0.2, 0.6, 0.2), (-0.2, 0, 0.1), density=RHO),
+                    box_block("w2", (0.2, 0.6, 0.2), (0.2, 0, 0.1), density=RHO),
+                    box_block("w3", (0.2, 0.2, 0.2), (0, 0.2, 0.1), density=RHO),
+                    box_block("w4", (0.2, 0.2, 0.2), (0, -0.2, 0.1), density=RHO),
+                    box_block("cap", (0.6, 0.6, 0.1), (0, 0, 0.25), density=RHO))
+    assert cone_directions(_cone(scene, "b"), DOWN) == [pytest.approx(DOWN)]
+    found = _insertion(scene, "b")
+    assert not found.insertable and found.blocked_by == ("cap",)
+    assert found.reason == "1 direction blocked by cap"
+    without_cap = scene.subset([b.id for b in scene.blocks if b.id != "cap"])
+    np.testing.assert_allclose(_insertion(without_cap, "b").direction, DOWN)
+
+
+def test_trapped_sequence_reported_and_planned_around():
+    """A block placed after the four walls and the cap around it cannot get in; the planner
+    orders it before them."""
+    blocks = [box_block("b", (0.2, 0.2, 0.2), (0, 0, 0.1), density=RHO),
+              box_block("w1", (0.2, 0.6, 0.2), (-0.2, 0, 0.1), density=RHO),
+              box_block("w2", (0.2, 0.6, 0.2), (0.2, 0, 0.1), density=RHO),
+              box_block("w3", (0.2, 0.2, 0.2), (0, 0.2, 0.1), density=RHO),
+              box_block("w4", (0.2, 0.2, 0.2), (0, -0.2, 0.1), density=RHO),
+              box_block("cap", (0.6, 0.6, 0.1), (0, 0, 0.25), density=RHO)]
+    scene = _ground(*blocks)
+    trapped = make_scene("trap", scene.blocks, sequence=["w1", "w2", "w3", "w4", "cap", "b"])
+    reports = check_sequence(trapped)
+    assert [r.insertable for r in reports] == [True] * 5 + [False]
+    assert all(r.stable for r in reports)
+    assert "not insertable: b" in reports[-1].message
+    np.testing.assert_array_equal(reports[-1].insertion_direction, np.zeros(3))
+    off = check_sequence(trapped, CheckOptions(insertion=InsertionOptions(enabled=False)))
+    assert off[-1].insertable and not np.any(off[-1].insertion_direction)
+    whole = check_scene(trapped)        # the whole assembly: its last block's insertion
+    assert not whole.insertable
+    plan = plan_sequence(trapped, max_held=0)
+    assert plan.feasible, plan.message
+    assert plan.order.index("b") < plan.order.index("cap")
+    assert all(r.insertable for r in plan.reports)
+    np.testing.assert_allclose(plan.scene.approach[plan.order.index("b")], DOWN, atol=1e-12)
+    prefix = make_scene("trap", scene.blocks, sequence=["w1", "w2", "w3", "w4", "cap"])
+    stuck = plan_sequence(prefix, max_held=0, keep_sequence=True)
+    assert not stuck.feasible and stuck.failed_step == 5
+    assert "b cannot be inserted: enclosed" in stuck.message, stuck.message
+    # the planned scene's directions are checked, not chosen, when it is checked again
+    again = check_sequence(plan.scene)
+    for r, d in zip(again, plan.scene.approach):
+        np.testing.assert_allclose(r.insertion_direction, d)
+
+
+GENERATED = {
+    "wall": lambda: gen.running_bond_wall(3, 3),
+    "arch": lambda: gen.semicircular_arch(7),
+    "buttressed arch": lambda: gen.buttressed_arch(7),
+    "stack": lambda: gen.stack(4),
+    "harmonic stack": lambda: gen.harmonic_stack(4),
+    "dome": lambda: gen.dome(6, 2),
+}
+
+
+@pytest.mark.parametrize("name", sorted(GENERATED))
+def test_plans_of_generated_scenes_are_insertable(name):
+    """Every step of a plan is insertable along its reported direction, by the sampled
+    sweep of the oracle."""
+    scene = GENERATED[name]()
+    plan = plan_sequence(scene, max_held=2)
+    assert plan.reports
+    for r in plan.reports:
+        if not r.block_placed:
+            continue
+        assert r.insertable, r.message
+        assert np.linalg.norm(r.insertion_direction) == pytest.approx(1.0)
+        k = plan.order.index(r.block_placed)
+        present = [b.id for b in plan.scene.blocks if b.support] + plan.order[:k + 1]
+        assert _independent_sweep_free(plan.scene, present, r.block_placed,
+                                       r.insertion_direction), r.block_placed
+
+
+def test_given_approach_round_trips_scene_json_and_assembly_state():
+    """A scene's "approach" survives the scene JSON and the AssemblyState dict (a zero vector
+    there: choose), and the check keeps a given direction."""
+    scene = _lintel()
+    seq = ["p1", "p2", "lintel", "brick"]
+    given = make_scene("g", scene.blocks, sequence=seq,
+                       approach=[None, None, [0, 0, -2], [0, -1, 0]])
+    for back in (scene_from_dict(scene_to_dict(given)),
+                 scene_from_state_dict(state_to_dict(given))):
+        assert back.approach[:2] == (None, None)
+        np.testing.assert_allclose(back.approach[2], DOWN)
+        np.testing.assert_allclose(back.approach[3], [0, -1, 0])
+    reports = check_sequence(given)
+    np.testing.assert_allclose(reports[3].insertion_direction, [0, -1, 0])
+    refused = make_scene("g", scene.blocks, sequence=seq, approach=[None, None, None, DOWN])
+    last = check_sequence(refused)[-1]
+    assert not last.insertable and "the given approach blocked by lintel" in last.message
+    with pytest.raises(SceneError, match="one entry per step"):
+        make_scene("g", scene.blocks, sequence=seq, approach=[None])
+    with pytest.raises(SceneError, match="non-zero"):
+        make_scene("g", scene.blocks, sequence=seq, approach=[None, None, None, [0, 0, 0]])
+
+
+def test_table_approach_column_and_marker_arrow():
+    """The table says down / side / the vector / none, and the markers' arrow ends at the
+    placed block's centre, pointing along its direction."""
+    scene = make_scene("g", _lintel().blocks, sequence=["p1", "p2", "lintel", "brick"])
+    reports = check_sequence(scene)
+    assert [approach_text(r) for r in reports] == ["down", "down", "down", "side -y"]
+    assert "approach" in format_table(reports).splitlines()[0]
+    tilted = replace(reports[3], insertion_direction=np.array([0.6, 0.0, -0.8]))
+    assert approach_text(tilted) == "(0.6, 0, -0.8)"
+    assert approach_text(replace(reports[3], insertable=False,
+                                 insertion_direction=np.zeros(3))) == "none"
+    header = {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": "world"}
+    (arrow,) = approach_markers(scene_meshes(scene), reports[3], header)
+    assert arrow["type"] == ARROW and arrow["ns"] == "insertion"
+    tail, tip = arrow["points"]
+    np.testing.assert_allclose(tip, [0, 0, (0.6 - 0.05) / 2], atol=1e-9)     # the centre
+    np.testing.assert_allclose((tip - tail) / np.linalg.norm(tip - tail),
+                               reports[3].insertion_direction, atol=1e-12)
+    assert scene_update(step_markers(scene, reports[3], header)).encode()      # Foxglove too
+
+
+@pytest.mark.parametrize("d", [(0, 0, -1), (0, -1, 0), (-1, 0, 0), (1, 0, 0), (0.6, 0, -0.8)])
+def test_foxglove_arrow_turns_x_onto_the_direction(d):
+    """The Foxglove arrow's orientation turns its x axis onto the direction (checked with
+    scipy's rotation, an independent computation)."""
+    turned = Rotation.from_quat(x_onto(np.array(d, dtype=float))).apply([1.0, 0.0, 0.0])
+    np.testing.assert_allclose(turned, d, atol=1e-12)
+
+
+def test_shrunk_box_is_the_box_offset_inwards():
+    """The clearance moves every face of a box in by exactly that much (closed form)."""
+    corners = box_vertices((0.4, 0.2, 0.1)) + [1.0, 2.0, 3.0]
+    inner = shrunk(corners, 0.01)
+    np.testing.assert_allclose(np.sort(np.unique(np.round(inner - [1, 2, 3], 12), axis=0), 0),
+                               np.sort(box_vertices((0.38, 0.18, 0.08)), 0), atol=1e-12)
+    # capped at a quarter of the least face distance (here 0.05 / 4)
+    np.testing.assert_allclose(np.ptp(shrunk(corners, 1.0), axis=0), [0.375, 0.175, 0.075])
+
+
+def test_ten_thousand_vertex_block_comes_down():
+    """A 10,000-vertex convex dome on the ground: straight down (the shrink and the path are
+    linear in the hull's size, no vertex-by-face table)."""
+    scene = gen.convex_domes(1)
+    found = _insertion(scene, "dome0")
+    assert found.insertable
+    np.testing.assert_allclose(found.direction, DOWN, atol=1e-12)

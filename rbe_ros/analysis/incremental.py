@@ -86,7 +86,9 @@ class StepChecker:
         carried between two holds), tried first as a region with the new blocks.
         ``restrict`` False: only the relaxations of those two regions (when a restriction is
         known not to settle such a step, only a failure is worth proving)."""
-        if self._results is None:
+        # held blocks with grips: their wrenches come from the whole problem (a local one
+        # would take them as supports)
+        if self._results is None or assembly.grips:
             return None
         graph = ContactGraph(assembly)
         new = self._new_blocks(assembly, graph)

@@ -19,9 +19,12 @@ the previous step plus the new block, with more blocks added greedily while the 
 not stand (those the failed check names as moving first), then every hold whose release
 keeps the step standing is released, oldest first; if that leaves more than K, the exact
 minimal hold search (:func:`rbe_ros.analysis.holds.minimal_holds`, within its budget). A
-candidate is feasible with at most K holds. Each partial plan keeps the first ``beam``
-feasible candidates; of all children the ``beam`` best survive (fewest hold-steps so far,
-then fewest holds now, then candidate rank). No child at a step: the plan fails there.
+candidate is feasible with at most K holds, each robot within the hold capacities of the
+options (``hold_force_max``, ``hold_torque_max``: see :class:`~rbe_ros.analysis.holds.
+StabilityOracle`); when no candidate is, the message names the wrench the best one needs.
+Each partial plan keeps the first ``beam`` feasible candidates; of all children the ``beam``
+best survive (fewest hold-steps so far, then fewest holds now, then candidate rank).
+No child at a step: the plan fails there.
 
 A candidate step is the partial plan's last standing state plus one block, so it is checked
 as :func:`check_sequence` checks a step (:class:`StepChecker`: the kept forces of that state,
@@ -46,7 +49,8 @@ from typing import Protocol
 
 import numpy as np
 
-from ..rbe.result import Report
+from ..rbe.model import Grip
+from ..rbe.result import Report, Status
 from ..scene import Hold, Scene, SceneError, make_scene
 from .asbuilt import declared
 from .assembly import Assembly
@@ -173,11 +177,16 @@ class _Trial:
         found = self.reports.get(key)
         if found is None:
             self.planner.poll()
-            assembly = self.planner.full.subset(self.present, key)
             restrict = not (self.direct and set(self.previous) - key)
-            report = (self.planner.ahead(self.present, key)
-                      or self.checker.attempt(assembly, self.open_course, restrict=restrict)
-                      or check(assembly, self.planner.options))
+            report = self.planner.ahead(self.present, key)      # gripped, when sent
+            if report is not None:
+                assembly = self.planner.gripped(self.present, key)
+            else:
+                assembly = self.planner.full.subset(self.present, key)
+                report = (self.checker.attempt(assembly, self.open_course, restrict=restrict)
+                          or check(assembly, self.planner.options))
+            if report.stable and key:
+                report = self.planner.within_capacity(self.present, key) or report
             self.planner.counted(report)
             found = self.reports[key] = (assembly, report)
         return found
@@ -301,16 +310,16 @@ class _Planner:
             return (*self._holds_by_components(order, previous), None, None)
         trial = _Trial(self, partial, block)
         held = self._repair(trial, block, previous)
-        if len(held) > self.plan.max_held:
+        if len(held) > self.plan.max_held or not trial.stands(held):
             assembly = self.full.subset(trial.present)
             self.poll()
             oracle = StabilityOracle(assembly, self.options, self.cache)
             result = minimal_holds(assembly, self.options, prefer=(*previous, block),
                                    oracle=oracle)
             self.checks += oracle.checks
-            if result.stands and len(result.blocks) < len(held):
+            if result.stands and (len(result.blocks) < len(held) or not trial.stands(held)):
                 held = result.blocks
-        ok = len(held) <= self.plan.max_held
+        ok = len(held) <= self.plan.max_held and trial.stands(held)
         assembly, report = trial.result(held) if ok else (None, None)
         return held, ok, report, assembly
 
@@ -328,33 +337,58 @@ class _Planner:
         held = release_unneeded(trial, held)
         return tuple(sorted(held, key=self.position.__getitem__))
 
-    def _holds_by_components(self, order, previous) -> tuple[tuple[str, ...], bool]:
-        """The search before incremental checks: every check solves whole components."""
-        assembly = self.full.subset(self.present(order, len(order) - 1))
-        oracle = StabilityOracle(assembly, self.options, self.cache)
+    def _holds_by_components(self, order: tuple[str, ...], previous: tuple[str, ...],
+                             options=None):
+        """(held blocks, within K) for the step that places ``order[-1]`` (under ``options``,
+        default the plan's), every check solving whole components: the search before the
+        incremental checks (``full_candidates``), and the capacity note's."""
+        k = len(order) - 1
+        options = options or self.options
+        assembly = self.full.subset(self.present(order, k))
+        oracle = StabilityOracle(assembly, options, self.cache)
         try:
             held = self._repair_components(oracle, order[-1], previous)
-            if len(held) > self.plan.max_held:
-                result = minimal_holds(assembly, self.options, prefer=(*previous, order[-1]),
+            if len(held) > self.plan.max_held or not oracle.stands(self._indices(oracle, held)):
+                result = minimal_holds(assembly, options, prefer=(*previous, order[-1]),
                                        oracle=oracle)
-                if result.stands and len(result.blocks) < len(held):
+                if result.stands and (len(result.blocks) < len(held)
+                                      or not oracle.stands(self._indices(oracle, held))):
                     held = result.blocks
+            ok = len(held) <= self.plan.max_held and oracle.stands(self._indices(oracle, held))
         finally:
             self.checks += oracle.checks
-        return held, len(held) <= self.plan.max_held
+        return held, ok
+
+    @staticmethod
+    def _indices(oracle: StabilityOracle, held) -> list[int]:
+        return [oracle.index[b] for b in held]
+
+    def _capacity_note(self, order: tuple[str, ...], previous) -> str:
+        """What the robots would need beyond their capacities at the step that places
+        ``order[-1]``, held as the plan would hold it with unbounded robots ("" when the
+        capacities are unbounded, or that needs more than K holds or is within them)."""
+        if self.options.hold_force_max is None and self.options.hold_torque_max is None:
+            return ""
+        unbounded = replace(self.options, hold_force_max=None, hold_torque_max=None)
+        held, ok = self._holds_by_components(order, previous, unbounded)
+        oracle = StabilityOracle(self.full.subset(self.present(order, len(order) - 1)),
+                                 self.options, self.cache)
+        over = oracle.capacity(self._indices(oracle, held)) if ok else None
+        return (f"; with {', '.join(held)} held (fewest with unbounded robots), {over.message}"
+                if over is not None else "")
 
     def _repair_components(self, oracle: StabilityOracle, new: str, previous
                            ) -> tuple[str, ...]:
-        self.poll()
         if oracle.stands(()):
             return ()
         held = [oracle.index[b] for b in previous if b in oracle.index] + [oracle.index[new]]
         while True:
-            self.poll()
             fails = oracle.failing(held)
             if not fails:
                 break
             comp, report = fails[0]
+            if not comp:            # a robot over its capacity that no other hold can relieve
+                break
             named = [oracle.index[b] for b in report.unstable_blocks
                      if b in oracle.index and oracle.index[b] in comp]
             held.append(sorted(named or comp, key=lambda j: (-oracle.height[j], j))[0])
@@ -365,8 +399,13 @@ class _Planner:
                     ) -> tuple[Report, Assembly]:
         """The full report of the step placing ``order[-1]`` and its assembly (checked as
         a sequence step when the search used the component checks)."""
-        if report is None:
-            assembly = self.full.subset(self.present(order, len(order) - 1), held)
+        present = self.present(order, len(order) - 1)
+        if held and (report is None or not report.hold_wrenches):
+            # the robots' wrenches: the step with a grip on each held block, solved whole
+            assembly = self.gripped(present, held)
+            report = check(assembly, self.options)
+        elif report is None:
+            assembly = self.full.subset(present, held)
             report = checker.attempt(assembly) or check(assembly, self.options)
         found = self.insertion(order)
         extra = {} if found is None else {"insertable": found.insertable,
@@ -393,8 +432,11 @@ class _Planner:
                                     f"(time limit or asked to stop); step {k} not placed")
             if not children:
                 count = len(best_rejected[1]) if best_rejected else 0
+                best = beam[0]
                 why = (f"; the best candidate, {best_rejected[0]}, needs {count} held "
                        f"block{'' if count == 1 else 's'} ({', '.join(best_rejected[1])})"
+                       + self._capacity_note((*best.order, best_rejected[0]),
+                                             best.held[-1] if best.held else ())
                        if best_rejected else
                        "; no unplaced block touches the placed ones" if not blocked else "")
                 why += "".join(f"; {b} cannot be inserted: {r}" for b, r in blocked.items())
@@ -467,6 +509,19 @@ class _Planner:
                 self.submitted[key] = self.pool.submit(*key)
         for key in set(self.submitted) - wanted:     # off the path taken: not needed
             self.submitted.pop(key).cancel()
+
+    def within_capacity(self, present: tuple[str, ...], held: frozenset) -> Report | None:
+        """The HOLD_EXCEEDED report of the step with a robot's grip on each held block, when
+        the options bound the wrenches and one is over (as
+        :meth:`~rbe_ros.analysis.holds.StabilityOracle.capacity`); else None."""
+        if self.options.hold_force_max is None and self.options.hold_torque_max is None:
+            return None
+        report = check(self.gripped(present, held), self.options)
+        return report if report.status == Status.HOLD_EXCEEDED else None
+
+    def gripped(self, present, held) -> Assembly:
+        """The step with a robot's grip (at the centroid) on each held block."""
+        return self.full.subset(present, held, tuple(Grip(b) for b in sorted(held)))
 
     def ahead(self, present: tuple[str, ...], held: frozenset) -> Report | None:
         """The look-ahead's full check of this step with ``held``, if it was sent."""

@@ -16,7 +16,7 @@ from .holds import suggested_holds
 from .incremental import StepChecker
 from .margin import report_margin
 from .options import CheckOptions
-from .steps import final_state, sequence_step, step_count
+from .steps import final_grips, final_state, sequence_step, step_count
 from .validate import validated_assembly
 from .verdict import check
 
@@ -40,7 +40,7 @@ def check_scene(scene: Scene, options: CheckOptions = CheckOptions(),
             held: tuple[str, ...] = ()
             if scene.holds:
                 present, held = final_state(scene)
-                assembly = assembly.subset(present, held)
+                assembly = assembly.subset(present, held, final_grips(scene, held))
             with stage("solve"):
                 report = check(assembly, options)
             report = _completed(report, assembly, held, options)
@@ -79,7 +79,7 @@ def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
         try:
             if full is None:
                 raise geometry_timeout
-            assembly = full.subset(step.present, step.held)
+            assembly = full.subset(step.present, step.held, step.grips)
             with time_budget(limit):
                 with stage("solve"):
                     report = checker.check(assembly)

@@ -21,6 +21,9 @@ Namespaces (after a DELETEALL, so the markers of an earlier report vanish):
   aggregated scenes only the interfaces in tension or over friction get their outline and
   kern (the force segments' feet still mark every polygon), which keeps the markers of a
   1000-block wall step under 2 MB;
+* ``holds``: one ARROW per held block with a robot's wrench, from its grip point along the
+  force on the block (the largest hold force 0.3 times the assembly's size long; id: the
+  hold's index in the report), amber, red when it exceeds the capacity (utilisation > 1);
 * ``text``: a TEXT_VIEW_FACING above the assembly: step, block, verdict and the reason.
 
 Nothing here imports rclpy.
@@ -42,7 +45,7 @@ from ..scene import BOX_FACES, Scene, SceneError, box_vertices
 from .messages import SOLID_PRIMITIVE_BOX, report_from_dict, scene_from_state_dict
 
 #: Marker types and actions (visualization_msgs/Marker constants).
-LINE_LIST, TRIANGLE_LIST, TEXT_VIEW_FACING = 5, 11, 9
+ARROW, LINE_LIST, TRIANGLE_LIST, TEXT_VIEW_FACING = 0, 5, 11, 9
 ADD, DELETEALL = 0, 3
 #: Topic of the markers in bags, the name the node publishes them under.
 MARKER_TOPIC = "/rbe_node/markers"
@@ -312,9 +315,29 @@ def report_markers(meshes: Meshes, roles: Mapping[str, str], report: Report, hea
         position = ((lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, hi[2] + 0.15 * size)
     else:
         size, position = 1.0, (0.0, 0.0, 1.0)
+    markers += hold_markers(report, header, 0.3 * size)
     markers.append(_marker(header, "text", 0, TEXT_VIEW_FACING, TEXT, position=position,
                            scale=(0, 0, max(0.04 * size, 0.02)), text=text_of(report)))
     return {"markers": markers}
+
+
+#: Colours of the hold arrows: within the capacity, beyond it.
+HOLD_COLOURS = ((1.0, 0.65, 0.0, 1.0), (1.0, 0.05, 0.05, 1.0))
+
+
+def hold_markers(report: Report, header: Mapping, length: float) -> list[dict]:
+    """An ARROW per hold wrench of ``report`` from its grip along its force, the largest
+    ``length`` m long (see the module docstring)."""
+    forces = [np.asarray(w.force, dtype=float) for w in report.hold_wrenches]
+    largest = max((float(np.linalg.norm(f)) for f in forces), default=0.0)
+    out = []
+    for k, (w, f) in enumerate(zip(report.hold_wrenches, forces)):
+        start = np.asarray(w.grip_point, dtype=float)
+        end = start + (length / largest * f if largest > 0 else 0.0)
+        out.append(_marker(header, "holds", k, ARROW, HOLD_COLOURS[w.utilisation > 1.0],
+                           points=np.stack([start, end]),
+                           scale=(0.04 * length, 0.08 * length, 0.12 * length)))
+    return out
 
 
 def step_markers(scene: Scene, report: Report, header: Mapping, **kw) -> dict:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from ..rbe.result import Report
 
 
@@ -16,18 +18,27 @@ def hold_note(r: Report) -> str:
     return note
 
 
+def largest_hold_force(r: Report) -> float:
+    """The largest |F| a robot applies to a held block in ``r`` (N; 0 when none is held)."""
+    return max((float(np.linalg.norm(w.force)) for w in r.hold_wrenches), default=0.0)
+
+
 def format_table(reports: list[Report]) -> str:
-    """One row per report: step, block, verdict, max tension, worst |V|/N, time and reason;
-    the reason notes the blocks held at the step and, when unstable, the ones to hold."""
+    """One row per report: step, block, verdict, max tension, worst |V|/N, time, the largest
+    hold force (when a report has hold wrenches) and reason; the reason notes the blocks held
+    at the step and, when unstable, the ones to hold."""
     margin = any(r.margin_g >= 0 for r in reports)
+    hold = any(r.hold_wrenches for r in reports)
     head = ("step", "block", "verdict", "max tension N", "worst |V|/N", "solve ms") \
-        + ("margin g",) * margin + ("reason",)
+        + ("margin g",) * margin + ("max hold N",) * hold + ("reason",)
     rows = [head]
     for r in reports:
         ratio = f"{r.worst_friction_ratio:.3f}" if math.isfinite(r.worst_friction_ratio) else "inf"
         rows.append((str(r.step_index) if r.step_index >= 0 else "-", r.block_placed or "-",
                      r.status.name, f"{r.max_tension:.1f}", ratio, f"{1e3 * r.solve_time:.1f}")
-                    + (f"{r.margin_g:.3f}",) * margin + (r.message + hold_note(r),))
+                    + (f"{r.margin_g:.3f}",) * margin
+                    + (f"{largest_hold_force(r):.1f}" if r.hold_wrenches else "-",) * hold
+                    + (r.message + hold_note(r),))
     widths = [max(len(row[i]) for row in rows) for i in range(len(head) - 1)]
     lines = ["  ".join(c.ljust(w) if i < 3 else c.rjust(w)
                        for i, (c, w) in enumerate(zip(row, widths)))

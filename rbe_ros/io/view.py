@@ -21,9 +21,10 @@ from plotly.offline import get_plotlyjs
 
 from ..analysis.options import CheckOptions
 from ..rbe.result import Status
-from .markers import ROLE_COLOURS, ROLES, line_markers, run_roles
+from .markers import ROLE_COLOURS, ROLES, hold_markers, line_markers, run_roles
 from .messages import report_from_dict
 from .replay import Run, options_to_json, replay_run
+from .table import largest_hold_force
 
 #: Coordinates in the page are rounded to 0.1 mm.
 DECIMALS = 4
@@ -85,19 +86,24 @@ def view_data(runs: Sequence[ViewRun], options: CheckOptions, title: str) -> dic
             x, y, z = _coords(meshes.triangles[meshes.start[i]:meshes.end[i]])
             blocks.append({"id": bid, "x": x, "y": y, "z": z})
         out_runs.append({"label": run.label, "blocks": blocks})
+        size = (float(np.ptp(meshes.triangles.reshape(-1, 3), axis=0).max())
+                if len(meshes.triangles) else 1.0)
         for d, report, role in zip(run.reports, reports, roles):
             lines = []
-            for m in line_markers(report, d["header"]):
+            for m in (line_markers(report, d["header"])
+                      + hold_markers(report, d["header"], 0.3 * size)):
                 x, y, z = _segments(m["points"])
                 lines.append({"name": f"{m['ns']} {m['id']}",
                               "colour": _rgba(tuple(m["color"][k] for k in "rgba")),
-                              "width": 6 if m["ns"] == "forces" else 3, "x": x, "y": y, "z": z})
+                              "width": _WIDTHS.get(m["ns"], 3), "x": x, "y": y, "z": z})
             steps.append({
                 "run": r, "step": report.step_index, "block": report.block_placed,
                 "status": report.status.name, "stable": report.stable,
                 "max_tension": _number(report.max_tension),
                 "worst_friction_ratio": _number(report.worst_friction_ratio),
-                "model": report.model, "margin": _margin(d), "message": report.message,
+                "model": report.model, "margin": _margin(d),
+                "max_hold": largest_hold_force(report) if report.hold_wrenches else None,
+                "message": report.message,
                 "roles": {bid: ROLES.index(role) for bid, role in role.items()},
                 "lines": lines})
     return {"title": title, "runs": out_runs, "steps": steps,
@@ -105,6 +111,10 @@ def view_data(runs: Sequence[ViewRun], options: CheckOptions, title: str) -> dic
                        "opacity": ROLE_COLOURS[n][3]} for n in ROLES],
             "options": json.loads(options_to_json(options)),
             "statuses": {s.name: s.value for s in Status}}
+
+
+#: Line widths in the page by marker namespace (others 3): forces and the robots' holds.
+_WIDTHS = {"forces": 6, "holds": 10}
 
 
 def write_html(path, runs: Sequence[ViewRun], options: CheckOptions, title: str) -> Path:
@@ -146,7 +156,8 @@ tr { cursor: pointer; }
 <div class="legend" id="legend"></div>
 <div id="plot"></div>
 <table id="steps"><thead><tr><th>run</th><th>step</th><th>block</th><th>verdict</th>
-<th>max tension N</th><th>worst |V|/N</th><th>model</th><th>margin g</th><th>reason</th>
+<th>max tension N</th><th>worst |V|/N</th><th>model</th><th>margin g</th><th>max hold N</th>
+<th>reason</th>
 </tr></thead><tbody></tbody></table>
 <h3>Check options</h3><table id="options"><tbody></tbody></table>
 <script id="data" type="application/json">@DATA@</script>
@@ -228,6 +239,7 @@ function build() {
     cell(tr, fmt(s.worst_friction_ratio, 3), "num");
     cell(tr, s.model);
     cell(tr, fmt(s.margin, 3), "num");
+    cell(tr, fmt(s.max_hold, 1), "num");
     cell(tr, s.message);
     tr.addEventListener("click", () => show(k));
     body.appendChild(tr);

@@ -35,12 +35,13 @@ KINDS = ("fn_pos", "fn_neg", "fu", "fv")
 @dataclass(frozen=True)
 class Grip:
     """A robot's hold of a free block: an unknown force at ``point`` (world) and a torque
-    about it, bounded by ``max_force`` (N) and ``max_torque`` (N m). math.inf: unbounded
-    (the block is held like a support); 0: none (a pin grip carries no torque); None: the
-    check's option (resolved before a model is built)."""
+    about it, bounded by ``max_force`` (N) and ``max_torque`` (N m). math.inf: unbounded (the
+    block is held like a support); 0: none (a pin grip carries no torque). None, the point:
+    the block's centroid; a capacity: the check's option (both resolved before a model is
+    built, by :func:`rbe_ros.analysis.verdict.model_of`)."""
 
     block: str
-    point: np.ndarray
+    point: np.ndarray | None = None
     max_force: float | None = None
     max_torque: float | None = None
 

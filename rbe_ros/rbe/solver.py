@@ -59,7 +59,7 @@ _TIE_DIRECTION = np.array([1.0, math.sqrt(2.0), math.sqrt(3.0)]) / math.sqrt(6.0
 #: solve would cost a full solve more. The paper's forces are thus computed with the
 #: wrench that costs the least; a held block the step needs no help for carries a sliver,
 #: of order g'/w of the weight.
-HOLD_WEIGHT = 1e3
+HOLD_WEIGHT = 1e4
 
 
 @dataclass(frozen=True)

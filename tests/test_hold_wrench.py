@@ -4,15 +4,19 @@ verdicts of holds as supports, and the wrench's balance against the reported int
 forces."""
 from __future__ import annotations
 
+import itertools
 import json
+import math
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
+from oracles import plane_blocks
 from rbe_ros import generators
 from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.analysis.pipeline import check_scene, check_sequence
+from rbe_ros.analysis.planning import plan_sequence
 from rbe_ros.analysis.steps import sequence_steps
 from rbe_ros.analysis.validate import validated_assembly
 from rbe_ros.analysis.verdict import check
@@ -20,6 +24,7 @@ from rbe_ros.cli import main
 from rbe_ros.io.messages import report_from_dict, report_json, scene_from_state_dict, \
     state_to_dict
 from rbe_ros.io.scene_json import scene_from_dict, scene_to_dict
+from rbe_ros.io.table import largest_hold_force
 from rbe_ros.rbe.result import Status
 from rbe_ros.scene import Hold, SceneError, box_block, make_scene
 
@@ -234,3 +239,90 @@ def test_cli_hold_capacities(tmp_path, capsys):
     assert out["status"] == 6 and "hold exceeded" in out["message"]
     assert main(["check", str(path), "--hold-force-max", "-1"]) != 0
     assert "--hold-force-max" in capsys.readouterr().err
+
+
+# --- the arch and the dome: the plane oracle, plans within a payload ---------------------------
+
+def _force(w) -> float:
+    return float(np.linalg.norm(w.force))
+
+
+def test_the_plane_oracle_with_a_bounded_force_agrees_with_the_arch_hold_wrenches():
+    """The arch's plan checked with pin grips at the centroids: where one voussoir is held,
+    its force is the smallest the plane rigid-block LP finds (tests/oracles/plane_blocks.py,
+    the held block free with an external force); where two are, the LP's smallest largest
+    force is at most the larger of the two (the check minimises their sum of squares)."""
+    arch = generators.semicircular_arch(7)
+    blocks, joints, supports = plane_blocks.semicircular_arch(7)
+    plan = plan_sequence(arch, 2)
+    reports = check_sequence(plan.scene, CheckOptions(hold_torque_max=0.0))
+    compared = 0
+    for step, report in zip(sequence_steps(plan.scene), reports):
+        present = set(step.present) | supports
+        if not step.held:
+            continue
+        smallest = plane_blocks.smallest_hold_force(blocks, joints, present, supports,
+                                                    set(step.held))
+        assert report.stable and math.isfinite(smallest), step.index
+        forces = [_force(w) for w in report.hold_wrenches]
+        if len(forces) == 1:
+            assert forces[0] == pytest.approx(smallest, rel=REL), step.index
+            compared += 1
+        else:
+            assert smallest <= max(forces) * (1 + REL), step.index
+    assert compared >= 1
+
+
+@pytest.fixture(scope="module")
+def arch_plan():
+    arch = generators.semicircular_arch(7)
+    plan = plan_sequence(arch, 2)
+    return arch, plan, max(largest_hold_force(r) for r in plan.reports)
+
+
+def test_the_arch_planned_below_its_largest_hold_fails_at_a_step_the_oracle_confirms(arch_plan):
+    arch, plan, largest = arch_plan
+    assert plan.feasible and largest == pytest.approx(690.4, rel=1e-3)
+    limit = 0.8 * largest
+    capped = plan_sequence(arch, 2, CheckOptions(hold_force_max=limit))
+    assert not capped.feasible and capped.failed_step == 4
+    assert capped.order == ["v00", "v06", "v01", "v05"]
+    assert "block v02 needs |F| 690.4 N (capacity 552.3 N)" in capped.message
+    for r in capped.reports:
+        assert r.stable and all(_force(w) <= limit * (1 + 1e-6) for w in r.hold_wrenches)
+    # no unplaced voussoir can be placed at step 4 with at most 2 held within the limit
+    blocks, joints, supports = plane_blocks.semicircular_arch(7)
+    placed = set(capped.order)
+    for candidate in set(blocks) - placed - supports:
+        present = placed | {candidate} | supports
+        assert not plane_blocks.stands(blocks, joints, present, supports)
+        for size in (1, 2):
+            for held in itertools.combinations(sorted(placed | {candidate}), size):
+                smallest = plane_blocks.smallest_hold_force(
+                    blocks, joints, present, supports, set(held), torque=True)
+                assert smallest > limit, (candidate, held, smallest)
+
+
+def test_the_dome_planned_below_its_largest_hold_stays_within_it():
+    dome = generators.dome(8, 5)
+    plan = plan_sequence(dome, 2)
+    largest = max(largest_hold_force(r) for r in plan.reports)
+    limit = 0.8 * largest
+    capped = plan_sequence(dome, 2, CheckOptions(hold_force_max=limit))
+    assert capped.feasible and capped.max_held <= 2
+    assert all(r.stable for r in capped.reports)
+    assert max(largest_hold_force(r) for r in capped.reports) <= limit * (1 + 1e-6)
+    # the step whose single hold was over the limit is held by two robots now
+    assert any(len(h) == 2 and len(a) == 1 for h, a in zip(capped.held, plan.held))
+
+
+def test_cli_plan_with_a_hold_force_limit(tmp_path, capsys, arch_plan):
+    arch, _, largest = arch_plan
+    path = tmp_path / "arch.json"
+    path.write_text(json.dumps(scene_to_dict(arch)))
+    assert main(["plan", str(path), "--max-held", "2", "--json",
+                 "--hold-force-max", f"{0.8 * largest}"]) == 1
+    out = json.loads(capsys.readouterr().out)
+    assert out["failed_step"] == 4 and "block v02 needs" in out["message"]
+    assert main(["plan", str(path), "--max-held", "2"]) == 0
+    assert "max hold N" in capsys.readouterr().out

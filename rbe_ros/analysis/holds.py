@@ -246,6 +246,8 @@ def _greedy(oracle: StabilityOracle, preferred, width: int) -> frozenset:
             score = (sum(len(c) for c, _ in after), sum(r.max_tension for _, r in after), rank)
             if best_score is None or score < best_score:
                 best, best_score = k, score
+        if best is None:        # a robot over its capacity that no other hold can relieve
+            break
         held.append(best)
     return frozenset(release_unneeded(oracle, held))
 

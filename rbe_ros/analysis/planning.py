@@ -30,7 +30,7 @@ held) is finally checked step by step with :func:`check_sequence`.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -138,15 +138,17 @@ class _Planner:
         # tried when no resting one fits, held as they are placed
         return [b for _, b in sorted(resting) + sorted(touching)][:self.plan.candidates]
 
-    def holds_for(self, order: tuple[str, ...], previous: tuple[str, ...]):
-        """(held blocks, within K) for the step that places ``order[-1]``."""
+    def holds_for(self, order: tuple[str, ...], previous: tuple[str, ...], options=None):
+        """(held blocks, within K) for the step that places ``order[-1]`` (under ``options``,
+        default the plan's)."""
         k = len(order) - 1
+        options = options or self.options
         assembly = self.full.subset(self.present(order, k))
-        oracle = StabilityOracle(assembly, self.options, self.cache)
+        oracle = StabilityOracle(assembly, options, self.cache)
         try:
             held = self._repair(oracle, order[-1], previous)
             if len(held) > self.plan.max_held or not oracle.stands(self._indices(oracle, held)):
-                result = minimal_holds(assembly, self.options, prefer=(*previous, order[-1]),
+                result = minimal_holds(assembly, options, prefer=(*previous, order[-1]),
                                        oracle=oracle)
                 if result.stands and (len(result.blocks) < len(held)
                                       or not oracle.stands(self._indices(oracle, held))):
@@ -160,13 +162,19 @@ class _Planner:
     def _indices(oracle: StabilityOracle, held) -> list[int]:
         return [oracle.index[b] for b in held]
 
-    def _capacity_note(self, order: tuple[str, ...], held) -> str:
-        """What the robots holding ``held`` at the step that places ``order[-1]`` would need
-        beyond their capacities ("" when within them, or unbounded)."""
+    def _capacity_note(self, order: tuple[str, ...], previous) -> str:
+        """What the robots would need beyond their capacities at the step that places
+        ``order[-1]``, held as the plan would hold it with unbounded robots ("" when the
+        capacities are unbounded, or that needs more than K holds or is within them)."""
+        if self.options.hold_force_max is None and self.options.hold_torque_max is None:
+            return ""
+        unbounded = replace(self.options, hold_force_max=None, hold_torque_max=None)
+        held, ok = self.holds_for(order, previous, unbounded)
         oracle = StabilityOracle(self.full.subset(self.present(order, len(order) - 1)),
                                  self.options, self.cache)
-        over = oracle.capacity(self._indices(oracle, held))
-        return f"; held so, {over.message}" if over is not None else ""
+        over = oracle.capacity(self._indices(oracle, held)) if ok else None
+        return (f"; with {', '.join(held)} held (fewest with unbounded robots), {over.message}"
+                if over is not None else "")
 
     def _repair(self, oracle: StabilityOracle, new: str, previous) -> tuple[str, ...]:
         if oracle.stands(()):
@@ -220,7 +228,8 @@ class _Planner:
                 count = len(best_rejected[1]) if best_rejected else 0
                 why = (f"; the best candidate, {best_rejected[0]}, needs {count} held "
                        f"block{'' if count == 1 else 's'} ({', '.join(best_rejected[1])})"
-                       + self._capacity_note((*best.order, best_rejected[0]), best_rejected[1])
+                       + self._capacity_note((*best.order, best_rejected[0]),
+                                             best.held[-1] if best.held else ())
                        if best_rejected else
                        "; no unplaced block touches the placed ones")
                 return self._finish(best, False, k, f"no block can be placed at step {k} with "

@@ -45,6 +45,13 @@ bench: setup
 	$(PY) -m pip check --disable-pip-version-check
 	$(PY) benchmarks/bench.py $(BENCH_ARGS)
 	$(MAKE) bench-margin
+	$(MAKE) bench-holds
+
+# Cost of the robots' hold wrenches against holds as supports, in one run: docs/HOLD_WRENCH.md
+# (about a minute; also run by make bench).
+.PHONY: bench-holds
+bench-holds: setup
+	$(PY) benchmarks/hold_wrench.py
 
 # As-built noise suite: perturbed poses under the declared uncertainty, the design rule with
 # raised tolerances and today's defaults; docs/ASBUILT.md and docs/figures/asbuilt.png

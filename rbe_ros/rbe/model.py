@@ -155,31 +155,38 @@ def build_model(blocks, interfaces, gravity, grips=()) -> EquilibriumModel:
 def _hold_columns(blocks, grips, row_of, rows: int, length_scale: float):
     """The equilibrium columns of the grips' wrenches: per grip 3 of the force z = F / W
     (unless its force capacity is 0) and 3 of the torque y = M / (W l) (unless its torque
-    capacity is 0), with l the block's size; and the layout of each grip's columns."""
+    capacity is 0), with l the block's size; and the layout of each grip's columns. Built
+    as coordinates: a column of the force has its 1 in a force row and the lever arm's
+    cross product in the moment rows, one of the torque l / L in a moment row."""
     index = {b.id: j for j, b in enumerate(blocks)}
-    cols, layout = [], []
+    r_idx, c_idx, values, layout = [], [], [], []
+    count = 0
     for g in grips:
         j = index[g.block]
         r = 6 * int(row_of[j])
         size = float(blocks[j].size) or 1.0
         first_force = first_torque = -1
         if g.max_force != 0:
-            first_force = len(cols)
-            arm = (np.asarray(g.point, dtype=float) - blocks[j].centroid) / length_scale
-            for e in np.eye(3):
-                col = np.zeros(rows)
-                col[r:r + 3] = e
-                col[r + 3:r + 6] = np.cross(arm, e)
-                cols.append(col)
+            first_force, count = count, count + 3
+            arm = _cross_matrix((np.asarray(g.point, dtype=float) - blocks[j].centroid)
+                                / length_scale)            # column k: arm x e_k
+            for k in range(3):
+                r_idx += [r + k, r + 3, r + 4, r + 5]
+                c_idx += [first_force + k] * 4
+                values += [1.0, *arm[:, k]]
         if g.max_torque != 0:
-            first_torque = len(cols)
-            for e in np.eye(3):
-                col = np.zeros(rows)
-                col[r + 3:r + 6] = e * size / length_scale
-                cols.append(col)
+            first_torque, count = count, count + 3
+            r_idx += [r + 3, r + 4, r + 5]
+            c_idx += [first_torque, first_torque + 1, first_torque + 2]
+            values += [size / length_scale] * 3
         layout.append((first_force, first_torque, size))
-    matrix = sp.csc_matrix(np.array(cols).T if cols else np.zeros((rows, 0)))
+    matrix = sp.csc_matrix((values, (r_idx, c_idx)), shape=(rows, count))
     return matrix, tuple(layout)
+
+
+def _cross_matrix(a: np.ndarray) -> np.ndarray:
+    """[a]_x: the matrix of x -> a x x."""
+    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
 
 
 def finite(value: float | None) -> bool:

@@ -201,7 +201,7 @@ def solve(model: EquilibriumModel, options: SolveOptions = SolveOptions(), *,
     v = _Variables(nv, tension, lp, multiplier, model.hold_columns.shape[1])
     a, b, cones = _constraints(model, options, v, p, live_load, (1.0, MAX_MULTIPLIER))
     p_diag, q = _objective(options, v, lp, multiplier)
-    if lp:
+    if lp and nv:
         offsets = (model.points - model.points.mean(axis=0)) @ _TIE_DIRECTION
         tie = 1.0 + LP_TIE_BREAK * (offsets / model.length_scale) ** 2
         for k in (0, 1) if tension else (0,):

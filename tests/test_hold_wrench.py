@@ -21,10 +21,12 @@ from rbe_ros.analysis.steps import sequence_steps
 from rbe_ros.analysis.validate import validated_assembly
 from rbe_ros.analysis.verdict import check
 from rbe_ros.cli import main
-from rbe_ros.io.messages import report_from_dict, report_json, scene_from_state_dict, \
-    state_to_dict
+from rbe_ros.io.markers import ARROW, step_markers
+from rbe_ros.io.messages import header_dict, report_from_dict, report_json, \
+    scene_from_state_dict, state_to_dict
 from rbe_ros.io.scene_json import scene_from_dict, scene_to_dict
-from rbe_ros.io.table import largest_hold_force
+from rbe_ros.io.table import format_table, largest_hold_force
+from rbe_ros.io.view import ViewRun, view_data
 from rbe_ros.rbe.result import Status
 from rbe_ros.scene import Hold, SceneError, box_block, make_scene
 
@@ -333,3 +335,24 @@ def test_cli_plan_with_a_hold_force_limit(tmp_path, capsys, arch_plan):
     assert out["failed_step"] == 4 and "block v02 needs" in out["message"]
     assert main(["plan", str(path), "--max-held", "2"]) == 0
     assert "max hold N" in capsys.readouterr().out
+
+
+def test_the_hold_arrow_the_table_column_and_the_view(tmp_path):
+    scene, _ = beyond_edge(0.4, max_torque=0.0)
+    report = check_scene(scene)
+    w = wrench(report)
+    arrows = [m for m in step_markers(scene, report, header_dict("world", 0))["markers"]
+              if m["ns"] == "holds"]
+    (arrow,) = arrows
+    assert arrow["type"] == ARROW
+    start, end = np.asarray(arrow["points"])
+    np.testing.assert_allclose(start, w.grip_point)
+    direction = (end - start) / np.linalg.norm(end - start)
+    np.testing.assert_allclose(direction, w.force / np.linalg.norm(w.force), atol=1e-9)
+    table = format_table([report])
+    assert "max hold N" in table.splitlines()[0]
+    assert f"{np.linalg.norm(w.force):.1f}" in table.splitlines()[2]
+    run = ViewRun("held", state_to_dict(scene), [report_json(report)])
+    (step,) = view_data([run], CheckOptions(), "held")["steps"]
+    assert step["max_hold"] == pytest.approx(np.linalg.norm(w.force))
+    assert any(line["name"] == "holds 0" for line in step["lines"])

@@ -34,12 +34,12 @@ test-long: setup
 paper: setup
 	$(PY) benchmarks/paper.py
 
-# Speed against accuracy against compas_cra, PyBullet and MuJoCo: docs/BENCHMARKS.md and
-# docs/bench/ (20-30 minutes). The physics engines go into .venv (requirements/bench.txt,
+# Speed against accuracy against compas_cra, PyBullet, MuJoCo and LMGC90: docs/BENCHMARKS.md and
+# docs/bench/ (30-40 minutes). The physics engines go into .venv (requirements/bench.txt,
 # checked with pip check); compas-cra into a scratch venv (RBE_COMPAS_VENV, default
 # .venv-compas, made by make setup). make bench BENCH_ARGS=--quick: a subset in under 3 minutes,
 # written to out/bench-quick/.
-.PHONY: bench
+.PHONY: bench bench-lmgc90
 bench: setup
 	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements/bench.txt
 	$(PY) -m pip check --disable-pip-version-check
@@ -52,6 +52,15 @@ bench: setup
 .PHONY: bench-holds
 bench-holds: setup
 	$(PY) benchmarks/hold_wrench.py
+
+# LMGC90 alone (non-smooth contact dynamics, the accuracy reference; about 10 minutes): its
+# verdicts on the near-limit suite and on compas_cra's samples, ours re-timed beside it,
+# merged into the last full run's docs/bench/results.json; writes docs/BENCHMARKS.md (section
+# 4) and docs/lmgc90_verdicts.json. LMGC90 goes into a scratch venv (RBE_LMGC90_VENV, default
+# .venv-lmgc90, about 1 GB, made on first use from requirements/lmgc90.txt, pip check'ed);
+# make bench runs it too.
+bench-lmgc90: setup
+	nice -n 10 $(PY) benchmarks/bench.py --only lmgc90
 
 # As-built noise suite: perturbed poses under the declared uncertainty, the design rule with
 # raised tolerances and today's defaults; docs/ASBUILT.md and docs/figures/asbuilt.png

@@ -11,6 +11,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
+import _lmgc90_report
 from bench import DEFAULT, OURS, PHYSICS, method_label
 
 COLOURS = {
@@ -18,6 +19,7 @@ COLOURS = {
     "ours-qp-pyramid4": "#b3cdf5", "ours-lp-soc": "#2e8b57", "ours-lp-pyramid8": "#55b07d",
     "ours-lp-pyramid8-outer": "#86cfa3", "ours-lp-pyramid4": "#bce6cc", "cvxpy-qp-soc": "#8a2be2",
     "compas_cra": "#e08a00", "pybullet-240": "#c0392b", "pybullet-1k": "#7b1a12", "mujoco-1k": "#555555",
+    "lmgc90": "#008b8b",
 }
 MARKERS = {"single block": "o", "yawed block": "D", "tower tilt": "^", "overhang": "s",
            "harmonic stack": "P", "tower": "v", "inclined interface": "<", "arch thickness": "X",
@@ -30,7 +32,7 @@ def _methods(result) -> list[str]:
         for m in case["results"]:
             if m not in seen:
                 seen.append(m)
-    order = [f"ours-{o}-{c}" for o, c in OURS] + ["cvxpy-qp-soc", "compas_cra", *PHYSICS]
+    order = [f"ours-{o}-{c}" for o, c in OURS] + ["cvxpy-qp-soc", "compas_cra", *PHYSICS, "lmgc90"]
     return [m for m in order if m in seen]
 
 
@@ -207,6 +209,9 @@ def write(result: dict, out: Path) -> None:
     chart_table(result, figs / "near_limit.png")
     chart_scaling(result, figs / "scaling.png")
     (out / "BENCHMARKS.md").write_text(markdown(result))
+    verdicts = _lmgc90_report.verdicts(result)
+    if verdicts:
+        (out / "lmgc90_verdicts.json").write_text(json.dumps(verdicts, indent=1, default=_json_default) + "\n")
 
 
 def _json_default(o):
@@ -232,6 +237,7 @@ def markdown(result: dict) -> str:
           " ratios below compare like with like on a noisy machine (load average"
           f" {result['load_average_1min'][0]:.2f} at the start, {result['load_average_1min'][1]:.2f}"
           " at the end). Rerun `make bench` to refresh every number.", ""]
+    L += _lmgc90_report.merged_note(result)
     if result["quick"]:
         L += ["**Quick mode**: a subset (fewer physics runs, no dome, no armadillo, walls up to 100"
               " blocks); compas_cra's own interface detection is not timed on the near-limit cases, so"
@@ -253,6 +259,7 @@ def markdown(result: dict) -> str:
     L += ["## 3. Time per check against the number of blocks", "", "![scaling](bench/scaling.png)", ""]
     L += _scaling_table(result)
     L += _armadillo_section(result)
+    L += _lmgc90_report.section(result)
     L += ["## Methods and parameters", "",
           "- **ours**: `rbe_ros.analysis.pipeline.check_scene` (contact detection, model, Clarabel, verdict),"
           " objective QP or LP, friction-net, cone `soc` (exact), `pyramid8` (8 facets, inscribed),"
@@ -293,6 +300,8 @@ def markdown(result: dict) -> str:
           " (boxes, convex meshes), free joints, friction mu (MuJoCo takes the larger of a pair),"
           " elliptic cones (its default pyramidal cone is coarser), time step 1 ms, otherwise"
           " defaults; the same collapse test.",
+          "- **LMGC90** (`compas-lmgc90`, scratch venv `.venv-lmgc90` from requirements/lmgc90.txt,"
+          " `benchmarks/_lmgc90.py`; one process per check): see section 4 for its verdict.",
           "- Timing: wall clock, best of "
           f"{result['settings']['repeat']} for ours and cvxpy, one run for the others (physics"
           " runs are long; compas_cra's detection is timed once per scene).",
@@ -305,6 +314,8 @@ def markdown(result: dict) -> str:
         L.append("- compas_cra venv: " + ", ".join(f"{k} {val}" for k, val in v.items() if k != "samples"))
     if result.get("physics_versions"):
         L.append("- physics: " + ", ".join(f"{k} {v}" for k, v in result["physics_versions"].items()))
+    if result.get("lmgc90"):
+        L.append("- LMGC90 venv: " + ", ".join(f"{k} {v}" for k, v in result["lmgc90"]["versions"].items()))
     L.append("")
     return "\n".join(L)
 
@@ -351,6 +362,7 @@ def _summary(result, methods) -> list[str]:
             f" {_fmt_t(cra)} for the solve alone on its stored interfaces: {ratio:.1f}x faster" + why)
     elif arm is None:
         L.append("- Armadillo: not run (quick mode or compas_cra unavailable).")
+    L += _lmgc90_report.summary(result)
     rows = _over_10(result)
     slower = [r for r in rows if r["ours"] is not None and r["pb"] is not None and r["ours"] >= r["pb"]]
     if rows:
@@ -410,7 +422,9 @@ def _speed_table(result, methods) -> list[str]:
             right = sum(bool(c["results"][m].get("correct")) for c in cs)
             scored = sum("correct" in c["results"][m] for c in cs)
             t = statistics.median(c["results"][m]["time"] for c in cs)
-            ratio = statistics.median(c["results"][m]["time"] / c["results"][DEFAULT]["time"] for c in cs)
+            # a method run apart (make bench-lmgc90) carries ours re-timed in its own run
+            ratio = statistics.median(c["results"][m]["time"] / (c["results"][m].get("time_ours")
+                                                                 or c["results"][DEFAULT]["time"]) for c in cs)
             cells.append(f"{right}/{scored}, {_fmt_t(t)}, {_fmt_x(ratio)}" if scored else
                          f"-, {_fmt_t(t)}, {_fmt_x(ratio)}")
         L.append(f"| {method_label(m)} | " + " | ".join(cells) + " |")

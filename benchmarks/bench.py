@@ -1,6 +1,6 @@
 """Speed against accuracy: rbe_ros side by side with what users would pick instead.
 
-    .venv/bin/python benchmarks/bench.py            (or: make bench; about 20-30 minutes)
+    .venv/bin/python benchmarks/bench.py            (or: make bench; about 30-40 minutes)
     .venv/bin/python benchmarks/bench.py --quick    (under 3 minutes; writes out/bench-quick/)
 
 Methods, all run in this one process run, scene by scene (compas_cra in a subprocess of its
@@ -12,10 +12,14 @@ own venv, see _bench_cra_driver.py):
 * the default problem stated in cvxpy (``_cvxpy_rbe.py``), same detection and matrices;
 * compas_cra 0.8.0 ``rbe_solve`` (IPOPT), on the same scenes exported with
   ``rbe_ros.io.compas.save_compas_assembly``;
-* PyBullet at 240 Hz and at 1 kHz, MuJoCo at 1 kHz (``_physics.py``).
+* PyBullet at 240 Hz and at 1 kHz, MuJoCo at 1 kHz (``_physics.py``);
+* LMGC90 (non-smooth contact dynamics, ``_lmgc90.py``, in a scratch venv of its own), the
+  accuracy reference, and on compas_cra's samples (docs/lmgc90_verdicts.json).
 
 Writes docs/BENCHMARKS.md, docs/bench/*.png and docs/bench/results.json. Every number is
 measured in the run that writes it; rerunning refreshes all of them.
+``--only lmgc90`` (make bench-lmgc90) runs LMGC90 and ours (for the time ratio) alone and
+merges them into the last full run's results.json before writing the same files.
 """
 from __future__ import annotations
 
@@ -38,6 +42,7 @@ ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(ROOT / "tests"))   # the independent references (tests/oracles/)
 
+import _lmgc90 as lmgc90  # noqa: E402
 import _physics as physics  # noqa: E402
 from machine import machine_summary  # noqa: E402
 from oracles import arch_limit  # noqa: E402
@@ -78,6 +83,14 @@ ARMADILLO_MU = 0.84          # rbe_solve's default mu
 #: Runs of each of our timings on the armadillo (best kept; a run is 0.3 s, compas_cra's 5 s,
 #: which gets 3: the machine is shared, and a short run is more often hit by other load).
 ARMADILLO_REPEAT = 5
+#: LMGC90's tilt capacities are bisected on these families only (a simulation per trial).
+LMGC90_TILT_FAMILIES = ("single block", "yawed block")
+#: compas_cra's samples for LMGC90 (docs/lmgc90_verdicts.json): supports and mu as compas_cra's
+#: example scripts set them (A, H: examples/16_ha.py; shelf: 07_shelf.py; cubes: 02_cubes.py;
+#: type-a..d have no example script: the two side blocks are the supports, mu as A and H).
+LMGC90_SAMPLES = {"A": ([0, 1], 0.84), "H": ([0, 1], 0.84), "shelf": ([0], 0.9),
+                  "cubes": ([0], 0.84), "type-a": ([0, 1], 0.84), "type-b": ([0, 1], 0.84),
+                  "type-c": ([0, 1], 0.84), "type-d": ([0, 1], 0.84)}
 
 
 def method_label(mid: str) -> str:
@@ -88,7 +101,7 @@ def method_label(mid: str) -> str:
         return f"ours {obj.upper()} {cone}" + (" (default)" if mid == DEFAULT else "")
     return {"cvxpy-qp-soc": "cvxpy QP exact cone", "compas_cra": "compas_cra rbe_solve",
             "pybullet-240": "PyBullet 240 Hz", "pybullet-1k": "PyBullet 1 kHz",
-            "mujoco-1k": "MuJoCo 1 kHz"}[mid]
+            "mujoco-1k": "MuJoCo 1 kHz", "lmgc90": "LMGC90"}[mid]
 
 
 # ----------------------------------------------------------------------------- scenes
@@ -318,6 +331,57 @@ def run_physics(case: Case, engines: list[str], tilt_engines: list[str]) -> None
             res["capacity"], res["trials"] = bisect_tilt(stands)
             res["time_bisection"] = time.perf_counter() - start
         case.results[mid] = res
+
+
+def run_lmgc90(case: Case, python: Path) -> None:
+    """LMGC90's verdict (gravity turned to -z, as it only knows that), and on the tilt families
+    of :data:`LMGC90_TILT_FAMILIES` its tilt capacity by bisection on its verdict."""
+    res = lmgc90.check(rotated_for_gravity(case.scene), case.mu, python)
+    res["time_ours"] = case.results[DEFAULT]["time"]
+    if case.kind == "tilt" and case.family in LMGC90_TILT_FAMILIES and not res["failed"]:
+        start = time.perf_counter()
+        res["capacity"], res["trials"] = bisect_tilt(lambda a: lmgc90.check(
+            rotated_for_gravity(tilted(case.scene, a)), case.mu, python, T=lmgc90.T_TILT)["stable"])
+        res["time_bisection"] = time.perf_counter() - start
+    case.results["lmgc90"] = res
+
+
+def lmgc90_samples(python: Path, samples_dir: Path) -> dict:
+    """LMGC90's and our verdicts on compas_cra's samples (:data:`LMGC90_SAMPLES`), uniform
+    density (their files give none; uniform density does not change a verdict)."""
+    from rbe_ros.io.compas import load_compas_assembly
+    out = {}
+    for name, (supports, mu) in LMGC90_SAMPLES.items():
+        path = samples_dir / f"{name}.json"
+        if not path.exists():
+            out[name] = {"error": f"{path} not found"}
+            continue
+        scene = load_compas_assembly(path, supports=supports, density=lmgc90.DENSITY)
+        ours = check_scene(scene, ours_options("qp", "soc", mu))
+        res = lmgc90.check(scene, mu, python)
+        out[name] = {"file": path.name, "supports": supports, "mu": mu,
+                     "blocks": len(scene.blocks), "lmgc90": _word(res), "rbe_ros": ours.status.name,
+                     "rbe_ros_stable": bool(ours.stable)} | {
+                         k: res.get(k) for k in ("stable", "max_disp", "max_rot_deg", "simulated",
+                                                 "time", "slabs", "hulls", "error")}
+        print(f"[lmgc90] sample {name}: LMGC90 {out[name]['lmgc90']}, rbe_ros {ours.status.name}",
+              flush=True)
+    return out
+
+
+def _word(res: dict) -> str:
+    return "failed" if res.get("failed") else ("stands" if res["stable"] else "falls")
+
+
+def cra_samples_dir(cra_venv: Path) -> Path | None:
+    """compas_cra's sample folder in its venv (None if that venv is not there)."""
+    import compas_compare
+    python = compas_compare.venv_python(cra_venv)
+    if not python.exists():
+        return None
+    out = subprocess.run([str(python), "-c", "import compas_cra; print(compas_cra.SAMPLE)"],
+                         capture_output=True, text=True, timeout=120)
+    return Path(out.stdout.strip()) if out.returncode == 0 else None
 
 
 class Cra:
@@ -564,8 +628,16 @@ def main(argv=None) -> int:
     parser.add_argument("--no-cra", action="store_true", help="leave compas_cra out")
     parser.add_argument("--no-physics", action="store_true", help="leave the physics engines out")
     parser.add_argument("--cra-venv", type=Path, default=Path(os.environ.get("RBE_COMPAS_VENV", ROOT / ".venv-compas")))
+    parser.add_argument("--no-lmgc90", action="store_true", help="leave LMGC90 out")
+    parser.add_argument("--lmgc90-venv", type=Path, default=None,
+                        help=f"LMGC90's scratch venv (default ${lmgc90.VENV_ENV} or .venv-lmgc90)")
+    parser.add_argument("--only", choices=["lmgc90"],
+                        help="run LMGC90 (and ours, for the time ratio) alone and merge it into the"
+                        " last full run's docs/bench/results.json (make bench-lmgc90)")
     args = parser.parse_args(argv)
     out = args.out or (ROOT / "out" / "bench-quick" if args.quick else ROOT / "docs")
+    if args.only == "lmgc90":
+        return only_lmgc90(args, out)
     t0 = time.perf_counter()
     load0 = os.getloadavg()[0]
 
@@ -578,6 +650,12 @@ def main(argv=None) -> int:
             cra = Cra(args.cra_venv, tmp)
         except Exception as exc:                     # no venv, no PyPI: run without it
             print(f"[bench] compas_cra unavailable: {exc}", file=sys.stderr)
+    lmgc_py = None
+    if not args.no_lmgc90:
+        try:
+            lmgc_py = lmgc90.ensure_venv(args.lmgc90_venv)
+        except Exception as exc:                     # no PyPI, no wheel for this machine
+            print(f"[bench] LMGC90 unavailable: {exc}", file=sys.stderr)
     repeat = 1 if args.quick else 3
     try:
         warm_up(engines)
@@ -595,6 +673,8 @@ def main(argv=None) -> int:
             if case.physics and engines:
                 run_physics(case, engines, tilt_engines if not args.quick or
                             case.family == "single block" else [])
+            if lmgc_py is not None and case.physics:
+                run_lmgc90(case, lmgc_py)
             score(case)
             print(f"[case] {case.name}: " + ", ".join(
                 f"{k} {'ok' if v.get('correct') else 'WRONG' if 'correct' in v else '-'}"
@@ -607,6 +687,9 @@ def main(argv=None) -> int:
         if arm:
             print(f"[armadillo] ours {arm['ours-qp-soc']['time']:.2f} s, cra solve {arm['cra'].get('time_solve')}",
                   flush=True)
+        lmgc = None
+        if lmgc_py is not None:
+            lmgc = lmgc90_run_info(lmgc_py, args, cases, load0, t0)
     finally:
         if cra is not None:
             cra.close()
@@ -623,11 +706,54 @@ def main(argv=None) -> int:
                      "repeat": repeat, "armadillo_repeat": ARMADILLO_REPEAT},
         "cases": [{k: v for k, v in vars(c).items() if k != "scene"} | {"blocks": len(c.scene.blocks)}
                   for c in cases],
-        "arch": arch, "scaling": rows, "armadillo": arm,
+        "arch": arch, "scaling": rows, "armadillo": arm, "lmgc90": lmgc,
     }
     import _bench_report
     _bench_report.write(result, out)
     print(f"[bench] wrote {out / 'BENCHMARKS.md'} in {time.perf_counter() - t0:.0f} s")
+    return 0
+
+
+def lmgc90_run_info(python: Path, args, cases: list[Case], load0: float, t0: float) -> dict:
+    """LMGC90's part of results.json: settings, versions, its run's load and time, and its
+    verdicts on compas_cra's samples (also written to docs/lmgc90_verdicts.json)."""
+    samples_dir = cra_samples_dir(args.cra_venv)
+    samples = lmgc90_samples(python, samples_dir) if samples_dir else {}
+    answered = [c.results["lmgc90"] for c in cases if "versions" in c.results.get("lmgc90", {})]
+    return {"settings": lmgc90.settings(), "versions": answered[0]["versions"] if answered else {},
+            "samples": samples, "load_average_1min": [load0, os.getloadavg()[0]],
+            "runtime_s": time.perf_counter() - t0, "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
+
+
+def only_lmgc90(args, out: Path) -> int:
+    """LMGC90 alone on the near-limit suite, ours re-timed beside it (the time ratio comes
+    from one run), merged into the last full run's results (``out``/bench/results.json)."""
+    import _bench_report
+    t0 = time.perf_counter()
+    load0 = os.getloadavg()[0]
+    stored = ROOT / "docs" / "bench" / "results.json"
+    result = json.loads(stored.read_text())
+    python = lmgc90.ensure_venv(args.lmgc90_venv)
+    cases = near_limit_cases(result["quick"]) + arch_cases(result["quick"])[0] + paper_cases(result["quick"])
+    by_name = {c["name"]: c for c in result["cases"]}
+    for case in cases:
+        record = by_name.get(case.name)
+        if record is None or not case.physics:
+            continue
+        start = time.perf_counter()
+        report, t = best_of(1 if len(case.scene.blocks) > 100 else 3,
+                            lambda: check_scene(case.scene, ours_options("qp", "soc", case.mu)))
+        case.results[DEFAULT] = {"time": t, "stable": bool(report.stable)}
+        run_lmgc90(case, python)
+        score(case)
+        record["results"]["lmgc90"] = case.results["lmgc90"]
+        res = case.results["lmgc90"]
+        print(f"[case] {case.name}: LMGC90 {_word(res)}"
+              f" ({'ok' if res.get('correct') else 'WRONG' if 'correct' in res else 'not scored'})"
+              f"  ({time.perf_counter() - start:.1f} s)", flush=True)
+    result["lmgc90"] = lmgc90_run_info(python, args, cases, load0, t0) | {"merged": True}
+    _bench_report.write(result, out)
+    print(f"[bench] wrote {out / 'BENCHMARKS.md'} (LMGC90 merged) in {time.perf_counter() - t0:.0f} s")
     return 0
 
 

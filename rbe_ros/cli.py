@@ -25,7 +25,6 @@ from .analysis.options import CheckOptions
 from .analysis.pipeline import check_scene, check_sequence, first_failing_step
 from .analysis.executors import ProcessPool, ray_cluster
 from .analysis.perturb import PoseNoise
-from .analysis.planning import plan_sequence
 from .analysis.robust import RobustJob, estimate, sample_scene, serial
 from .analysis.tilt import DIRECTIONS, tilt_capacity
 from .analysis.validate import validated_assembly
@@ -40,6 +39,7 @@ from .io.table import format_table
 from .io.view import ViewRun, checked_runs, write_html
 from .io.scene_json import load_scene, scene_to_dict
 from .io.inputs import load_design
+from .io.plans import PlanLimits, plan_state
 from .io.poses import load_poses, scene_at_poses
 from .io.stored_interfaces import compare_interfaces
 from .scene import Scene, SceneError
@@ -474,8 +474,9 @@ def _run_plan(args) -> int:
     if not args.json:
         print(f"planning {scene.name}: {sum(not b.support for b in scene.blocks)} blocks to "
               f"place, at most {args.max_held} held", file=sys.stderr)
-    plan = plan_sequence(scene, args.max_held, options, beam=args.beam,
-                         candidates=args.candidates, keep_sequence=args.keep_sequence)
+    limits = PlanLimits(args.max_held, args.beam, args.candidates, args.keep_sequence)
+    limits.search()                 # a limit out of range: an error of the command line
+    plan = plan_state(lambda: scene, limits, options)
     if args.output and plan.scene is not None:
         out_path = Path(args.output)
         out_path.parent.mkdir(parents=True, exist_ok=True)
@@ -502,8 +503,7 @@ def _run_view(args) -> int:
     source = Path(args.scene)
     if source.suffix == ".mcap" or (source / "metadata.yaml").is_file():
         options = bag_options(source)
-        runs = [ViewRun(f"run {k}", run.state, run.reports)
-                for k, run in enumerate(read_runs(source))]
+        runs = [ViewRun(f"run {k}", *run.checked()) for k, run in enumerate(read_runs(source))]
         title = source.name
     else:
         options = _options(args)

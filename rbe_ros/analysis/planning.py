@@ -30,6 +30,7 @@ held) is finally checked step by step with :func:`check_sequence`.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -43,6 +44,8 @@ from .options import CheckOptions
 from .pipeline import check_sequence
 from .steps import supports_present
 
+#: How the message of a plan stopped by ``should_stop`` begins (a time limit, a cancel).
+STOPPED = "stopped after"
 #: A contact carries a block when its normal into the block points up by at least this
 #: cosine (87 deg from vertical).
 RESTS_ON = 0.05
@@ -85,6 +88,19 @@ class Plan:
 
 
 @dataclass(frozen=True)
+class PlanProgress:
+    """Where a running plan is, after a placed step: blocks placed of ``total``, the step
+    (0-based), the block placed there and the blocks held at it, seconds since the start."""
+
+    placed: int
+    total: int
+    step: int
+    block: str
+    held: tuple[str, ...]
+    elapsed: float
+
+
+@dataclass(frozen=True)
 class _Partial:
     order: tuple[str, ...]
     held: tuple[tuple[str, ...], ...]
@@ -92,8 +108,12 @@ class _Partial:
 
 
 class _Planner:
-    def __init__(self, scene: Scene, options: CheckOptions, plan: PlanOptions):
+    def __init__(self, scene: Scene, options: CheckOptions, plan: PlanOptions,
+                 progress: Callable[[PlanProgress], None] | None = None,
+                 should_stop: Callable[[], bool] | None = None):
         self.scene, self.options, self.plan = scene, options, plan
+        self.progress, self.should_stop = progress, should_stop
+        self.start = time.perf_counter()
         # holds of free blocks are the planner's; those of supports stay (scaffolds)
         supports = {b.id for b in scene.blocks if b.support}
         self.base = make_scene(scene.name, scene.blocks, scene.gravity, (),
@@ -208,6 +228,9 @@ class _Planner:
                 found = 0
                 previous = partial.held[-1] if partial.held else ()
                 for rank, b in enumerate(self.candidates(partial.order)):
+                    if self.should_stop is not None and self.should_stop():
+                        return self._finish(beam[0], False, k,
+                                            f"{STOPPED} {k} of {n} blocks")
                     order = (*partial.order, b)
                     held, ok = self.holds_for(order, previous)
                     if not ok:
@@ -235,6 +258,9 @@ class _Planner:
                 return self._finish(best, False, k, f"no block can be placed at step {k} with "
                                     f"at most {self.plan.max_held} held{why}")
             beam = sorted(children.values(), key=lambda p: (p.score, p.order))[:self.plan.beam]
+            if self.progress is not None:
+                self.progress(PlanProgress(k + 1, n, k, beam[0].order[-1], beam[0].held[-1],
+                                           time.perf_counter() - self.start))
         best = beam[0]
         return self._finish(best, True, -1, f"every step stands with at most "
                             f"{max((len(h) for h in best.held), default=0)} held blocks "
@@ -281,14 +307,20 @@ def _planned_under(options: CheckOptions) -> tuple[float, float] | None:
 
 
 def plan_sequence(scene: Scene, max_held: int = 2, options: CheckOptions = CheckOptions(), *,
-                  beam: int = 1, candidates: int = 8, keep_sequence: bool = False) -> Plan:
+                  beam: int = 1, candidates: int = 8, keep_sequence: bool = False,
+                  progress: Callable[[PlanProgress], None] | None = None,
+                  should_stop: Callable[[], bool] | None = None) -> Plan:
     """An insertion order of every free block of ``scene`` in which each step stands with at
-    most ``max_held`` blocks held (see the module docstring), or where none was found."""
+    most ``max_held`` blocks held (see the module docstring), or where none was found.
+    ``progress`` is called after each placed step; ``should_stop`` is polled between
+    candidate checks: when true, the best partial plan so far is returned (not feasible,
+    "stopped after K of N blocks", ``failed_step`` K: the first step not planned)."""
     start = time.perf_counter()
     result = _Planner(scene, declared(options, scene),
-                      PlanOptions(max_held, beam, candidates, keep_sequence)).run()
+                      PlanOptions(max_held, beam, candidates, keep_sequence),
+                      progress, should_stop).run()
     result.time = time.perf_counter() - start
     return result
 
 
-__all__ = ["Plan", "PlanOptions", "plan_sequence"]
+__all__ = ["Plan", "PlanOptions", "PlanProgress", "STOPPED", "plan_sequence"]

@@ -15,6 +15,7 @@ from __future__ import annotations
 import functools
 import io
 import os
+import re
 import sys
 from collections.abc import Collection, Iterator, Mapping
 from importlib.metadata import version
@@ -34,6 +35,8 @@ from ruamel.yaml import YAML
 from . import cdr
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
+#: The messages of an .action file, in its order (separated by ``---`` lines).
+ACTION_PARTS = ("Goal", "Result", "Feedback")
 _DELIM = "=" * 80
 # RMW_DURATION_INFINITE as rosbag2 (Jazzy, metadata version 9) writes it.
 _INFINITE = {"sec": 9223372036, "nsec": 854775807}
@@ -71,6 +74,12 @@ def typestore() -> Typestore:
     types: dict = {}
     for f in sorted(msg_dir().glob("*.msg")):
         types.update(get_types_from_msg(f.read_text(), f"rbe_msgs/msg/{f.stem}"))
+    # an action's goal, result and feedback are messages of their own (as rosidl makes them),
+    # recorded like any other: rbe_msgs/action/<Name>_Goal, _Result, _Feedback
+    for f in sorted((msg_dir().parent / "action").glob("*.action")):
+        parts = re.split(r"^---[ \t]*$", f.read_text(), flags=re.MULTILINE)
+        for part, text in zip(ACTION_PARTS, parts):
+            types.update(get_types_from_msg(text, f"rbe_msgs/action/{f.stem}_{part}"))
     store.register(types)
     return store
 

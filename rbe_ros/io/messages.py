@@ -18,9 +18,11 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from ..analysis.planning import Plan, PlanProgress
 from ..rbe.result import NOT_COMPUTED, HoldWrench, InterfaceResult, NearContact, Report, Status
 from ..scene import (BOX_FACES, Hold, Scene, SceneError, blame, box_vertices, make_block,
                      make_scene)
+from .plans import PlanLimits
 
 SOLID_PRIMITIVE_BOX = 1  # shape_msgs/SolidPrimitive.BOX
 _XYZ = ("x", "y", "z")
@@ -401,6 +403,50 @@ def report_from_dict(d: Mapping) -> Report:
     )
 
 
-__all__ = ["SOLID_PRIMITIVE_BOX", "header_dict", "header_stamp_ns", "json_safe", "poses_from_dict",
-           "poses_to_dict", "report_from_dict", "report_header", "report_json", "report_to_dict",
-           "scene_from_state_dict", "state_to_dict"]
+# --- PlanSequence action ---------------------------------------------------------------------
+
+def plan_goal_to_dict(state: dict, limits: PlanLimits) -> dict:
+    """An rbe_msgs/action/PlanSequence goal dict: the AssemblyState dict ``state`` to plan
+    and the request's limits."""
+    return {"assembly": state, "max_held": int(limits.max_held),
+            "beam": int(limits.beam), "hold_force_max": float(limits.hold_force_max),
+            "hold_torque_max": float(limits.hold_torque_max),
+            "time_limit": float(limits.time_limit)}
+
+
+def plan_goal_from_dict(d: Mapping) -> tuple[dict, PlanLimits]:
+    """The AssemblyState dict and the limits of a PlanSequence goal dict (``beam`` 0: the
+    default, 1); the limits are checked where they are used
+    (:func:`rbe_ros.io.plans.plan_state`)."""
+    return dict(d.get("assembly", {})), PlanLimits(
+        int(d.get("max_held", 0)), int(d.get("beam", 0)) or 1,
+        hold_force_max=float(d.get("hold_force_max", 0.0)),
+        hold_torque_max=float(d.get("hold_torque_max", 0.0)),
+        time_limit=float(d.get("time_limit", 0.0)))
+
+
+def plan_result_to_dict(plan: Plan, header: dict) -> dict:
+    """An rbe_msgs/action/PlanSequence result dict of ``plan``; ``header`` (of the goal's
+    assembly, :func:`report_header`) is that of its reports and of the planned assembly."""
+    state = state_to_dict(plan.scene, header["frame_id"], header_stamp_ns(header)) \
+        if plan.scene is not None else {"header": header, "blocks": [], "sequence": [],
+                                        "gravity": _vec((0.0, 0.0, 0.0)), "holds": []}
+    return {"feasible": bool(plan.feasible), "message": str(plan.message),
+            "order": [str(b) for b in plan.order],
+            "holds": state.get("holds", []),
+            "reports": [report_to_dict(r, header) for r in plan.reports],
+            "failed_step": int(plan.failed_step), "plan": state}
+
+
+def plan_feedback_to_dict(progress: PlanProgress) -> dict:
+    """An rbe_msgs/action/PlanSequence feedback dict of a plan's progress."""
+    return {"placed": int(progress.placed), "total": int(progress.total),
+            "step": int(progress.step), "block": str(progress.block),
+            "held": [str(b) for b in progress.held], "elapsed": float(progress.elapsed)}
+
+
+__all__ = ["SOLID_PRIMITIVE_BOX", "header_dict", "header_stamp_ns", "json_safe",
+           "plan_feedback_to_dict", "plan_goal_from_dict", "plan_goal_to_dict",
+           "plan_result_to_dict", "poses_from_dict", "poses_to_dict", "report_from_dict",
+           "report_header", "report_json", "report_to_dict", "scene_from_state_dict",
+           "state_to_dict"]

@@ -41,7 +41,7 @@ import json
 import math
 import re
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -50,14 +50,17 @@ from ..analysis.option_spec import from_json as options_from_json
 from ..analysis.option_spec import to_json as options_to_json
 from ..analysis.options import CheckOptions
 from ..analysis.pipeline import StateCheck, check_state
+from ..analysis.planning import STOPPED
 from ..analysis.steps import final_state, sequence_steps
 from ..geometry.block import pose_block
 from ..rbe.result import NOT_COMPUTED, Report
 from ..scene import Scene, SceneError
 from .bag import BagWriter, read_bag, read_custom_data
 from .markers import MARKER_TOPIC, MARKER_TYPE, run_markers
-from .messages import (header_stamp_ns, poses_from_dict, report_header, report_to_dict,
-                       scene_from_state_dict, state_to_dict)
+from .messages import (header_stamp_ns, plan_goal_from_dict, plan_result_to_dict,
+                       poses_from_dict, report_header, report_to_dict, scene_from_state_dict,
+                       state_to_dict)
+from .plans import plan_state
 from .poses import AsBuilt
 
 OPTIONS_KEY = "rbe_ros.check_options"
@@ -69,13 +72,22 @@ SETTINGS_TYPE = "std_msgs/msg/String"
 STATE_TYPE = "rbe_msgs/msg/AssemblyState"
 POSES_TYPE = "rbe_msgs/msg/BlockPoses"
 REPORT_TYPE = "rbe_msgs/msg/StabilityReport"
+#: A ~/plan goal and its result, as the node records them (topics ~/plan/goal, ~/plan/result).
+PLAN_GOAL_TYPE = "rbe_msgs/action/PlanSequence_Goal"
+PLAN_RESULT_TYPE = "rbe_msgs/action/PlanSequence_Result"
 #: Topics of bags written here: the names rbe_node uses (node name rbe_node).
 STATE_TOPIC = "/rbe_node/assembly"
 REPORT_TOPIC = "/rbe_node/report"
 DESIGN_TOPIC = "/rbe_node/design"
 POSES_TOPIC = "/rbe_node/poses"
-#: Kinds of run: a state checked as it is, a design (~/design), measured poses (~/poses).
-STATE, DESIGN, POSES = "state", "design", "poses"
+PLAN_GOAL_TOPIC = "/rbe_node/plan/goal"
+PLAN_RESULT_TOPIC = "/rbe_node/plan/result"
+#: Kinds of run: a state checked as it is, a design (~/design), measured poses (~/poses), a
+#: plan goal (~/plan: its "reports" are its one result).
+STATE, DESIGN, POSES, PLAN = "state", "design", "poses", "plan"
+#: The message types of a run's kind and of its answers.
+RUN_TYPES = {STATE: (STATE_TYPE, REPORT_TYPE), DESIGN: (STATE_TYPE, REPORT_TYPE),
+             POSES: (POSES_TYPE, REPORT_TYPE), PLAN: (PLAN_GOAL_TYPE, PLAN_RESULT_TYPE)}
 #: Log-time spacing of the reports (and markers) of a recorded sequence: one step a second,
 #: so that a player's timeline (Foxglove) steps through the sequence one step at a time.
 STEP_NS = 1_000_000_000
@@ -107,20 +119,40 @@ class Run:
     settings: dict | None = None    # the node's settings when it got the state (~/settings)
 
     @property
+    def header(self) -> dict:
+        """The header of the state (of a plan goal: of its assembly)."""
+        state = self.state.get("assembly", {}) if self.kind == PLAN else self.state
+        return state.get("header", {})
+
+    @property
     def key(self) -> tuple[int, int]:
-        stamp = self.state.get("header", {}).get("stamp", {})
-        return int(stamp.get("sec", 0)), int(stamp.get("nanosec", 0))
+        return _key(self.header)
+
+    def checked(self) -> tuple[dict, list[dict]]:
+        """The state checked and its reports: of a plan, the planned assembly and its steps'
+        reports (from its result; nothing without one), else the state and its reports."""
+        if self.kind == PLAN:
+            result = self.reports[0] if self.reports else {}
+            return result.get("plan", {}), result.get("reports", [])
+        return self.state, self.reports
 
     def describe(self) -> str:
-        header = self.state.get("header", {})
+        header = self.header
         seq = self.state.get("sequence") or []
         what = f"{len(seq)}-block sequence" if seq else "whole assembly"
         contents = {STATE: f"{len(self.state.get('blocks', []))} blocks, {what}",
                     DESIGN: f"design of {len(self.state.get('blocks', []))} blocks",
-                    POSES: f"{len(self.state.get('ids', []))} measured poses"}[self.kind]
+                    POSES: f"{len(self.state.get('ids', []))} measured poses",
+                    PLAN: f"plan of {len(self.state.get('assembly', {}).get('blocks', []))}"
+                          f" blocks, at most {self.state.get('max_held')} held"}[self.kind]
         return (f"{'state' if self.kind == STATE else self.kind} stamp "
                 f"{header_stamp_ns(header) / 1e9:.9f} s frame "
                 f"{header.get('frame_id', '')!r} ({contents})")
+
+
+def _key(header: dict) -> tuple[int, int]:
+    stamp = header.get("stamp", {})
+    return int(stamp.get("sec", 0)), int(stamp.get("nanosec", 0))
 
 
 def step_stamps(stamp_ns: int, count: int) -> list[int]:
@@ -131,20 +163,33 @@ def step_stamps(stamp_ns: int, count: int) -> list[int]:
 def read_runs(path) -> list[Run]:
     """The runs of a bag: every AssemblyState in log-time order, each with the reports whose
     header stamp is its stamp (a report goes to the latest such state before it). Other
-    topics (markers) are not read."""
+    topics (markers) are not read. A plan goal is a run whose one "report" is its result (the
+    result whose planned assembly has the goal's stamp: the first such goal still without
+    one, as a newer goal preempts an older)."""
     runs: list[Run] = []
     by_key: dict[tuple[int, int], list[Run]] = {}
+    plans: dict[tuple[int, int], list[Run]] = {}
     settings = None
-    for m in read_bag(path, msgtypes={STATE_TYPE, POSES_TYPE, REPORT_TYPE, SETTINGS_TYPE}):
+    for m in read_bag(path, msgtypes={STATE_TYPE, POSES_TYPE, REPORT_TYPE, SETTINGS_TYPE,
+                                      PLAN_GOAL_TYPE, PLAN_RESULT_TYPE}):
         if m.msgtype == SETTINGS_TYPE:
             if m.topic.endswith("/settings"):
                 settings = json.loads(m.data["data"])
-        elif m.msgtype in (STATE_TYPE, POSES_TYPE):
-            kind = POSES if m.msgtype == POSES_TYPE else \
-                DESIGN if m.topic.endswith("/design") else STATE
+        elif m.msgtype in (STATE_TYPE, POSES_TYPE, PLAN_GOAL_TYPE):
+            kind = POSES if m.msgtype == POSES_TYPE else PLAN if m.msgtype == PLAN_GOAL_TYPE \
+                else DESIGN if m.topic.endswith("/design") else STATE
             run = Run(m.data, m.stamp_ns, m.topic, kind=kind, settings=settings)
             runs.append(run)
-            by_key.setdefault(run.key, []).append(run)
+            (plans if kind == PLAN else by_key).setdefault(run.key, []).append(run)
+        elif m.msgtype == PLAN_RESULT_TYPE:
+            key = _key(m.data.get("plan", {}).get("header", {}))
+            owner = next((r for r in plans.get(key, []) if not r.reports), None)
+            if owner is None:
+                raise ValueError(f"{path}: a plan result at {m.stamp_ns} ns has no goal with "
+                                 f"its header stamp {key}")
+            owner.reports.append(m.data)
+            owner.report_stamps.append(m.stamp_ns)
+            owner.report_topic = m.topic
         elif m.msgtype == REPORT_TYPE:
             stamp = m.data.get("header", {}).get("stamp", {})
             key = int(stamp.get("sec", 0)), int(stamp.get("nanosec", 0))
@@ -207,6 +252,37 @@ def state_reports(state: dict, options: CheckOptions = CheckOptions()) -> list[R
         return scene_from_state_dict(state if sequence else {**state, "sequence": []})
 
     return check_state(read, bool(state.get("sequence")), options).reports
+
+
+def stopped_at(run: Run) -> int | None:
+    """How many blocks the recorded plan of a plan run had placed when it was stopped
+    (canceled, preempted, its time limit); None if it was not stopped."""
+    recorded = run.reports[0] if run.reports else {}
+    if not str(recorded.get("message", "")).startswith(STOPPED):
+        return None
+    return len(recorded.get("order", []))
+
+
+def replay_plan(run: Run, options: CheckOptions = CheckOptions()) -> list[dict]:
+    """The result dict of re-planning the goal of a plan run through the node's dispatch
+    (:func:`plan_state`), with the settings the node had then. A recorded plan that was
+    stopped (canceled, preempted, its time limit) is re-planned up to as many blocks as it
+    had placed: the time it took is not part of the result; else without a time limit."""
+    options, frame_id = run_settings(run, options)
+    state, limits = plan_goal_from_dict(run.state)
+    limits = replace(limits, time_limit=0.0)
+    until = stopped_at(run)
+    placed = [0]
+
+    def count(progress) -> None:
+        placed[0] = progress.placed
+
+    def stop() -> bool:
+        return until is not None and placed[0] >= until
+
+    plan = plan_state(lambda: scene_from_state_dict(state), limits, options,
+                      progress=count, should_stop=stop)
+    return [plan_result_to_dict(plan, report_header(state.get("header"), frame_id))]
 
 
 def run_settings(run: Run, options: CheckOptions) -> tuple[CheckOptions, str]:
@@ -463,6 +539,36 @@ def _compare_hold_wrenches(c: _Comparer, a: list, b: list, tolerances: Tolerance
         c.number(where, "utilisation", x["utilisation"], y["utilisation"], tolerances.ratio)
 
 
+#: Plan result fields compared exactly (the reports are compared as reports).
+_PLAN_EXACT = ("feasible", "message", "order", "holds", "failed_step")
+
+
+def compare_plan(recorded: dict, replayed: dict, *, run: int = 0,
+                 tolerances: Tolerances = Tolerances()) -> list[Difference]:
+    """The differences between two PlanSequence result dicts: the plan (feasibility,
+    message, order, holds, failed step; the planned assembly's header, sequence, holds and
+    blocks) exactly, each step's report as :func:`compare_report` does (free weight: the
+    planned assembly's at that step)."""
+    c = _Comparer(run, -1, "", 1.0, tolerances)
+    for name in _PLAN_EXACT:
+        c.exact("plan result", name, recorded.get(name), replayed.get(name))
+    a, b = recorded.get("plan", {}), replayed.get("plan", {})
+    for name in ("header", "sequence", "holds"):
+        c.exact("planned assembly", name, a.get(name), b.get(name))
+    c.exact("planned assembly", "blocks", [x["id"] for x in a.get("blocks", [])],
+            [x["id"] for x in b.get("blocks", [])])
+    out = c.out
+    weights = free_weights(a) if a.get("blocks") else {}
+    reports_a, reports_b = recorded.get("reports", []), replayed.get("reports", [])
+    if len(reports_a) != len(reports_b):
+        out.append(Difference(run, -1, "", "plan result", "reports (count)", len(reports_a),
+                              len(reports_b)))
+    for rec, rep in zip(reports_a, reports_b):
+        out += compare_report(rec, rep, run=run, tolerances=tolerances,
+                              free_weight=weights.get(int(rec.get("step_index", -1)), 1.0))
+    return out
+
+
 def compare_runs(runs: list[Run], replayed: list[list[dict]], *,
                  tolerances: Tolerances = Tolerances()) -> list[Difference]:
     """Differences between each run's recorded reports and ``replayed[i]`` (the same
@@ -470,6 +576,10 @@ def compare_runs(runs: list[Run], replayed: list[list[dict]], *,
     out: list[Difference] = []
     asbuilt = asbuilt_scenes(runs)
     for i, (run, new) in enumerate(zip(runs, replayed)):
+        if run.kind == PLAN:
+            for rec, rep in zip(run.reports, new):
+                out += compare_plan(rec, rep, run=i, tolerances=tolerances)
+            continue
         weights = free_weights(run.state if run.kind == STATE else asbuilt[i])
         for rec, rep in zip(run.reports, new):
             w = weights.get(int(rec.get("step_index", -1)), 1.0)
@@ -507,9 +617,9 @@ def write_runs(path, runs: list[Run], replayed: list[list[dict]], options: Check
     with BagWriter(path, custom_data={OPTIONS_KEY: options_to_json(options)}) as bag:
         topics: set[str] = set()
         for i, (run, reports) in enumerate(zip(runs, replayed)):
-            for topic, kind, latched in ((run.topic, POSES_TYPE if run.kind == POSES else
-                                          STATE_TYPE, run.kind == DESIGN),
-                                         (run.report_topic, REPORT_TYPE, True)):
+            state_type, answer_type = RUN_TYPES[run.kind]
+            for topic, kind, latched in ((run.topic, state_type, run.kind == DESIGN),
+                                         (run.report_topic, answer_type, True)):
                 if topic not in topics:
                     bag.add_topic(topic, kind, transient_local=latched)
                     topics.add(topic)
@@ -521,7 +631,7 @@ def write_runs(path, runs: list[Run], replayed: list[list[dict]], options: Check
                 step_stamps(run.stamp_ns, len(reports))
             for report, stamp in zip(reports, stamps):
                 bag.write(run.report_topic, report, stamp)
-            if markers:
+            if markers and run.kind != PLAN:
                 # an as-built run is drawn as the state checked: its scene, as a whole
                 drawn = run.state if run.kind == STATE else {} if isinstance(
                     asbuilt[i], SceneError) else {**state_to_dict(asbuilt[i]), "sequence": []}
@@ -586,6 +696,8 @@ def offline_reports(runs: list[Run], options: CheckOptions,
     for i, run in enumerate(runs):
         if run.kind == STATE:
             replayed.append(replay_run(run, options))
+        elif run.kind == PLAN:
+            replayed.append(replay_plan(run, options))
         else:   # a design or poses message the node dropped unchecked is not checked
             run_options, frame_id = run_settings(run, options)
             header = report_header(run.state.get("header"), frame_id)
@@ -621,9 +733,9 @@ def replay_bag(path, output=None, *, options: CheckOptions | None = None, compar
     return ReplayResult(runs, replayed, differences, out if write else None, options)
 
 
-__all__ = ["DESIGN", "Difference", "OPTIONS_KEY", "POSES", "ReplayResult", "Run", "STATE",
-           "Tolerances", "asbuilt_check", "asbuilt_scenes", "bag_options", "compare_report",
-           "compare_runs", "default_output", "free_weights", "merge_message", "offline_reports",
-           "options_from_json", "options_to_json", "read_runs", "record_bag", "replay_bag",
-           "replay_run", "run_settings", "SETTINGS_TYPE", "state_reports", "step_stamps",
-           "write_runs"]
+__all__ = ["DESIGN", "Difference", "OPTIONS_KEY", "PLAN", "POSES", "ReplayResult", "Run",
+           "STATE", "Tolerances", "asbuilt_check", "asbuilt_scenes", "bag_options",
+           "compare_plan", "compare_report", "compare_runs", "default_output", "free_weights",
+           "merge_message", "offline_reports", "options_from_json", "options_to_json",
+           "read_runs", "record_bag", "replay_bag", "replay_plan", "replay_run", "run_settings",
+           "SETTINGS_TYPE", "state_reports", "step_stamps", "stopped_at", "write_runs"]

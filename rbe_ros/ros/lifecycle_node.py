@@ -7,10 +7,11 @@ system brings the checks up only once the rest is ready:
 * configure: the parameters are validated, the bag of ``mcap_path`` opened and the design of
   ``design_file`` read; a bad one fails the transition with one error line (the node stays
   unconfigured);
-* activate: ``~/assembly``, ``~/design``, ``~/poses``, ``~/check`` and ``~/check_sequence``
-  open (the design of ``design_file`` is sent on, as by ``rbe_node``, at the first activate
-  after configure); deactivate closes the service and the action and stops the checks (a
-  running check ends after its current step), but keeps the design and the poses measured so
+* activate: ``~/assembly``, ``~/design``, ``~/poses``, ``~/check``, ``~/check_sequence`` and
+  ``~/plan`` open (the design of ``design_file`` is sent on, as by ``rbe_node``, at the first
+  activate after configure); deactivate closes the service and the actions and stops the
+  checks (a running check ends after its current step, a running plan at its next candidate
+  check), but keeps the design and the poses measured so
   far (the next activate goes on from them) and the topic subscriptions: what arrives while
   inactive is ignored and counted (``dropped_states`` of the next report, /diagnostics, a
   warning at activate);

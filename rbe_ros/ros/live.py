@@ -12,9 +12,12 @@ newest state on its topic and drops a waiting one under load): a state with a se
 ``~/assembly`` topic, answered by the report on ``~/report`` with its header stamp; a design
 on ``~/design`` and measured poses on ``~/poses`` likewise (the node merges each into its
 as-built state; one it dropped unchecked when recorded is answered now, and the answer left
-out). Before a state whose recorded settings (``~/settings``: check options and frame_id)
-differ from those last set, the node's parameters are set to them through its parameter
-service, so a bag with run-time parameter changes replays with the settings of each state.
+out); a ~/plan goal as a goal of ``~/plan`` without its time limit (the result is its
+answer; a plan recorded as stopped cannot be stopped at the same block live: ValueError,
+replay it offline). Before a state whose recorded settings (``~/settings``: check options
+and frame_id) differ from those last set, the node's parameters are set to them through its
+parameter service, so a bag with run-time parameter changes replays with the settings of
+each state.
 """
 from __future__ import annotations
 
@@ -29,7 +32,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import rclpy
-from rbe_msgs.action import CheckSequence
+from rbe_msgs.action import CheckSequence, PlanSequence
 from rbe_msgs.msg import AssemblyState, BlockPoses, StabilityReport
 from rclpy.action import ActionClient
 from rclpy.executors import SingleThreadedExecutor
@@ -41,7 +44,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from ..analysis.option_spec import node_parameters
 from ..analysis.options import CheckOptions
-from ..io.replay import DESIGN, POSES, STATE, Run, run_settings
+from ..io.replay import DESIGN, PLAN, POSES, STATE, Run, run_settings, stopped_at
 from .convert import dict_to_message, message_to_dict
 
 
@@ -118,6 +121,7 @@ class _Client:
             POSES: (self.node.create_publisher(BlockPoses, f"{base}/poses", qos), BlockPoses)}
         self.node.create_subscription(StabilityReport, f"{base}/report", self._on_report, qos)
         self.action = ActionClient(self.node, CheckSequence, f"{base}/check_sequence")
+        self.plan_action = ActionClient(self.node, PlanSequence, f"{base}/plan")
         self.parameters = AsyncParameterClient(self.node, base)
         self.base = base
         self.executor = SingleThreadedExecutor(context=context)
@@ -134,6 +138,7 @@ class _Client:
         self.executor.shutdown(timeout_sec=5.0)
         self.thread.join(5.0)
         self.action.destroy()
+        self.plan_action.destroy()
         self.node.destroy_node()
 
     def _wait(self, future, timeout: float, what: str):
@@ -152,7 +157,7 @@ class _Client:
         end = time.monotonic() + timeout
         while True:
             alive()
-            if (self.action.server_is_ready()
+            if (self.action.server_is_ready() and self.plan_action.server_is_ready()
                     and all(p.get_subscription_count() >= 1 for p, _ in self.publishers.values())
                     and self.node.count_publishers(f"{self.base}/report") >= 1):
                 return
@@ -183,15 +188,24 @@ class _Client:
                                         "get_parameters", timeout)
         return {n: parameter_value_to_python(v) for n, v in zip(names, response.values)}
 
-    def check_sequence(self, state, timeout: float) -> list[dict]:
-        future = self._in_executor(lambda: self.action.send_goal_async(
-            CheckSequence.Goal(assembly=state)), timeout, "goal response")
+    def _result(self, action: ActionClient, goal, timeout: float, what: str):
+        """The result of ``goal`` sent to ``action`` (named ``what``)."""
+        future = self._in_executor(lambda: action.send_goal_async(goal), timeout,
+                                   "goal response")
         handle = self._wait(future, timeout, "goal response")
         if not handle.accepted:
-            raise RuntimeError(f"{self.base} rejected the check_sequence goal")
-        result = self._wait(self._in_executor(handle.get_result_async, timeout, "result"),
-                            timeout, "check_sequence result")
-        return [message_to_dict(r) for r in result.result.reports]
+            raise RuntimeError(f"{self.base} rejected the {what} goal")
+        return self._wait(self._in_executor(handle.get_result_async, timeout, "result"),
+                          timeout, f"{what} result").result
+
+    def check_sequence(self, state, timeout: float) -> list[dict]:
+        result = self._result(self.action, CheckSequence.Goal(assembly=state), timeout,
+                              "check_sequence")
+        return [message_to_dict(r) for r in result.reports]
+
+    def plan(self, goal, timeout: float) -> list[dict]:
+        """The result dict of a ~/plan goal (its one answer)."""
+        return [message_to_dict(self._result(self.plan_action, goal, timeout, "plan"))]
 
     def check_whole(self, state, timeout: float, kind: str = STATE) -> list[dict]:
         """Publish ``state`` (a message of ``kind``) and wait for the report with its stamp."""
@@ -210,6 +224,16 @@ class _Client:
                     raise TimeoutError(f"no report for the state of stamp {key} on "
                                        f"{self.base}/report within {timeout:g} s")
                 self.lock.wait(left)
+
+
+def live_goal(run: Run) -> PlanSequence.Goal:
+    """The recorded ~/plan goal of ``run`` to send again, without its time limit (how long a
+    plan ran is not part of its result). A plan that was stopped cannot be stopped at the
+    same block over DDS: ValueError, replay it offline."""
+    if stopped_at(run) is not None:
+        raise ValueError(f"{run.describe()}: the recorded plan was stopped; replay --live "
+                         "cannot stop a plan after as many blocks: replay the bag offline")
+    return dict_to_message({**run.state, "time_limit": 0.0}, PlanSequence.Goal)
 
 
 def settings_parameters(run: Run, options: CheckOptions) -> dict[str, object]:
@@ -249,12 +273,15 @@ def live_reports(runs, options: CheckOptions, *, node_name: str | None = None, c
                     restore = client.get_parameters(list(wanted), timeout)
                 client.set_parameters(wanted, timeout)
                 settings = run.settings
-            state = dict_to_message(run.state, client.publishers[run.kind][1])
-            if run.kind == STATE and run.state.get("sequence"):
-                out.append(client.check_sequence(state, timeout))
+            if run.kind == PLAN:
+                out.append(client.plan(live_goal(run), timeout))
             else:
-                answer = client.check_whole(state, timeout, run.kind)
-                out.append(answer if run.kind == STATE or run.reports else [])
+                state = dict_to_message(run.state, client.publishers[run.kind][1])
+                if run.kind == STATE and run.state.get("sequence"):
+                    out.append(client.check_sequence(state, timeout))
+                else:
+                    answer = client.check_whole(state, timeout, run.kind)
+                    out.append(answer if run.kind == STATE or run.reports else [])
             alive()
             if on_run is not None:
                 on_run(i, run)

@@ -18,7 +18,14 @@ Interfaces (relative to the node, e.g. ``/rbe_node/report``):
   (:mod:`rbe_ros.io.foxglove_scene`);
 * serves ``~/check`` (rbe_msgs/srv/CheckAssembly): the assembly as a whole, sequence ignored;
 * serves the action ``~/check_sequence`` (rbe_msgs/action/CheckSequence): feedback per step,
-  all reports and the first failing step as result; cancellable between steps.
+  all reports and the first failing step as result; cancellable between steps;
+* serves the action ``~/plan`` (rbe_msgs/action/PlanSequence): plans an insertion order with
+  at most ``max_held`` blocks held (as ``rbe-ros plan``, through the same
+  :func:`rbe_ros.io.plans.plan_state`), feedback after each placed step, the plan, its holds
+  and each step's report as result. Cancellable between candidate checks (the result is the
+  best partial plan, status CANCELED); a newer goal preempts a running one (ABORTED, "stopped
+  after K of N blocks"); plans run one at a time. A goal that cannot be planned (invalid
+  input) SUCCEEDS with ``feasible`` false and the reason, as an infeasible plan does.
 
 Bad input never stops the node: a state that cannot be checked (outside the limits of
 :class:`rbe_ros.scene.ValidationLimits`, ``max_blocks`` among them) gives a report with status
@@ -27,7 +34,9 @@ SOLVER_FAILED naming the solver's status or the stage, and any other error in a 
 logged and gives SOLVER_FAILED with the exception text. With ``mcap_path`` set, every checked
 state and every report is recorded (CDR, receive/publish time) in a rosbag2 MCAP bag, each
 message flushed before the report is published (a report seen on DDS is on disk, even after
-SIGKILL); the bag is closed on shutdown (SIGINT, SIGTERM).
+SIGKILL); the bag is closed on shutdown (SIGINT, SIGTERM). A ``~/plan`` goal and its result
+are recorded on ``~/plan/goal`` and ``~/plan/result`` (rbe_msgs/action/PlanSequence_Goal,
+_Result), and ``rbe-ros replay`` re-plans the goal.
 
 Run: ``rbe_node --ros-args -p friction_coefficient:=0.5 -p mcap_path:=bags/run``
 (or ``python -m rbe_ros.ros.node``).
@@ -55,7 +64,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
 from rclpy.signals import SignalHandlerOptions
-from rbe_msgs.action import CheckSequence
+from rbe_msgs.action import CheckSequence, PlanSequence
 from rbe_msgs.msg import AssemblyState, BlockPoses, StabilityReport
 from rbe_msgs.srv import CheckAssembly
 from std_msgs.msg import String
@@ -64,16 +73,19 @@ from visualization_msgs.msg import MarkerArray
 from ..analysis.option_spec import BY_PARAM, OPTIONS, Option, from_outer
 from ..analysis.options import CheckOptions
 from ..analysis.pipeline import StateCheck, check_state
+from ..analysis.planning import STOPPED
 from ..analysis.steps import sequence_step
 from ..io import cdr
 from ..io.bag import BagWriter, typestore
 from ..io.inputs import load_design
 from ..io.foxglove_scene import SceneServer
 from ..io.markers import MARKER_TYPE, run_markers, step_markers
-from ..io.messages import report_header, report_to_dict, state_to_dict
+from ..io.messages import (plan_feedback_to_dict, plan_goal_from_dict, plan_result_to_dict,
+                           report_header, report_to_dict, state_to_dict)
+from ..io.plans import plan_state
 from ..io.poses import AsBuilt
-from ..io.replay import (DESIGN, OPTIONS_KEY, POSES, SETTINGS_TYPE,
-                         asbuilt_check, merge_message, options_to_json)
+from ..io.replay import (DESIGN, OPTIONS_KEY, PLAN_GOAL_TYPE, PLAN_RESULT_TYPE, POSES,
+                         SETTINGS_TYPE, asbuilt_check, merge_message, options_to_json)
 from ..rbe.result import Report, Status
 from ..scene import Scene, SceneError
 from .convert import dict_to_message, message_to_dict, scene_from_msg
@@ -162,7 +174,10 @@ class RbeChecks:
         """Declare the parameters; the state, publishers and diagnostics of the node."""
         self._closing = False
         self._destroyed = False
-        self._action = None
+        self._actions: list = []
+        # ~/plan: one plan at a time; the newest goal preempts the one running
+        self._plan_lock = threading.Lock()
+        self._plan_newest = None
         self._interfaces: list = []     # subscriptions and service, while open
         self._bag = None
         self._bag_lock = threading.Lock()
@@ -199,6 +214,7 @@ class RbeChecks:
         # building the rclpy message (an object per Point) and serialising it
         self._encode_report = cdr.encoder(typestore(), "rbe_msgs/msg/StabilityReport")
         self._encode_markers = cdr.encoder(typestore(), MARKER_TYPE)
+        self._encode_plan = cdr.encoder(typestore(), PLAN_RESULT_TYPE)
         self._report_pub = self.create_publisher(StabilityReport, "~/report", LATCHED_QOS)
         self._marker_pub = self.create_publisher(MarkerArray, "~/markers", LATCHED_QOS)
 
@@ -214,6 +230,8 @@ class RbeChecks:
         self.design_topic = self.resolve_topic_name("~/design")
         self.poses_topic = self.resolve_topic_name("~/poses")
         self.marker_topic = self._marker_pub.topic_name
+        self.plan_goal_topic = self.resolve_topic_name("~/plan/goal")
+        self.plan_result_topic = self.resolve_topic_name("~/plan/result")
         self.add_post_set_parameters_callback(self._parameters_set)
         # the report log (_log_report): verdict counts since the last summary line
         self._log_lock = threading.Lock()
@@ -228,7 +246,8 @@ class RbeChecks:
             self.get_logger().info(f"Foxglove WebSocket server on port {self.foxglove.port}")
 
     def _start_interfaces(self) -> None:
-        """Subscribe the state topics, serve ~/check and ~/check_sequence, start the worker."""
+        """Subscribe the state topics, serve ~/check, ~/check_sequence and ~/plan, start the
+        worker."""
         self._closing = False
         # raw: the callback gets the CDR bytes; a state is converted to a message only when
         # the worker checks it (converting every state that arrives would hold the GIL and
@@ -245,11 +264,14 @@ class RbeChecks:
                                          callback_group=self._topic_group, raw=True)]
         self._interfaces = [self.create_service(CheckAssembly, "~/check", self._on_check,
                                                 callback_group=self._service_group)]
-        self._action = ActionServer(
-            self, CheckSequence, "~/check_sequence", execute_callback=self._execute_sequence,
+        self._actions = [ActionServer(
+            self, action, name, execute_callback=execute,
             goal_callback=lambda _goal: GoalResponse.ACCEPT,
             cancel_callback=lambda _goal: CancelResponse.ACCEPT,
             callback_group=self._action_group)
+            for action, name, execute in ((CheckSequence, "~/check_sequence",
+                                           self._execute_sequence),
+                                          (PlanSequence, "~/plan", self._execute_plan))]
         self._worker = threading.Thread(target=self._work, name="rbe_state_worker", daemon=True)
         self._worker.start()
         with self._slot_cond:
@@ -286,9 +308,9 @@ class RbeChecks:
             for subscription in self._topics:
                 self.destroy_subscription(subscription)
             self._topics = []
-        if self._action is not None:
-            self._action.destroy()
-            self._action = None
+        for action in self._actions:
+            action.destroy()
+        self._actions = []
 
     # --- parameters -------------------------------------------------------------------------
 
@@ -338,7 +360,9 @@ class RbeChecks:
         self.settings_topic = f"{self.get_fully_qualified_name()}/settings"
         self._bag.add_topic(self.settings_topic, SETTINGS_TYPE, transient_local=True)
         self._later_topics = {self.design_topic: ("rbe_msgs/msg/AssemblyState", True),
-                              self.poses_topic: ("rbe_msgs/msg/BlockPoses", False)}
+                              self.poses_topic: ("rbe_msgs/msg/BlockPoses", False),
+                              self.plan_goal_topic: (PLAN_GOAL_TYPE, False),
+                              self.plan_result_topic: (PLAN_RESULT_TYPE, False)}
         self.bag_path = path
         self.get_logger().info(f"recording states and reports to {path}")
 
@@ -680,6 +704,54 @@ class RbeChecks:
         else:  # the state could not be checked, or shutting down
             goal_handle.abort()
         return result
+
+    def _execute_plan(self, goal_handle) -> PlanSequence.Result:
+        """Plan the goal's assembly (the goal and its result recorded), one plan at a time:
+        a newer goal stops this one between two candidate checks (ABORTED), as a cancel does
+        (CANCELED); the result is then the best partial plan."""
+        try:
+            return self._plan_goal(goal_handle)
+        except Exception as exc:   # publishing or recording failed (e.g. during shutdown)
+            message = f"plan failed: {type(exc).__name__}: {exc}"
+            self.get_logger().error(f"plan goal not handled: {message}")
+            goal_handle.abort()
+            return PlanSequence.Result(message=message, failed_step=0)
+
+    def _plan_goal(self, goal_handle) -> PlanSequence.Result:
+        self._plan_newest = goal_handle
+        goal = goal_handle.request
+        self._record(self.plan_goal_topic, goal)
+        header = report_header(message_to_dict(goal.assembly.header),
+                               self.get_parameter("frame_id").value)
+        _, limits = plan_goal_from_dict(message_to_dict(goal))
+
+        def stopped() -> bool:
+            return self._closing or goal_handle.is_cancel_requested or \
+                self._plan_newest is not goal_handle
+
+        def progress(p) -> None:
+            goal_handle.publish_feedback(
+                dict_to_message(plan_feedback_to_dict(p), PlanSequence.Feedback))
+
+        def read() -> Scene:
+            return scene_from_msg(goal.assembly, limits=options.limits)
+
+        with self._plan_lock:
+            start = time.monotonic()
+            options = self.check_options()
+            plan = plan_state(read, limits, options, progress=progress, should_stop=stopped)
+            data = self._encode_plan(plan_result_to_dict(plan, header))
+            self._record(self.plan_result_topic, data)
+        self.get_logger().info(f"plan of {header['frame_id']} ({len(goal.assembly.blocks)} "
+                               f"blocks, at most {limits.max_held} held) in "
+                               f"{time.monotonic() - start:.1f} s: {plan.message}")
+        if not plan.message.startswith(STOPPED) or not stopped():
+            goal_handle.succeed()       # planned, infeasible, invalid, or its time limit
+        elif goal_handle.is_cancel_requested:
+            goal_handle.canceled()
+        else:
+            goal_handle.abort()         # preempted by a newer goal, or shutting down
+        return deserialize_message(data, PlanSequence.Result)
 
 
 class RbeNode(RbeChecks, Node):

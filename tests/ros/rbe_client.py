@@ -5,8 +5,9 @@ from __future__ import annotations
 import json
 import threading
 import time
+from contextlib import contextmanager
 
-from rbe_msgs.action import CheckSequence
+from rbe_msgs.action import CheckSequence, PlanSequence
 from rbe_msgs.msg import AssemblyState, StabilityReport
 from rbe_msgs.srv import CheckAssembly
 from rclpy.action import ActionClient
@@ -105,6 +106,7 @@ class Client:
                                           self._keep(self.markers), reliable)
         self.check = self.node.create_client(CheckAssembly, f"{NODE}/check")
         self.action = ActionClient(self.node, CheckSequence, f"{NODE}/check_sequence")
+        self.plan = ActionClient(self.node, PlanSequence, f"{NODE}/plan")
         # One executor thread, and every ActionClient request is made from it (see
         # _in_executor): rclpy's ActionClient registers a request's sequence number only
         # after sending it, without a lock, so a response handled by another thread in
@@ -134,6 +136,8 @@ class Client:
                    left(), "the ~/check service")
         wait_until(lambda: left() and self.action.wait_for_server(timeout_sec=0.2),
                    left(), "the ~/check_sequence action server")
+        wait_until(lambda: left() and self.plan.wait_for_server(timeout_sec=0.2),
+                   left(), "the ~/plan action server")
         wait_until(lambda: left() and self.state_pub.get_subscription_count() >= 1
                    and self.node.count_publishers(f"{NODE}/report") >= 1
                    and self.node.count_publishers(f"{NODE}/markers") >= 1,
@@ -143,6 +147,7 @@ class Client:
         self.executor.shutdown(timeout_sec=5.0)
         self.thread.join(5.0)
         self.action.destroy()
+        self.plan.destroy()
         self.node.destroy_node()
 
     def _in_executor(self, fn, *args, timeout: float = TIMEOUT):
@@ -194,6 +199,16 @@ class Client:
                   timeout: float = TIMEOUT):
         """Send a CheckSequence goal; feedback messages are appended to ``feedback``.
         Returns the accepted goal handle."""
+        self.sent_states.append(state)
+        return self._send(self.action, CheckSequence.Goal(assembly=state), feedback,
+                          on_feedback, timeout)
+
+    def send_plan(self, goal: PlanSequence.Goal, feedback: list, on_feedback=None,
+                  timeout: float = TIMEOUT):
+        """Send a PlanSequence goal to ~/plan (as :meth:`send_goal`)."""
+        return self._send(self.plan, goal, feedback, on_feedback, timeout)
+
+    def _send(self, action: ActionClient, goal, feedback: list, on_feedback, timeout: float):
         def callback(msg):
             with self.lock:
                 feedback.append(msg.feedback)
@@ -201,9 +216,8 @@ class Client:
             if on_feedback is not None:
                 on_feedback(msg.feedback)
 
-        self.sent_states.append(state)
-        future = self._in_executor(lambda: self.action.send_goal_async(
-            CheckSequence.Goal(assembly=state), feedback_callback=callback))
+        future = self._in_executor(lambda: action.send_goal_async(
+            goal, feedback_callback=callback))
         handle = wait_future(future, timeout, "the goal response")
         assert handle.accepted
         return handle
@@ -221,5 +235,19 @@ class Client:
         return response.status, response.result
 
 
-__all__ = ["Client", "NodeProcess", "canonical", "stacked_boxes", "state_msg", "tower",
-           "wait_future", "wait_until"]
+@contextmanager
+def node_and_client(context, ros_args: list[str], log, markers: bool = False):
+    """An rbe_node process started with ``ros_args`` (its output in ``log``) and a
+    :class:`Client` it answers; both closed on exit."""
+    proc = NodeProcess(ros_args, log)
+    client = Client(context, markers=markers)
+    try:
+        client.wait_ready(proc)
+        yield proc, client
+    finally:
+        client.close()
+        proc.stop()
+
+
+__all__ = ["Client", "NodeProcess", "canonical", "node_and_client", "stacked_boxes", "state_msg",
+           "tower", "wait_future", "wait_until"]

@@ -1,0 +1,95 @@
+"""The one dispatch of a plan request, shared by ``rbe-ros plan``, the node's ``~/plan``
+action and replay: :func:`plan_state` reads the scene, applies the request's limits (hold
+capacities over the options, a time limit over ``should_stop``) and plans; it never raises,
+so that a goal that cannot be planned is a result, not a crash."""
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from ..analysis.option_spec import BY_PARAM, from_outer
+from ..analysis.options import CheckOptions
+from ..analysis.planning import Plan, PlanOptions, PlanProgress, plan_sequence
+from ..scene import Scene, SceneError, validate_scene
+
+#: Hold capacities a request may set over the options: the node parameters of those names
+#: (outer values, N and N m; <= 0: the options' own).
+HOLD_CAPACITIES = ("hold_force_max", "hold_torque_max")
+
+
+@dataclass(frozen=True)
+class PlanLimits:
+    """What a plan request bounds: the search (:class:`PlanOptions`' fields, checked by
+    :func:`plan_state`), the hold capacities, the wall time."""
+
+    max_held: int = 2
+    beam: int = 1
+    candidates: int = 8
+    keep_sequence: bool = False
+    hold_force_max: float = 0.0     # N; <= 0: the options'
+    hold_torque_max: float = 0.0    # N m; <= 0: the options'
+    time_limit: float = 0.0         # s; <= 0: none
+
+    def search(self) -> PlanOptions:
+        """The planner's search (ValueError naming a limit out of its range)."""
+        return PlanOptions(self.max_held, self.beam, self.candidates, self.keep_sequence)
+
+
+def plan_options(options: CheckOptions, limits: PlanLimits) -> CheckOptions:
+    """``options`` with the hold capacities of ``limits`` that are set (SceneError when this
+    build has no such option: a capacity asked for is never silently dropped)."""
+    for name in HOLD_CAPACITIES:
+        value = getattr(limits, name)
+        if value > 0:
+            option = BY_PARAM.get(name)
+            if option is None:
+                raise SceneError(f"{name} {value:g} asked for, but this rbe_ros has no hold "
+                                 "capacities: plan without it (0)")
+            try:
+                options = from_outer({option: value}, options)
+            except ValueError as exc:
+                raise SceneError(str(exc)) from None
+    return options
+
+
+def _failed(message: str) -> Plan:
+    """The plan of a request that could not be planned (nothing placed)."""
+    return Plan(False, [], [], message, failed_step=0)
+
+
+def plan_state(read_scene: Callable[[], Scene], limits: PlanLimits,
+               options: CheckOptions = CheckOptions(), *,
+               progress: Callable[[PlanProgress], None] | None = None,
+               should_stop: Callable[[], bool] | None = None) -> Plan:
+    """Plan the scene ``read_scene()`` makes within ``limits``; never raises: bad input (a
+    limit out of range, a scene outside the options' validation limits, as a check would
+    refuse it) is a plan that failed with "invalid input: ...", any other error "plan failed:
+    ...".
+    ``should_stop`` and the time limit stop the search between candidate checks (the best
+    partial plan, "stopped after K of N blocks")."""
+    deadline = time.monotonic() + limits.time_limit if limits.time_limit > 0 else None
+
+    def stop() -> bool:
+        return (should_stop is not None and should_stop()) or \
+            (deadline is not None and time.monotonic() > deadline)
+
+    try:
+        search = limits.search()
+    except ValueError as exc:
+        return _failed(f"invalid input: {exc}")
+    try:
+        scene = read_scene()
+        if options.limits is not None:
+            validate_scene(scene, options.limits)
+        return plan_sequence(scene, search.max_held, plan_options(options, limits),
+                             beam=search.beam, candidates=search.candidates,
+                             keep_sequence=search.keep_sequence, progress=progress,
+                             should_stop=stop)
+    except SceneError as exc:
+        return _failed(f"invalid input: {exc}")
+    except Exception as exc:        # a failed plan is a result, never a crash
+        return _failed(f"plan failed: {type(exc).__name__}: {exc}")
+
+
+__all__ = ["HOLD_CAPACITIES", "PlanLimits", "plan_options", "plan_state"]

@@ -1,0 +1,183 @@
+"""The ~/plan action over DDS from an rclpy client: the 7-voussoir arch planned with at most
+two holds (feedback after every placed step; the result equal to ``rbe-ros plan --json`` of
+the same scene), a dome's plan canceled and one preempted by a newer goal (the best partial
+plans), and the node's bag: its goals re-planned by ``rbe-ros replay --compare``, a perturbed
+recorded result caught."""
+from __future__ import annotations
+
+import json
+from types import SimpleNamespace
+
+import pytest
+from action_msgs.msg import GoalStatus
+from rbe_msgs.action import PlanSequence
+
+from rbe_ros import generators
+from rbe_ros.analysis.planning import STOPPED, plan_sequence
+from rbe_ros.cli import main
+from rbe_ros.io.messages import report_to_dict
+from rbe_ros.io.replay import (PLAN, bag_options, compare_plan, compare_report, read_runs,
+                               replay_bag, write_runs)
+from rbe_ros.io.scene_json import scene_to_dict
+from rbe_ros.ros.convert import message_to_dict
+from rbe_ros.ros.live import live_goal, live_recheck
+
+from rbe_client import node_and_client, stamp_of, state_msg, wait_until
+
+MAX_HELD = 2
+
+
+@pytest.fixture(scope="module")
+def rbe(rclpy_context, tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("rbe_plan")
+    bag = tmp / "bag"
+    with node_and_client(rclpy_context, ["-p", f"mcap_path:={bag}"], tmp / "node.log") \
+            as (proc, client):
+        yield SimpleNamespace(proc=proc, client=client, bag=bag, tmp=tmp,
+                              context=rclpy_context)
+
+
+def goal_of(scene, max_held: int = MAX_HELD, **limits) -> PlanSequence.Goal:
+    return PlanSequence.Goal(assembly=state_msg(scene), max_held=max_held, **limits)
+
+
+def cli_plan(scene, tmp, capsys) -> dict:
+    """``rbe-ros plan --json`` of ``scene``: the plan the action must equal."""
+    path = tmp / "scene.json"
+    path.write_text(json.dumps(scene_to_dict(scene)))
+    capsys.readouterr()
+    main(["plan", str(path), "--max-held", str(MAX_HELD), "--json"])
+    return json.loads(capsys.readouterr().out)
+
+
+def test_the_arch_planned_over_dds_equals_rbe_ros_plan(rbe, capsys):
+    arch = generators.semicircular_arch(7)
+    feedback: list = []
+    goal = goal_of(arch)
+    handle = rbe.client.send_plan(goal, feedback)
+    status, result = rbe.client.result(handle, timeout=120.0)
+    expected = cli_plan(arch, rbe.tmp, capsys)
+    assert status == GoalStatus.STATUS_SUCCEEDED
+    assert expected["feasible"] and result.feasible
+    assert list(result.order) == expected["order"] and len(result.order) == 7
+    assert result.message == expected["message"]
+    assert result.failed_step == expected["failed_step"] == -1
+    sent = [message_to_dict(h) for h in result.holds]
+    # the planner's holds grip at the centroid, with the check's capacities (the scene
+    # file leaves those keys out)
+    default = {"max_force": 0.0, "max_torque": 0.0, "has_grip": False,
+               "grip": {"x": 0.0, "y": 0.0, "z": 0.0}}
+    assert all({k: h[k] for k in default} == default for h in sent)
+    holds = [{k: v for k, v in h.items() if k not in default} for h in sent]
+    assert holds == expected["holds"] and holds
+    assert max(h["until_step"] - h["from_step"] for h in holds) >= 1
+    # each step's report: the step, the block placed, the verdict and the blocks held
+    rows = [(r.step_index, r.block_placed, r.status, r.stable, list(r.held_blocks))
+            for r in result.reports]
+    assert rows == [(r["step_index"], r["block_placed"], r["status"], r["stable"],
+                     r["held_blocks"]) for r in expected["reports"]]
+    assert all(r.stable for r in result.reports)
+    # and every force of every step as the core computes it (within replay's tolerances)
+    plan = plan_sequence(arch, MAX_HELD)
+    header = message_to_dict(result.reports[0].header)
+    for report, step in zip(plan.reports, result.reports):
+        assert not compare_report(report_to_dict(report, header), message_to_dict(step))
+    assert max(len(r.held_blocks) for r in result.reports) <= MAX_HELD
+    # the planned assembly: the placed blocks in the planned order with the planned holds,
+    # with the goal's stamp on it and on every report
+    assert list(result.plan.sequence) == expected["order"]
+    assert [message_to_dict(h) for h in result.plan.holds] == sent
+    assert {stamp_of(r) for r in [*result.reports, result.plan]} == {stamp_of(goal.assembly)}
+    # feedback after every placed step: placed rising to 7, the block and holds of the step
+    # (feedback and result are different topics: the last feedback may come after the result)
+    wait_until(lambda: len(feedback) >= 7, what="the feedback of 7 steps")
+    assert [f.placed for f in feedback] == list(range(1, 8))
+    assert all(f.total == 7 for f in feedback)
+    assert [f.block for f in feedback] == expected["order"]
+    assert [f.step for f in feedback] == list(range(7))
+    steps = {r["step_index"]: r["held_blocks"] for r in expected["reports"]}
+    assert [sorted(f.held) for f in feedback] == [sorted(steps[k]) for k in range(7)]
+    assert all(b >= a >= 0 for a, b in zip([f.elapsed for f in feedback],
+                                           [f.elapsed for f in feedback][1:]))
+
+
+def test_a_dome_plan_canceled_then_one_preempted(rbe):
+    """Canceled after its first placed steps: CANCELED, the best partial plan (fewer blocks
+    than the dome's, each planned step's report); a running plan that a newer goal preempts:
+    ABORTED with its partial plan, the newer one planned."""
+    dome = generators.dome()        # 126 blocks: a plan of a minute or more
+    total = sum(not b.support for b in dome.blocks)
+    client = rbe.client
+    feedback: list = []
+    handle = client.send_plan(goal_of(dome), feedback)
+    wait_until(lambda: len(feedback) >= 2, 120.0, "two placed steps of the dome")
+    client.cancel(handle)
+    status, result = client.result(handle, timeout=120.0)
+    assert status == GoalStatus.STATUS_CANCELED
+    placed = len(result.order)
+    assert 2 <= placed < total
+    assert not result.feasible and result.failed_step == placed
+    assert result.message.startswith(f"{STOPPED} {placed} of {total} blocks")
+    assert [r.block_placed for r in result.reports][:placed] == list(result.order)
+    wait_until(lambda: len(feedback) >= placed, what=f"the feedback of {placed} steps")
+    assert list(result.order) == [f.block for f in feedback][:placed]
+
+    feedback = []
+    first = client.send_plan(goal_of(dome), feedback)
+    wait_until(lambda: feedback, 120.0, "a placed step of the dome")
+    arch = generators.semicircular_arch(7)
+    second = client.send_plan(goal_of(arch), [])
+    status, result = client.result(first, timeout=120.0)
+    assert status == GoalStatus.STATUS_ABORTED
+    assert result.message.startswith(STOPPED) and not result.feasible
+    assert 1 <= len(result.order) < total
+    status, result = client.result(second, timeout=120.0)
+    assert status == GoalStatus.STATUS_SUCCEEDED and result.feasible
+    assert len(result.order) == 7
+
+
+def test_bad_limits_are_an_infeasible_result(rbe):
+    status, result = rbe.client.result(rbe.client.send_plan(
+        goal_of(generators.semicircular_arch(5), max_held=-1), []))
+    assert status == GoalStatus.STATUS_SUCCEEDED
+    assert not result.feasible and result.message.startswith("invalid input: max_held")
+    assert not result.order and not result.reports
+
+
+def test_the_bag_replays_its_plans(rbe, capsys):
+    """Every goal so far re-planned offline through the node's dispatch equals its recorded
+    result (the canceled and preempted ones up to as many blocks as they had placed);
+    a recorded result with two steps swapped, or a step's friction ratio 1% off, is a
+    difference (offline, and live through the running node). Runs after the tests above
+    (their goals are the bag's)."""
+    runs = [r for r in read_runs(rbe.bag) if r.kind == PLAN]
+    assert len(runs) == 5 and all(len(r.reports) == 1 for r in runs)
+    capsys.readouterr()
+    assert main(["replay", str(rbe.bag), "--compare", "-o", str(rbe.tmp / "replayed")]) == 0
+    assert "all recorded reports reproduced" in capsys.readouterr().out
+    # the view of the bag: each plan's planned assembly with its steps' reports
+    assert main(["view", str(rbe.bag), "-o", str(rbe.tmp / "view.html")]) == 0
+    steps = sum(len(r.reports[0]["reports"]) for r in runs)
+    assert f"{steps} reports of 5 states written" in capsys.readouterr().out
+
+    arch = runs[0]
+    swapped = json.loads(json.dumps(arch.reports[0]))
+    swapped["order"][1], swapped["order"][2] = swapped["order"][2], swapped["order"][1]
+    forces = json.loads(json.dumps(arch.reports[0]))
+    forces["reports"][3]["worst_friction_ratio"] *= 1.01
+    perturbed = rbe.tmp / "perturbed"
+    write_runs(perturbed, [arch, arch], [[swapped], [forces]], bag_options(rbe.bag))
+    assert main(["replay", str(perturbed), "--compare", "-o", str(rbe.tmp / "p_out")]) == 1
+    out = capsys.readouterr().out
+    assert "run 0 whole assembly plan result: order: recorded" in out
+    assert "run 1 step 3" in out and "worst_friction_ratio: recorded" in out
+
+    # live: the arch's goal sent again to the running node (its settings put back after)
+    live = replay_bag(perturbed, write=False, recheck=live_recheck("rbe_node", rbe.context, 60.0))
+    assert len(live.runs) == 2 and len(live.replayed) == 2
+    assert {(d.run, d.field) for d in live.differences} >= {(0, "order"),
+                                                            (1, "worst_friction_ratio")}
+    assert not compare_plan(arch.reports[0], live.replayed[0][0])
+    stopped = runs[1]       # the canceled dome
+    with pytest.raises(ValueError, match="the recorded plan was stopped"):
+        live_goal(stopped)

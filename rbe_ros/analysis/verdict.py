@@ -22,6 +22,7 @@ import numpy as np
 
 from ..rbe.cones import cone_capacity
 from ..rbe.model import EquilibriumModel, Grip, build_model, finite
+from ..rbe.prestress import Squeeze, squeeze
 from ..rbe.result import HoldWrench, InterfaceResult, Report, Status
 from ..rbe.resultants import interface_results
 from ..rbe.solver import Solution, solve
@@ -73,7 +74,11 @@ def _verdict(assembly: Assembly, options: CheckOptions) -> Report:
         return deciding
     model, primary = deciding
     if primary.solved:
-        return _report(model, primary, options)
+        report = _report(model, primary, options)
+        if not report.stable:
+            return report
+        found = _squeezed(model, options, primary)
+        return report if found is None else _prestress_report(model, report, found, options)
     if primary.status == "failed":
         return _failed(primary)
     if any(finite(g.max_force) or finite(g.max_torque) for g in model.grips):
@@ -183,7 +188,36 @@ def stable_forces(model: EquilibriumModel, options: CheckOptions, load=None
     if any(r.tension or (r.friction_exceeded and counts)
            for r, counts in zip(results, _loaded(model, results, options))):
         return None
+    if _squeezed(model, options, solution, load) is not None:
+        return None
     return solution, results
+
+
+def _squeezed(model: EquilibriumModel, options: CheckOptions, solution: Solution,
+              load=None) -> Squeeze | None:
+    """The last part of the criterion of check and stable_forces, for a ``solution`` that
+    passed the others: the squeeze when its blocks stand only by prestress
+    (rbe/prestress.py), else None. The reported field stays ``solution`` (RBE's)."""
+    found = squeeze(model, options.deciding, solution, load)
+    return None if found is None or found.stands else found
+
+
+def _prestress_report(model, report: Report, found: Squeeze, options: CheckOptions) -> Report:
+    """FRICTION_EXCEEDED for a field that stands only by prestress: its squeezed interfaces
+    flagged, their free blocks named."""
+    hit = set(model.vertex_interface[found.vertices].tolist())
+    free = {model.blocks[j].id for j in model.free}
+    squeezed = sorted({b for k in hit for b in (report.interfaces[k].block_a,
+                                                report.interfaces[k].block_b)} & free)
+    interfaces = [replace(r, friction_exceeded=True) if k in hit else r
+                  for k, r in enumerate(report.interfaces)]
+    one = len(squeezed) == 1
+    message = (f"friction exceeded without prestress: {_names(squeezed)} stand{'s' * one} only"
+               f" squeezed between {'its' if one else 'their'} neighbours (with the friction"
+               f" of each contact up to mu {options.deciding.mu:.3g} times the normal force the"
+               f" loads alone produce there, no equilibrium)")
+    return replace(report, status=Status.FRICTION_EXCEEDED, message=message,
+                   interfaces=interfaces, unstable_blocks=squeezed)
 
 
 def feasible_without_tension(model: EquilibriumModel, options: CheckOptions, load=None) -> bool:

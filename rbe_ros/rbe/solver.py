@@ -185,8 +185,12 @@ def _spent_since(start: float) -> float:
 
 
 def solve(model: EquilibriumModel, options: SolveOptions = SolveOptions(), *,
-          load: np.ndarray | None = None, live_load: np.ndarray | None = None) -> Solution:
+          load: np.ndarray | None = None, live_load: np.ndarray | None = None,
+          friction_cap: np.ndarray | None = None) -> Solution:
     """Solve the RBE problem of ``model`` under ``load`` (scaled p; default: dead load).
+    ``friction_cap`` (N per interface, inf: none) bounds the resultant of each interface's
+    friction forces in the cone's norm, as well as the vertex cones (Tresca bounds of the
+    prestress test, rbe/prestress.py).
     Within a check's time budget (:mod:`rbe_ros.deadline`) the solver gets what is left of it,
     and a solve that runs out of it raises CheckTimeout."""
     checkpoint()
@@ -199,7 +203,8 @@ def solve(model: EquilibriumModel, options: SolveOptions = SolveOptions(), *,
     # weight, which only slows the solver down).
     tension = options.allow_tension and not multiplier and options.friction == "plus"
     v = _Variables(nv, tension, lp, multiplier, model.hold_columns.shape[1])
-    a, b, cones = _constraints(model, options, v, p, live_load, (1.0, MAX_MULTIPLIER))
+    cap = None if friction_cap is None else np.asarray(friction_cap, float) / model.force_scale
+    a, b, cones = _constraints(model, options, v, p, live_load, (1.0, MAX_MULTIPLIER), cap)
     p_diag, q = _objective(options, v, lp, multiplier)
     if lp and nv:
         offsets = (model.points - model.points.mean(axis=0)) @ _TIE_DIRECTION
@@ -338,12 +343,13 @@ def _wrenches(model: EquilibriumModel, z: np.ndarray) -> np.ndarray:
 
 
 def _constraints(model: EquilibriumModel, options: SolveOptions, v: _Variables, p, column,
-                 bound: tuple[float, float]):
+                 bound: tuple[float, float], cap: np.ndarray | None = None):
     """A, b and the cones of A x + s = b, s in K, in Clarabel's order: zero cone, nonnegative
     cone, second-order cones. ``column`` (a load, or None) is the equilibrium column of the
-    multiplier variable, bounded by the row ``bound[0] * x <= bound[1]``. The equilibrium
-    rows are taken as columns of model.a_eq's CSC arrays and stacked on the other rows, not
-    rebuilt through coordinates (no sort)."""
+    multiplier variable, bounded by the row ``bound[0] * x <= bound[1]``. ``cap`` (scaled,
+    per interface; see solve) adds a cone on each capped interface's friction resultant. The
+    equilibrium rows are taken as columns of model.a_eq's CSC arrays and stacked on the other
+    rows, not rebuilt through coordinates (no sort)."""
     nv = v.nv
     neq = model.a_eq.shape[0]
     rows = _Rows(v.count, neq)
@@ -361,6 +367,11 @@ def _constraints(model: EquilibriumModel, options: SolveOptions, v: _Variables, 
         rows.add_rows([(np.array([v.lam]), bound[0])], bound[1])
     lp = len(v.t) > 0
     fu, fv = v.index(2, np.arange(nv)), v.index(3, np.arange(nv))
+    capped = np.array([], dtype=int) if cap is None else np.flatnonzero(np.isfinite(cap))
+    if len(capped):                 # the cap row of each vertex's interface, or -1
+        group = np.full(len(model.interfaces), -1)
+        group[capped] = np.arange(len(capped))
+        group = group[model.vertex_interface]
     if options.cone != "soc":
         angles, h = pyramid_facets(options.cone)
         for theta in angles:
@@ -369,6 +380,8 @@ def _constraints(model: EquilibriumModel, options: SolveOptions, v: _Variables, 
                 rows.add_rows(tangential + [(fn, -h * options.mu)], 0.0)
             if lp:
                 rows.add_rows(tangential + [(v.t, -1.0)], 0.0)
+            if len(capped):
+                rows.add_sums(group, tangential, h * cap[capped])
     cones = [clarabel.ZeroConeT(neq)] + ([clarabel.NonnegativeConeT(rows.count - neq)]
                                          if rows.count > neq else [])
     # second-order cones (t_i, fu_i, fv_i), rows interleaved per vertex
@@ -378,6 +391,9 @@ def _constraints(model: EquilibriumModel, options: SolveOptions, v: _Variables, 
             if head is not None:
                 rows.add_cones(head, fu, fv)
                 cones += [clarabel.SecondOrderConeT(3)] * nv
+        if len(capped):
+            rows.add_sum_cones(group, fu, fv, cap[capped])
+            cones += [clarabel.SecondOrderConeT(3)] * len(capped)
     cones += _capacities(model, v, rows)
     a = _Csc.stack(_equilibrium_columns(model, v, column), rows.matrix())
     return a, _floats(np.concatenate([-np.asarray(p, dtype=float)] + rows.b)), cones
@@ -484,6 +500,31 @@ class _Rows:
         self.v.append(np.full(len(cols), -1.0))
         self.b.append(np.concatenate(([bound], np.zeros(len(cols)))))
         self.count += 1 + len(cols)
+
+    def add_sums(self, group, terms, rhs) -> None:
+        """One row per group k: the sum over its vertices (group == k) of coefficient *
+        variable over ``terms`` (cols per vertex, coef), at most rhs[k]."""
+        on = group >= 0
+        for cols, coef in terms:
+            self.r.append(self.count + group[on])
+            self.c.append(cols[on])
+            self.v.append(np.full(int(on.sum()), coef))
+        self.b.append(np.asarray(rhs, dtype=float))
+        self.count += len(rhs)
+
+    def add_sum_cones(self, group, fu, fv, rhs) -> None:
+        """Rows (rhs_k, -sum fu, -sum fv) of one 3-cone per group k (its vertices: group ==
+        k): the resultant of their friction at most rhs_k."""
+        on = group >= 0
+        base = self.count + 3 * group[on]
+        for offset, cols in ((1, fu[on]), (2, fv[on])):
+            self.r.append(base + offset)
+            self.c.append(cols)
+            self.v.append(np.full(len(cols), -1.0))
+        b = np.zeros((len(rhs), 3))
+        b[:, 0] = rhs
+        self.b.append(b.ravel())
+        self.count += 3 * len(rhs)
 
     def matrix(self) -> sp.csc_matrix:
         """The rows collected (numbered from 0), canonical CSC."""

@@ -46,6 +46,13 @@ bench: setup
 	$(PY) benchmarks/bench.py $(BENCH_ARGS)
 	$(MAKE) bench-margin
 	$(MAKE) bench-insertion
+	$(MAKE) bench-holds
+
+# Cost of the robots' hold wrenches against holds as supports, in one run: docs/HOLD_WRENCH.md
+# (about a minute; also run by make bench).
+.PHONY: bench-holds
+bench-holds: setup
+	$(PY) benchmarks/hold_wrench.py
 
 # LMGC90 alone (non-smooth contact dynamics, the accuracy reference; about 10 minutes): its
 # verdicts on the near-limit suite and on compas_cra's samples, ours re-timed beside it,

@@ -134,11 +134,18 @@ class Hold:
     support block (a scaffold, the centring of an arch): the support is present only at those
     steps (put up at ``from_step``, taken away at ``until_step``). ``until_step`` None: to the
     end (after the last step too).
+
+    A robot's hold of a free block applies a wrench at ``grip`` (block frame, m; None: the
+    centroid), the force within ``max_force`` (N) and the torque about the grip within
+    ``max_torque`` (N m; 0: a pin grip); None: the check's options.
     """
 
     block: str
     from_step: int = 0
     until_step: int | None = None
+    grip: tuple[float, float, float] | None = None
+    max_force: float | None = None
+    max_torque: float | None = None
 
     def active(self, step: int) -> bool:
         return self.from_step <= step and (self.until_step is None or step < self.until_step)
@@ -341,8 +348,23 @@ def _check_holds(holds, ids: set[str], steps: int) -> tuple[Hold, ...]:
             raise SceneError(f"{where}: from_step {h.from_step} is past the last step "
                              f"({steps - 1})")
         out.append(Hold(h.block, int(h.from_step),
-                        None if h.until_step is None else int(h.until_step)))
+                        None if h.until_step is None else int(h.until_step),
+                        None if h.grip is None else tuple(
+                            float(x) for x in finite_array(h.grip, (3,), f"{where}: grip")),
+                        _capacity(h.max_force, f"{where}: max_force"),
+                        _capacity(h.max_torque, f"{where}: max_torque")))
     return tuple(out)
+
+
+def _capacity(value, where: str) -> float | None:
+    """A hold's capacity: None (the check's option) or a finite number >= 0."""
+    if value is None:
+        return None
+    if (isinstance(value, bool) or not isinstance(value, (int, float, np.number))
+            or not math.isfinite(value) or value < 0):
+        raise SceneError(f"{where} must be a number >= 0 (or absent: the check's option), "
+                         f"got {value!r}")
+    return float(value)
 
 
 def _is_int(x) -> bool:

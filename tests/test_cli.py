@@ -54,6 +54,7 @@ def test_readme_lists_every_key_of_the_json_report(capsys):
     out = run_json(capsys, "check", str(EXAMPLE), "--json")
     keys = set(out) | set(out["interfaces"][0]) | set(out["header"]) | {"x", "y", "z"}
     keys |= {"block_a", "block_b", "gap", "overlap_area"}      # of each near contact
+    keys |= {"block", "force", "torque", "grip_point", "utilisation"}    # each hold wrench
     assert listed == keys - {"stamp", "frame_id"}
 
 

@@ -282,9 +282,11 @@ def test_holds_and_hold_report_fields_round_trip():
     held = make_scene(s.name, s.blocks, s.gravity, s.sequence,
                       [Hold("a", 1), Hold("t", 0, 1), Hold("ground", 0, 2)])
     d = messages.state_to_dict(held, "map", 7)
-    assert d["holds"] == [{"block": "a", "from_step": 1, "until_step": -1},
-                          {"block": "t", "from_step": 0, "until_step": 1},
-                          {"block": "ground", "from_step": 0, "until_step": 2}]
+    plain = {"max_force": 0.0, "max_torque": 0.0, "grip": {"x": 0.0, "y": 0.0, "z": 0.0},
+             "has_grip": False}     # the check's capacities, the centroid
+    assert d["holds"] == [{"block": "a", "from_step": 1, "until_step": -1, **plain},
+                          {"block": "t", "from_step": 0, "until_step": 1, **plain},
+                          {"block": "ground", "from_step": 0, "until_step": 2, **plain}]
     assert messages.scene_from_state_dict(d).holds == held.holds
     assert messages.scene_from_state_dict(messages.state_to_dict(s)).holds == ()
     bad = dict(d, holds=[{"block": "a", "from_step": 0, "until_step": -2}])

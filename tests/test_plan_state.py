@@ -91,5 +91,8 @@ def test_goal_and_result_dicts_through_cdr():
     assert result["order"] == plan.order and result["plan"]["sequence"] == plan.order
     assert result["holds"] == result["plan"]["holds"] == [
         {"block": h.block, "from_step": h.from_step,
-         "until_step": -1 if h.until_step is None else h.until_step} for h in plan.scene.holds]
+         "until_step": -1 if h.until_step is None else h.until_step,
+         # the planner's holds: the check's capacities, the centroid
+         "max_force": 0.0, "max_torque": 0.0, "grip": {"x": 0.0, "y": 0.0, "z": 0.0},
+         "has_grip": False} for h in plan.scene.holds]
     assert [r["held_blocks"] for r in result["reports"]] == [list(h) for h in plan.held]

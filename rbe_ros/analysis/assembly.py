@@ -7,6 +7,7 @@ import numpy as np
 
 from ..geometry.block import PosedBlock, pose_blocks
 from ..geometry.contacts import ContactOptions, Interface, detect_contacts
+from ..rbe.model import Grip
 from ..scene import Scene
 
 
@@ -14,12 +15,15 @@ from ..scene import Scene
 class Assembly:
     """Posed blocks, the interfaces between them (not between two supports), gravity, and
     the near contacts (face pairs just beyond the contact tolerance, not between two
-    supports; see :mod:`rbe_ros.geometry.uncertainty`)."""
+    supports; see :mod:`rbe_ros.geometry.uncertainty`); ``grips``: the robots' holds of
+    held blocks (flagged supports, checked as free blocks with a bounded wrench by
+    :mod:`rbe_ros.analysis.verdict`; without a grip a held block is a plain support)."""
 
     blocks: tuple[PosedBlock, ...]
     interfaces: tuple[Interface, ...]
     gravity: np.ndarray
     near: tuple[Interface, ...] = ()
+    grips: tuple[Grip, ...] = ()
 
     @classmethod
     def from_scene(cls, scene: Scene, contact: ContactOptions = ContactOptions()) -> "Assembly":
@@ -30,10 +34,12 @@ class Assembly:
         Interface.compute_kerns(interfaces)
         return cls(blocks, interfaces, np.asarray(scene.gravity, dtype=float), near)
 
-    def subset(self, ids, held=()) -> "Assembly":
+    def subset(self, ids, held=(), grips=()) -> "Assembly":
         """The assembly of the blocks named in ``ids``, with the interfaces among them; the
         blocks named in ``held`` become supports (held by a robot, a scaffold, or treated as
-        rigid by a relaxation), and interfaces between two supports are dropped."""
+        rigid by a relaxation), and interfaces between two supports are dropped, except
+        those of a held block with a grip (of ``grips``, on held blocks), which is free in
+        the equilibrium."""
         keep, held = set(ids), set(held)
         index = {}
         for old, b in enumerate(self.blocks):
@@ -41,9 +47,10 @@ class Assembly:
                 index[old] = len(index)
         blocks = tuple(replace(self.blocks[i], support=True) if self.blocks[i].id in held
                        else self.blocks[i] for i in index)
+        grips = tuple(g for g in grips if g.block in held and g.block in keep)
+        rigid = [b.support and b.id not in {g.block for g in grips} for b in blocks]
         interfaces, near = (tuple(it.between(index[it.a], index[it.b])
                                   for it in found if it.a in index and it.b in index
-                                  and not (blocks[index[it.a]].support
-                                           and blocks[index[it.b]].support))
+                                  and not (rigid[index[it.a]] and rigid[index[it.b]]))
                             for found in (self.interfaces, self.near))
-        return Assembly(blocks, interfaces, self.gravity, near)
+        return Assembly(blocks, interfaces, self.gravity, near, grips)

@@ -19,6 +19,13 @@ minimal set is reachable that way, so the first set found at depth d is a minimu
 search is exact while it stays within ``HoldSearch.max_size`` blocks and
 ``HoldSearch.max_checks`` component checks.
 
+With hold capacities (``CheckOptions.hold_force_max``, ``hold_torque_max``) a hold set must
+also keep every robot within them: the components are no longer separable (a held block's
+wrench balances the forces of every component it touches), so a set whose components all
+stand is checked once more as a whole, a grip on each held block (cached). When that is
+HOLD_EXCEEDED, the components touching the blocks over capacity count as one failing
+component: only a hold among them can take load off those blocks.
+
 Beyond that budget, a greedy heuristic: repeatedly hold the candidate that leaves the
 fewest free blocks in failing components (ties: least tension, then candidate order),
 evaluating up to ``greedy_width`` candidates: first the blocks the failed check names as
@@ -33,6 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..rbe.model import Grip
 from ..rbe.result import Report, Status
 from .assembly import Assembly
 from .graph import ContactGraph
@@ -115,15 +123,42 @@ class StabilityOracle:
 
     def failing(self, held, *, explain: bool = True) -> list[tuple[frozenset, Report | None]]:
         """The components that do not stand with ``held`` (indices) held, smallest first,
-        with their reports (``explain``) or None."""
+        with their reports (``explain``) or None; when all stand but a robot's wrench is
+        over its capacity, the components touching the blocks over it, as one."""
         out = []
-        for comp in self.components(held):
+        components = self.components(held)
+        for comp in components:
             if not self.verdict(comp):
                 out.append((comp[0], self.report(comp) if explain else None))
-        return sorted(out, key=lambda c: (len(c[0]), min(c[0])))
+        if not out:
+            over = self.capacity(held)
+            if over is not None:
+                blocks = {self.index[b] for b in over.unstable_blocks}
+                near = frozenset().union(*(free for free, touched in components
+                                           if touched & blocks))
+                out.append((near, over))
+        return sorted(out, key=lambda c: (len(c[0]), min(c[0], default=-1)))
 
     def stands(self, held) -> bool:
-        return all(self.verdict(comp) for comp in self.components(held))
+        return (all(self.verdict(comp) for comp in self.components(held))
+                and self.capacity(held) is None)
+
+    def capacity(self, held) -> Report | None:
+        """The HOLD_EXCEEDED report of the whole assembly with a robot's grip (at the
+        centroid) on each block of ``held`` (indices) and on those it holds already, when
+        the options bound the wrenches and one is over; else None (cached)."""
+        options = self.options
+        if not held or (options.hold_force_max is None and options.hold_torque_max is None):
+            return None
+        names = {self.ids[k] for k in held}
+        key = ("capacity", frozenset(self.ids), frozenset(names))
+        if key not in self._shared:
+            grips = [*self.assembly.grips, *(Grip(b) for b in sorted(names))]
+            whole = self.assembly.subset(self.ids, names | {g.block for g in grips}, grips)
+            report = check(whole, options)
+            self._shared[key] = report if report.status == Status.HOLD_EXCEEDED else None
+            self.checks += 1
+        return self._shared[key]
 
 
 def minimal_holds(assembly: Assembly, options: CheckOptions = CheckOptions(), *,
@@ -178,8 +213,9 @@ def _deepen(oracle, held: frozenset, depth: int, preferred, budget: int, visited
         return held
     if len(fails) > depth - len(held):
         return None
-    comp = fails[0][0]
-    report = oracle.report(next(c for c in oracle.components(held) if c[0] == comp))
+    comp, report = fails[0]
+    if report is None:
+        report = oracle.report(next(c for c in oracle.components(held) if c[0] == comp))
     for k in _order(oracle, comp, report, preferred):
         nxt = held | {k}
         if nxt in visited:
@@ -210,6 +246,8 @@ def _greedy(oracle: StabilityOracle, preferred, width: int) -> frozenset:
             score = (sum(len(c) for c, _ in after), sum(r.max_tension for _, r in after), rank)
             if best_score is None or score < best_score:
                 best, best_score = k, score
+        if best is None:        # a robot over its capacity that no other hold can relieve
+            break
         held.append(best)
     return frozenset(release_unneeded(oracle, held))
 

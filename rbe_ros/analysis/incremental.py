@@ -63,7 +63,10 @@ class StepChecker:
 
     def check(self, assembly: Assembly) -> Report:
         """The verdict of ``assembly``, the next step after the ones checked before."""
-        report = self._local(assembly) if self.local and self._extends(assembly) else None
+        # held blocks with grips: their wrenches come from the whole problem (a local one
+        # would take them as supports)
+        report = (self._local(assembly) if self.local and not assembly.grips
+                  and self._extends(assembly) else None)
         if report is None:
             report = check(assembly, self.options)
         self._last_failed = not report.stable

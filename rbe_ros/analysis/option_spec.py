@@ -174,6 +174,14 @@ OPTIONS: tuple[Option, ...] = (
     Option("insertion.approach_distance", float, "insertion: the placed block's path must be "
            "free over this many m; 0: twice the block's longest extent", "--approach-distance",
            "approach_distance", 0.0, 100.0, metavar="M"),
+    Option("hold_force_max", float, "largest force in N a robot's hold may apply to a held "
+           "block (at its grip); a step that stands only with more is HOLD_EXCEEDED; a scene "
+           "hold's \"max_force\" wins; 0: unbounded", "--hold-force-max", "hold_force_max",
+           0.0, 1e9, zero=NONE, metavar="N"),
+    Option("hold_torque_max", float, "largest torque in N m a robot's hold may apply to a "
+           "held block (about its grip); a scene hold's \"max_torque\" wins (0 there: a pin "
+           "grip); 0: unbounded", "--hold-torque-max", "hold_torque_max", 0.0, 1e9,
+           zero=NONE, metavar="NM"),
     # fixed in the CLI and the node; stored so that a replay uses what a recording used
     Option("solve.weights.compression", float, "objective weight of compression"),
     Option("solve.weights.tension", float, "objective weight of tension (friction+ penalty)"),

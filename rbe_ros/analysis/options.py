@@ -61,6 +61,17 @@ class CheckOptions:
     #: Sane ranges checked before the geometry stage (None: no validation); see validate.py.
     limits: ValidationLimits | None = field(default_factory=ValidationLimits)
     insertion: InsertionOptions = field(default_factory=InsertionOptions)
+    #: Capacities of a robot's hold of a held block (N, N m; a scene hold's own win): the
+    #: wrench it applies at its grip, |F| <= hold_force_max and |M| <= hold_torque_max;
+    #: None: unbounded (a held block then stands like a support).
+    hold_force_max: float | None = None
+    hold_torque_max: float | None = None
+
+    def __post_init__(self):
+        for name in ("hold_force_max", "hold_torque_max"):
+            value = getattr(self, name)
+            if value is not None and not value >= 0:
+                raise ValueError(f"{name} must be >= 0 or None (unbounded), not {value!r}")
 
     @property
     def threshold(self) -> float:

@@ -19,7 +19,7 @@ from .incremental import StepChecker
 from .insertion import block_insertion
 from .margin import report_margin
 from .options import CheckOptions
-from .steps import final_state, last_block, sequence_step, step_count
+from .steps import final_grips, final_state, last_block, sequence_step, step_count
 from .validate import validated_assembly
 from .verdict import check
 
@@ -43,7 +43,7 @@ def check_scene(scene: Scene, options: CheckOptions = CheckOptions(),
             assembly, held = whole, ()
             if scene.holds:
                 present, held = final_state(scene)
-                assembly = whole.subset(present, held)
+                assembly = whole.subset(present, held, final_grips(scene, held))
             with stage("solve"):
                 report = check(assembly, options)
             placed = Placed(whole, tuple(b.id for b in assembly.blocks), last_block(scene),
@@ -84,7 +84,7 @@ def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
         try:
             if full is None:
                 raise geometry_timeout
-            assembly = full.subset(step.present, step.held)
+            assembly = full.subset(step.present, step.held, step.grips)
             with time_budget(limit):
                 with stage("solve"):
                     report = checker.check(assembly)

@@ -19,9 +19,12 @@ the previous step plus the new block, with more blocks added greedily while the 
 not stand (those the failed check names as moving first), then every hold whose release
 keeps the step standing is released, oldest first; if that leaves more than K, the exact
 minimal hold search (:func:`rbe_ros.analysis.holds.minimal_holds`, within its budget). A
-candidate is feasible with at most K holds. Each partial plan keeps the first ``beam``
-feasible candidates; of all children the ``beam`` best survive (fewest hold-steps so far,
-then fewest holds now, then candidate rank). No child at a step: the plan fails there.
+candidate is feasible with at most K holds, each robot within the hold capacities of the
+options (``hold_force_max``, ``hold_torque_max``: see :class:`~rbe_ros.analysis.holds.
+StabilityOracle`); when no candidate is, the message names the wrench the best one needs.
+Each partial plan keeps the first ``beam`` feasible candidates; of all children the ``beam``
+best survive (fewest hold-steps so far, then fewest holds now, then candidate rank).
+No child at a step: the plan fails there.
 
 The finished assembly must stand with nothing held; if the last step holds blocks, a release
 step follows. The planned scene (sequence = order, holds = the runs of steps each block is
@@ -184,21 +187,43 @@ class _Planner:
                                 self.options, self.scene.approach_of(order[-1]))
         return "" if found.insertable else found.reason
 
-    def holds_for(self, order: tuple[str, ...], previous: tuple[str, ...]):
-        """(held blocks, within K) for the step that places ``order[-1]``."""
+    def holds_for(self, order: tuple[str, ...], previous: tuple[str, ...], options=None):
+        """(held blocks, within K) for the step that places ``order[-1]`` (under ``options``,
+        default the plan's)."""
         k = len(order) - 1
+        options = options or self.options
         assembly = self.full.subset(self.present(order, k))
-        oracle = StabilityOracle(assembly, self.options, self.cache)
+        oracle = StabilityOracle(assembly, options, self.cache)
         try:
             held = self._repair(oracle, order[-1], previous)
-            if len(held) > self.plan.max_held:
-                result = minimal_holds(assembly, self.options, prefer=(*previous, order[-1]),
+            if len(held) > self.plan.max_held or not oracle.stands(self._indices(oracle, held)):
+                result = minimal_holds(assembly, options, prefer=(*previous, order[-1]),
                                        oracle=oracle)
-                if result.stands and len(result.blocks) < len(held):
+                if result.stands and (len(result.blocks) < len(held)
+                                      or not oracle.stands(self._indices(oracle, held))):
                     held = result.blocks
+            ok = len(held) <= self.plan.max_held and oracle.stands(self._indices(oracle, held))
         finally:
             self.checks += oracle.checks
-        return held, len(held) <= self.plan.max_held
+        return held, ok
+
+    @staticmethod
+    def _indices(oracle: StabilityOracle, held) -> list[int]:
+        return [oracle.index[b] for b in held]
+
+    def _capacity_note(self, order: tuple[str, ...], previous) -> str:
+        """What the robots would need beyond their capacities at the step that places
+        ``order[-1]``, held as the plan would hold it with unbounded robots ("" when the
+        capacities are unbounded, or that needs more than K holds or is within them)."""
+        if self.options.hold_force_max is None and self.options.hold_torque_max is None:
+            return ""
+        unbounded = replace(self.options, hold_force_max=None, hold_torque_max=None)
+        held, ok = self.holds_for(order, previous, unbounded)
+        oracle = StabilityOracle(self.full.subset(self.present(order, len(order) - 1)),
+                                 self.options, self.cache)
+        over = oracle.capacity(self._indices(oracle, held)) if ok else None
+        return (f"; with {', '.join(held)} held (fewest with unbounded robots), {over.message}"
+                if over is not None else "")
 
     def _repair(self, oracle: StabilityOracle, new: str, previous) -> tuple[str, ...]:
         if oracle.stands(()):
@@ -209,6 +234,8 @@ class _Planner:
             if not fails:
                 break
             comp, report = fails[0]
+            if not comp:            # a robot over its capacity that no other hold can relieve
+                break
             named = [oracle.index[b] for b in report.unstable_blocks
                      if b in oracle.index and oracle.index[b] in comp]
             held.append(sorted(named or comp, key=lambda j: (-oracle.height[j], j))[0])
@@ -254,6 +281,8 @@ class _Planner:
                 count = len(best_rejected[1]) if best_rejected else 0
                 why = (f"; the best candidate, {best_rejected[0]}, needs {count} held "
                        f"block{'' if count == 1 else 's'} ({', '.join(best_rejected[1])})"
+                       + self._capacity_note((*best.order, best_rejected[0]),
+                                             best.held[-1] if best.held else ())
                        if best_rejected else
                        "; no unplaced block touches the placed ones" if not blocked else "")
                 why += "".join(f"; {b} cannot be inserted: {r}" for b, r in blocked.items())

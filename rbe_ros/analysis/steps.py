@@ -6,6 +6,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ..rbe.model import Grip
 from ..scene import Scene
 
 
@@ -16,7 +20,8 @@ class Step:
     index: int
     block: str                      # "" at the release step after the last placement
     present: tuple[str, ...]
-    held: tuple[str, ...] = ()      # free blocks checked as supports at this step
+    held: tuple[str, ...] = ()      # free blocks held at this step
+    grips: tuple[Grip, ...] = ()    # the robots' grips of the held blocks
 
 
 def step_state(scene: Scene, order, k: int) -> tuple[tuple[str, ...], tuple[str, ...]]:
@@ -45,10 +50,35 @@ def supports_present(scene: Scene, k: int) -> tuple[str, ...]:
                  if b.support and (b.id not in with_hold or b.id in active))
 
 
+def step_grips(scene: Scene, k: int, held) -> tuple[Grip, ...]:
+    """The grips of the blocks ``held`` at step ``k``, from their active holds: the grip
+    point from the block frame to the world (None: the centroid, found when the model is
+    built), the capacities as the hold gives them (None: the check's options)."""
+    out = []
+    for h in scene.holds:
+        if h.block in held and h.active(k):
+            point = None
+            if h.grip is not None:
+                b = scene.block(h.block)
+                point = Rotation.from_quat(b.orientation).apply(np.asarray(h.grip)) + b.position
+            out.append(Grip(h.block, point, h.max_force, h.max_torque))
+            held = [b for b in held if b != h.block]     # one grip per block
+    return tuple(out)
+
+
+def _final_step(scene: Scene) -> tuple[list[str], int]:
+    order = [b.id for b in scene.blocks if not b.support]
+    return order, len(order) + 1
+
+
 def final_state(scene: Scene) -> tuple[tuple[str, ...], tuple[str, ...]]:
     """(present, held) after the last step: every block placed, holds to the end active."""
-    order = [b.id for b in scene.blocks if not b.support]
-    return step_state(scene, order, len(order) + 1)
+    return step_state(scene, *_final_step(scene))
+
+
+def final_grips(scene: Scene, held) -> tuple[Grip, ...]:
+    """The grips of the blocks ``held`` after the last step (:func:`final_state`)."""
+    return step_grips(scene, _final_step(scene)[1], held)
 
 
 def sequence_steps(scene: Scene) -> list[Step]:
@@ -78,4 +108,6 @@ def step_count(scene: Scene) -> int:
 def sequence_step(scene: Scene, k: int) -> Step:
     """Step ``k`` of :func:`sequence_steps` alone."""
     order = _order(scene)
-    return Step(k, order[k] if k < len(order) else "", *step_state(scene, order, k))
+    present, held = step_state(scene, order, k)
+    return Step(k, order[k] if k < len(order) else "", present, held,
+                step_grips(scene, k, held))

@@ -6,16 +6,24 @@ more solves explain the failure: the same equilibrium without any friction limit
 sliding (it stands with more friction: FRICTION_EXCEEDED, its forces show where) from tipping
 (it still needs tension: TENSION_REQUIRED), and then friction+ (always feasible while every
 block is connected to a support) shows where tension is needed.
+
+A held block with a grip (``Assembly.grips``) is a free block with the robot's wrench, bounded
+by the grip's capacities (the check's ``hold_force_max`` and ``hold_torque_max`` unless the
+hold gives its own). When the capped problem is infeasible, one more solve without the
+capacities tells HOLD_EXCEEDED (it stands with a larger wrench: the report names the block,
+the wrench needed and the capacity) from the other failures (explained as above).
 """
 from __future__ import annotations
 
 import math
 from dataclasses import replace
 
+import numpy as np
+
 from ..rbe.cones import cone_capacity
-from ..rbe.model import EquilibriumModel, build_model
+from ..rbe.model import EquilibriumModel, Grip, build_model, finite
 from ..rbe.prestress import Squeeze, squeeze
-from ..rbe.result import InterfaceResult, Report, Status
+from ..rbe.result import HoldWrench, InterfaceResult, Report, Status
 from ..rbe.resultants import interface_results
 from ..rbe.solver import Solution, solve
 from .assembly import Assembly
@@ -36,8 +44,28 @@ def _deciding(assembly: Assembly, options: CheckOptions):
         return Report(Status.INFEASIBLE,
                       f"no equilibrium: {_names(floating)} not connected to a support by any"
                       f" contact", unstable_blocks=floating)
-    model = build_model(assembly.blocks, assembly.interfaces, assembly.gravity)
+    model = model_of(assembly, options)
     return model, solve(model, options.deciding)
+
+
+def model_of(assembly: Assembly, options: CheckOptions, *, bounded: bool = True
+             ) -> EquilibriumModel:
+    """The equilibrium model of ``assembly``, its grips with their capacities (a grip's own,
+    else the option's; ``bounded`` False: unbounded, except a capacity 0, which says what
+    the grip cannot apply at all, as a pin grip no torque)."""
+    centroid = {b.id: b.centroid for b in assembly.blocks}
+    grips = tuple(replace(g, point=centroid[g.block] if g.point is None else g.point,
+                          max_force=_capacity(g.max_force, options.hold_force_max, bounded),
+                          max_torque=_capacity(g.max_torque, options.hold_torque_max, bounded))
+                  for g in assembly.grips)
+    return build_model(assembly.blocks, assembly.interfaces, assembly.gravity, grips)
+
+
+def _capacity(own: float | None, option: float | None, bounded: bool) -> float:
+    value = option if own is None else own
+    if value is None or (not bounded and value > 0):
+        return math.inf
+    return float(value)
 
 
 def _verdict(assembly: Assembly, options: CheckOptions) -> Report:
@@ -53,7 +81,62 @@ def _verdict(assembly: Assembly, options: CheckOptions) -> Report:
         return report if found is None else _prestress_report(model, report, found, options)
     if primary.status == "failed":
         return _failed(primary)
+    if any(finite(g.max_force) or finite(g.max_torque) for g in model.grips):
+        unbounded = model_of(assembly, options, bounded=False)
+        needed = solve(unbounded, options.deciding)
+        if needed.solved:
+            report = _report(unbounded, needed, options)
+            return _exceeded(report, model.grips) if report.stable else report
+        if needed.status == "failed":
+            return _failed(needed)
+        model = unbounded
     return _explain(model, options)
+
+
+def _exceeded(report: Report, grips: tuple[Grip, ...]) -> Report:
+    """HOLD_EXCEEDED: ``report`` stands with the wrenches it names, beyond ``grips``."""
+    wrenches = hold_wrenches(grips, [np.concatenate((w.force, w.torque))
+                                     for w in report.hold_wrenches])
+    over = [w for w in wrenches if w.utilisation > 1.0] or \
+        [max(wrenches, key=lambda w: w.utilisation)]
+    what = "; ".join(
+        f"block {w.block} needs |F| {np.linalg.norm(w.force):.4g} N"
+        f" (capacity {_shown(g.max_force, 'N')}) and |M| {np.linalg.norm(w.torque):.4g} N m"
+        f" (capacity {_shown(g.max_torque, 'N m')}) at its grip"
+        f" ({', '.join(f'{x:.4g}' for x in w.grip_point)})"
+        for w, g in ((w, next(g for g in grips if g.block == w.block)) for w in over))
+    return replace(report, status=Status.HOLD_EXCEEDED, hold_wrenches=wrenches,
+                   unstable_blocks=tuple(w.block for w in over),
+                   message=f"hold exceeded: stands only with more than the robot can apply:"
+                           f" {what}")
+
+
+def _shown(capacity: float, unit: str) -> str:
+    return f"{capacity:.4g} {unit}" if math.isfinite(capacity) else "unbounded"
+
+
+def hold_wrenches(grips, wrenches) -> tuple[HoldWrench, ...]:
+    """The HoldWrench of each grip from its wrench (force, torque about the grip: 6 numbers),
+    with its utilisation of the grip's capacities (a capacity of 0 counts any wrench above
+    rounding, 1e-9 N or N m, as infinite use)."""
+    out = []
+    for g, w in zip(grips, wrenches):
+        force, torque = np.array(w[:3], dtype=float), np.array(w[3:], dtype=float)
+        use = max((_use(np.linalg.norm(x), cap) for x, cap in ((force, g.max_force),
+                                                               (torque, g.max_torque))
+                   if finite(cap)), default=0.0)
+        out.append(HoldWrench(g.block, force, torque, np.array(g.point, dtype=float), use))
+    return tuple(out)
+
+
+def _use(size: float, capacity: float) -> float:
+    if capacity > 0:
+        return float(size / capacity)
+    return math.inf if size > ZERO_WRENCH else 0.0
+
+
+#: A wrench below this (N or N m) is none: the solver's rounding on a zero-capacity grip.
+ZERO_WRENCH = 1e-9
 
 
 def infeasible_report(assembly: Assembly, options: CheckOptions = CheckOptions()) -> Report | None:
@@ -89,8 +172,7 @@ def is_stable(assembly: Assembly, options: CheckOptions = CheckOptions()) -> boo
     friction threshold."""
     if ContactGraph(assembly).floating_blocks():
         return False
-    model = build_model(assembly.blocks, assembly.interfaces, assembly.gravity)
-    return stable_forces(model, options) is not None
+    return stable_forces(model_of(assembly, options), options) is not None
 
 
 def stable_forces(model: EquilibriumModel, options: CheckOptions, load=None
@@ -185,7 +267,8 @@ def _report(model, solution, options: CheckOptions, *, sliding: bool = False) ->
                    f" worst |V|/N {worst:.3f} (mu {options.solve.mu:.3g}"
                    + (f", threshold {mu:.3g})" if mu < options.solve.mu else ")"))
     return Report(status, message, max_tension, worst, num_blocks=len(model.blocks),
-                  interfaces=results, unstable_blocks=unstable)
+                  interfaces=results, unstable_blocks=unstable,
+                  hold_wrenches=hold_wrenches(model.grips, solution.wrenches))
 
 
 #: With a declared pose uncertainty, the friction ratio counts (worst_friction_ratio, the

@@ -23,6 +23,9 @@ Namespaces (after a DELETEALL, so the markers of an earlier report vanish):
   1000-block wall step under 2 MB;
 * ``insertion``: an ARROW along the placed block's insertion direction, ending at its
   centre, one and a half times its extent long (none when it has no direction);
+* ``holds``: one ARROW per held block with a robot's wrench, from its grip point along the
+  force on the block (the largest hold force 0.3 times the assembly's size long; id: the
+  hold's index in the report), amber, red when it exceeds the capacity (utilisation > 1);
 * ``text``: a TEXT_VIEW_FACING above the assembly: step, block, verdict and the reason.
 
 Nothing here imports rclpy.
@@ -329,9 +332,29 @@ def report_markers(meshes: Meshes, roles: Mapping[str, str], report: Report, hea
         position = ((lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, hi[2] + 0.15 * size)
     else:
         size, position = 1.0, (0.0, 0.0, 1.0)
+    markers += hold_markers(report, header, 0.3 * size)
     markers.append(_marker(header, "text", 0, TEXT_VIEW_FACING, TEXT, position=position,
                            scale=(0, 0, max(0.04 * size, 0.02)), text=text_of(report)))
     return {"markers": markers}
+
+
+#: Colours of the hold arrows: within the capacity, beyond it.
+HOLD_COLOURS = ((1.0, 0.65, 0.0, 1.0), (1.0, 0.05, 0.05, 1.0))
+
+
+def hold_markers(report: Report, header: Mapping, length: float) -> list[dict]:
+    """An ARROW per hold wrench of ``report`` from its grip along its force, the largest
+    ``length`` m long (see the module docstring)."""
+    forces = [np.asarray(w.force, dtype=float) for w in report.hold_wrenches]
+    largest = max((float(np.linalg.norm(f)) for f in forces), default=0.0)
+    out = []
+    for k, (w, f) in enumerate(zip(report.hold_wrenches, forces)):
+        start = np.asarray(w.grip_point, dtype=float)
+        end = start + (length / largest * f if largest > 0 else 0.0)
+        out.append(_marker(header, "holds", k, ARROW, HOLD_COLOURS[w.utilisation > 1.0],
+                           points=np.stack([start, end]),
+                           scale=(0.04 * length, 0.08 * length, 0.12 * length)))
+    return out
 
 
 def step_markers(scene: Scene, report: Report, header: Mapping, **kw) -> dict:

@@ -19,7 +19,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from ..analysis.planning import Plan, PlanProgress
-from ..rbe.result import NOT_COMPUTED, InterfaceResult, NearContact, Report, Status
+from ..rbe.result import NOT_COMPUTED, HoldWrench, InterfaceResult, NearContact, Report, Status
 from ..scene import (BOX_FACES, Hold, Scene, SceneError, blame, box_vertices, make_block,
                      make_scene)
 from .plans import PlanLimits
@@ -130,11 +130,19 @@ def state_to_dict(scene: Scene, frame_id: str = "world", stamp_ns: int = 0) -> d
         "blocks": [_block_to_dict(b) for b in scene.blocks],
         "sequence": list(scene.sequence),
         "gravity": _vec(scene.gravity),
-        "holds": [{"block": h.block, "from_step": int(h.from_step),
-                   "until_step": -1 if h.until_step is None else int(h.until_step)}
-                  for h in scene.holds],
+        "holds": [_hold_to_dict(h) for h in scene.holds],
         "approach": [_vec(np.zeros(3) if d is None else d) for d in scene.approach],
     }
+
+
+def _hold_to_dict(h: Hold) -> dict:
+    """A Hold dict: capacities <= 0 and has_grip false stand for the check's options and the
+    centroid (a hold's capacity 0, a pin grip, is sent as 0 too: the message cannot say it)."""
+    return {"block": h.block, "from_step": int(h.from_step),
+            "until_step": -1 if h.until_step is None else int(h.until_step),
+            "max_force": float(h.max_force or 0.0), "max_torque": float(h.max_torque or 0.0),
+            "grip": _vec(h.grip if h.grip is not None else (0.0, 0.0, 0.0)),
+            "has_grip": h.grip is not None}
 
 
 def _block_from_dict(index: int, raw):
@@ -222,7 +230,17 @@ def _hold_from_dict(index: int, raw) -> Hold:
     from_step, until_step = steps
     if until_step < -1:
         raise SceneError(f"{where}: until_step must be -1 (to the end) or a step, got {until_step}")
-    return Hold(block, from_step, None if until_step == -1 else until_step)
+    capacities = []
+    for key in ("max_force", "max_torque"):
+        value = _field(raw, key, 0.0, where)
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.number)) \
+                or not math.isfinite(value):
+            raise SceneError(f"{where}: {key} must be a finite number, got {value!r}")
+        capacities.append(float(value) if value > 0 else None)
+    has_grip = _field(raw, "has_grip", False, where)
+    grip = _xyz(_field(raw, "grip", {}, where), f"{where}.grip") if has_grip else None
+    return Hold(block, from_step, None if until_step == -1 else until_step,
+                None if grip is None else tuple(float(x) for x in grip), *capacities)
 
 
 # --- BlockPoses -------------------------------------------------------------------------------
@@ -342,6 +360,9 @@ def report_to_dict(report: Report, header: dict, *, arrays: bool = False) -> dic
         "margin_direction": _vec(report.margin_direction),
         "insertable": bool(report.insertable),
         "insertion_direction": _vec(report.insertion_direction),
+        "hold_wrenches": [{"block": str(w.block), "force": _vec(w.force),
+                           "torque": _vec(w.torque), "grip_point": _vec(w.grip_point),
+                           "utilisation": float(w.utilisation)} for w in report.hold_wrenches],
     }
 
 
@@ -385,6 +406,9 @@ def report_from_dict(d: Mapping) -> Report:
         insertable=bool(d.get("insertable", True)),
         insertion_direction=np.array(_xyz(d.get("insertion_direction", {}),
                                           "insertion_direction"), dtype=float),
+        hold_wrenches=[HoldWrench(str(w["block"]), *(np.array(_xyz(w[k], k), dtype=float)
+                                                     for k in ("force", "torque", "grip_point")),
+                                  float(w["utilisation"])) for w in d.get("hold_wrenches", [])],
     )
 
 

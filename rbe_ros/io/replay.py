@@ -558,7 +558,7 @@ _TOP_EXACT = ("step_index", "block_placed", "stable", "status", "num_blocks", "u
               "held_blocks", "suggested_holds", "model")
 _TOP_DONE = set(_TOP_EXACT) | {"header", "message", "max_tension", "worst_friction_ratio",
                                "interfaces", "margin_g", "margin_direction",
-                               "insertion_direction"} | IGNORED
+                               "insertion_direction", "hold_wrenches"} | IGNORED
 _IF_DONE = {"block_a", "block_b", "normal", "polygon", "normal_forces", "tangential_forces",
             "resultant_force", "normal_resultant", "shear_resultant", "centre_of_pressure",
             "torque", "kern", "friction_ratio", "tension", "friction_exceeded"}
@@ -624,9 +624,25 @@ def compare_report(recorded: dict, replayed: dict, *, run: int = 0, free_weight:
         c.vectors("", "insertion_direction", recorded["insertion_direction"],
                   replayed.get("insertion_direction", dict.fromkeys("xyz", 0.0)),
                   tolerances.position)
+    _compare_hold_wrenches(c, recorded.get("hold_wrenches", []),
+                           replayed.get("hold_wrenches", []), tolerances)
     for name in sorted(set(recorded) - _TOP_DONE):     # fields added later: exact
         c.exact("", name, recorded.get(name), replayed.get(name))
     return c.out
+
+
+def _compare_hold_wrenches(c: _Comparer, a: list, b: list, tolerances: Tolerances) -> None:
+    """The robots' wrenches: blocks exact, forces within the force tolerance, torques within
+    it times the grip's distance from the origin plus one (m), grip points within the
+    position tolerance, utilisations within the ratio tolerance."""
+    c.exact("", "hold_wrenches blocks", [w["block"] for w in a], [w["block"] for w in b])
+    for x, y in zip(a, b):
+        where = f"hold of {x['block']}"
+        arm = 1.0 + max(abs(float(v)) for v in x["grip_point"].values())
+        c.vectors(where, "force", x["force"], y["force"], c.force)
+        c.vectors(where, "torque", x["torque"], y["torque"], c.force * arm)
+        c.vectors(where, "grip_point", x["grip_point"], y["grip_point"], tolerances.position)
+        c.number(where, "utilisation", x["utilisation"], y["utilisation"], tolerances.ratio)
 
 
 #: Plan result fields compared exactly (the reports are compared as reports).

@@ -42,10 +42,15 @@ def _approach_from(raw) -> tuple:
 def _hold_from_dict(index: int, raw) -> Hold:
     if not isinstance(raw, dict) or "block" not in raw:
         raise SceneError(f'hold #{index} must be an object with a "block"')
-    unknown = set(raw) - {"block", "from_step", "until_step"}
+    unknown = set(raw) - {"block", "from_step", "until_step", *_HOLD_EXTRA}
     if unknown:
         raise SceneError(f"hold #{index}: unknown keys {sorted(unknown)}")
-    return Hold(str(raw["block"]), raw.get("from_step", 0), raw.get("until_step"))
+    return Hold(str(raw["block"]), raw.get("from_step", 0), raw.get("until_step"),
+                *(raw.get(k) for k in _HOLD_EXTRA))
+
+
+#: A robot's grip (block frame, m) and capacities (N, N m) of a hold, each optional.
+_HOLD_EXTRA = ("grip", "max_force", "max_torque")
 
 
 def _block_from_dict(index: int, raw, base_dir: Path | None) -> Block:
@@ -123,7 +128,9 @@ def scene_to_dict(scene: Scene) -> dict:
         out["sequence"] = list(scene.sequence)
     if scene.holds:
         out["holds"] = [{"block": h.block, "from_step": h.from_step,
-                         **({} if h.until_step is None else {"until_step": h.until_step})}
+                         **({} if h.until_step is None else {"until_step": h.until_step}),
+                         **{k: (list(getattr(h, k)) if k == "grip" else getattr(h, k))
+                            for k in _HOLD_EXTRA if getattr(h, k) is not None}}
                         for h in scene.holds]
     if scene.pose_uncertainty is not None:
         out["pose_uncertainty"] = list(scene.pose_uncertainty)

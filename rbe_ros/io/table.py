@@ -36,20 +36,30 @@ def hold_note(r: Report) -> str:
     return note
 
 
+def largest_hold_force(r: Report) -> float:
+    """The largest |F| a robot applies to a held block in ``r`` (N; 0 when none is held)."""
+    return max((float(np.linalg.norm(w.force)) for w in r.hold_wrenches), default=0.0)
+
+
 def format_table(reports: list[Report]) -> str:
     """One row per report: step, block, verdict, max tension, worst |V|/N, time, margin
-    (when computed), approach (when checked: :func:`approach_text`) and reason; the reason
-    notes the blocks held at the step and, when unstable, the ones to hold."""
+    (when computed), the largest hold force (when a report has hold wrenches), approach (when
+    checked: :func:`approach_text`) and reason; the reason notes the blocks held at the step
+    and, when unstable, the ones to hold."""
     margin = any(r.margin_g >= 0 for r in reports)
+    hold = any(r.hold_wrenches for r in reports)
     approach = any(not r.insertable or np.any(r.insertion_direction) for r in reports)
     head = ("step", "block", "verdict", "max tension N", "worst |V|/N", "solve ms") \
-        + ("margin g",) * margin + ("approach",) * approach + ("reason",)
+        + ("margin g",) * margin + ("max hold N",) * hold + ("approach",) * approach \
+        + ("reason",)
     rows = [head]
     for r in reports:
         ratio = f"{r.worst_friction_ratio:.3f}" if math.isfinite(r.worst_friction_ratio) else "inf"
         rows.append((str(r.step_index) if r.step_index >= 0 else "-", r.block_placed or "-",
                      r.status.name, f"{r.max_tension:.1f}", ratio, f"{1e3 * r.solve_time:.1f}")
-                    + (f"{r.margin_g:.3f}",) * margin + (approach_text(r),) * approach
+                    + (f"{r.margin_g:.3f}",) * margin
+                    + (f"{largest_hold_force(r):.1f}" if r.hold_wrenches else "-",) * hold
+                    + (approach_text(r),) * approach
                     + (r.message + hold_note(r),))
     widths = [max(len(row[i]) for row in rows) for i in range(len(head) - 1)]
     lines = ["  ".join(c.ljust(w) if i < 3 else c.rjust(w)

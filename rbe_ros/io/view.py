@@ -22,10 +22,11 @@ from plotly.offline import get_plotlyjs
 
 from ..analysis.options import CheckOptions
 from ..rbe.result import Status
-from .markers import ROLE_COLOURS, ROLES, approach_markers, line_markers, run_roles
+from .markers import (ROLE_COLOURS, ROLES, approach_markers, hold_markers, line_markers,
+                      run_roles)
 from .messages import report_from_dict
 from .replay import Run, options_to_json, replay_run
-from .table import approach_text
+from .table import approach_text, largest_hold_force
 
 #: Coordinates in the page are rounded to 0.1 mm.
 DECIMALS = 4
@@ -96,19 +97,24 @@ def view_data(runs: Sequence[ViewRun], options: CheckOptions, title: str) -> dic
             x, y, z = _coords(meshes.triangles[meshes.start[i]:meshes.end[i]])
             blocks.append({"id": bid, "x": x, "y": y, "z": z})
         out_runs.append({"label": run.label, "blocks": blocks})
+        size = (float(np.ptp(meshes.triangles.reshape(-1, 3), axis=0).max())
+                if len(meshes.triangles) else 1.0)
         for d, report, role in zip(run.reports, reports, roles):
             lines = []
-            for m in line_markers(report, d["header"]):
+            for m in (line_markers(report, d["header"])
+                      + hold_markers(report, d["header"], 0.3 * size)):
                 x, y, z = _segments(m["points"])
                 lines.append({"name": f"{m['ns']} {m['id']}",
                               "colour": _rgba(tuple(m["color"][k] for k in "rgba")),
-                              "width": 6 if m["ns"] == "forces" else 3, "x": x, "y": y, "z": z})
+                              "width": _WIDTHS.get(m["ns"], 3), "x": x, "y": y, "z": z})
             steps.append({
                 "run": r, "step": report.step_index, "block": report.block_placed,
                 "status": report.status.name, "stable": report.stable,
                 "max_tension": _number(report.max_tension),
                 "worst_friction_ratio": _number(report.worst_friction_ratio),
-                "model": report.model, "margin": _margin(d), "message": report.message,
+                "model": report.model, "margin": _margin(d),
+                "max_hold": largest_hold_force(report) if report.hold_wrenches else None,
+                "message": report.message,
                 "approach": approach_text(report), "arrow": _arrow(meshes, report, d),
                 "roles": {bid: ROLES.index(role) for bid, role in role.items()},
                 "lines": lines})
@@ -117,6 +123,10 @@ def view_data(runs: Sequence[ViewRun], options: CheckOptions, title: str) -> dic
                        "opacity": ROLE_COLOURS[n][3]} for n in ROLES],
             "options": json.loads(options_to_json(options)),
             "statuses": {s.name: s.value for s in Status}}
+
+
+#: Line widths in the page by marker namespace (others 3): forces and the robots' holds.
+_WIDTHS = {"forces": 6, "holds": 10}
 
 
 def write_html(path, runs: Sequence[ViewRun], options: CheckOptions, title: str) -> Path:
@@ -158,7 +168,7 @@ tr { cursor: pointer; }
 <div class="legend" id="legend"></div>
 <div id="plot"></div>
 <table id="steps"><thead><tr><th>run</th><th>step</th><th>block</th><th>verdict</th>
-<th>max tension N</th><th>worst |V|/N</th><th>model</th><th>margin g</th><th>approach</th>
+<th>max tension N</th><th>worst |V|/N</th><th>model</th><th>margin g</th><th>max hold N</th><th>approach</th>
 <th>reason</th>
 </tr></thead><tbody></tbody></table>
 <h3>Check options</h3><table id="options"><tbody></tbody></table>
@@ -254,6 +264,7 @@ function build() {
     cell(tr, fmt(s.worst_friction_ratio, 3), "num");
     cell(tr, s.model);
     cell(tr, fmt(s.margin, 3), "num");
+    cell(tr, fmt(s.max_hold, 1), "num");
     cell(tr, s.approach);
     cell(tr, s.message);
     tr.addEventListener("click", () => show(k));

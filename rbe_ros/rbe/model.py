@@ -10,10 +10,16 @@ with s = +1 where j is side b and -1 where it is side a. The variables are store
 x = [fn+, fn-, fu, fv] (nv each), and the system is scaled to forces in units of the total
 free weight W and lever arms in units of the scene length L, so that the solver works on
 numbers of order one whatever the units of the scene.
+
+A held free block (a :class:`Grip`) stays free with one more load, the robot's wrench: an
+unknown force F at the grip point p and a torque M about it, stored after the vertex forces
+as columns of ``hold_columns`` (z = F / W and y = M / (W l), l the block's size), so that its
+rows read F + ... = -w and (p - c) x F + M + ... = 0.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -24,6 +30,20 @@ from ..geometry.polygon import cross
 
 #: Variable kinds in the order they are stacked.
 KINDS = ("fn_pos", "fn_neg", "fu", "fv")
+
+
+@dataclass(frozen=True)
+class Grip:
+    """A robot's hold of a free block: an unknown force at ``point`` (world) and a torque
+    about it, bounded by ``max_force`` (N) and ``max_torque`` (N m). math.inf: unbounded (the
+    block is held like a support); 0: none (a pin grip carries no torque). None, the point:
+    the block's centroid; a capacity: the check's option (both resolved before a model is
+    built, by :func:`rbe_ros.analysis.verdict.model_of`)."""
+
+    block: str
+    point: np.ndarray | None = None
+    max_force: float | None = None
+    max_torque: float | None = None
 
 
 @dataclass(frozen=True)
@@ -42,6 +62,11 @@ class EquilibriumModel:
     v: np.ndarray
     force_scale: float           # W in N
     length_scale: float          # L in m
+    grips: tuple[Grip, ...] = ()
+    #: (6 m, number of hold variables): the equilibrium columns of the grips' wrenches
+    hold_columns: sp.csc_matrix = field(default_factory=lambda: sp.csc_matrix((0, 0)))
+    #: per grip: first column of its force (-1: none), of its torque (-1: none), its length l
+    hold_layout: tuple[tuple[int, int, float], ...] = ()
 
     @property
     def num_vertices(self) -> int:
@@ -71,11 +96,15 @@ def _weights(blocks, free, acceleration, force_scale) -> np.ndarray:
     return p.ravel()
 
 
-def build_model(blocks, interfaces, gravity) -> EquilibriumModel:
-    """Assemble the scaled equilibrium matrix of the free blocks (vectorised over vertices)."""
-    blocks, interfaces = tuple(blocks), tuple(interfaces)
+def build_model(blocks, interfaces, gravity, grips=()) -> EquilibriumModel:
+    """Assemble the scaled equilibrium matrix of the free blocks (vectorised over vertices);
+    the blocks of ``grips`` (capacities resolved, not None) are free blocks with a wrench,
+    whether or not they are flagged as supports."""
+    blocks, interfaces, grips = tuple(blocks), tuple(interfaces), tuple(grips)
     gravity = np.asarray(gravity, dtype=float)
-    free = np.array([j for j, b in enumerate(blocks) if not b.support], dtype=int)
+    gripped = {g.block for g in grips}
+    free = np.array([j for j, b in enumerate(blocks) if not b.support or b.id in gripped],
+                    dtype=int)
     row_of = np.full(len(blocks), -1)
     row_of[free] = np.arange(len(free))
 
@@ -116,6 +145,50 @@ def build_model(blocks, interfaces, gravity) -> EquilibriumModel:
     indptr = np.zeros(4 * nv + 1, dtype=np.int64)
     np.cumsum(np.tile(6 * on.sum(axis=1), 4), out=indptr[1:])
     a_eq = sp.csc_matrix((entries[keep], rows[keep], indptr), shape=(6 * len(free), 4 * nv))
+    hold_columns, layout = _hold_columns(blocks, grips, row_of, 6 * len(free), length_scale)
     return EquilibriumModel(blocks, interfaces, free, a_eq,
                             _weights(blocks, free, gravity, force_scale), vi,
-                            points, n, u, v, force_scale, length_scale)
+                            points, n, u, v, force_scale, length_scale, grips,
+                            hold_columns, layout)
+
+
+def _hold_columns(blocks, grips, row_of, rows: int, length_scale: float):
+    """The equilibrium columns of the grips' wrenches: per grip 3 of the force z = F / W
+    (unless its force capacity is 0) and 3 of the torque y = M / (W l) (unless its torque
+    capacity is 0), with l the block's size; and the layout of each grip's columns. Built
+    as coordinates: a column of the force has its 1 in a force row and the lever arm's
+    cross product in the moment rows, one of the torque l / L in a moment row."""
+    index = {b.id: j for j, b in enumerate(blocks)}
+    r_idx, c_idx, values, layout = [], [], [], []
+    count = 0
+    for g in grips:
+        j = index[g.block]
+        r = 6 * int(row_of[j])
+        size = float(blocks[j].size) or 1.0
+        first_force = first_torque = -1
+        if g.max_force != 0:
+            first_force, count = count, count + 3
+            arm = _cross_matrix((np.asarray(g.point, dtype=float) - blocks[j].centroid)
+                                / length_scale)            # column k: arm x e_k
+            for k in range(3):
+                r_idx += [r + k, r + 3, r + 4, r + 5]
+                c_idx += [first_force + k] * 4
+                values += [1.0, *arm[:, k]]
+        if g.max_torque != 0:
+            first_torque, count = count, count + 3
+            r_idx += [r + 3, r + 4, r + 5]
+            c_idx += [first_torque, first_torque + 1, first_torque + 2]
+            values += [size / length_scale] * 3
+        layout.append((first_force, first_torque, size))
+    matrix = sp.csc_matrix((values, (r_idx, c_idx)), shape=(rows, count))
+    return matrix, tuple(layout)
+
+
+def _cross_matrix(a: np.ndarray) -> np.ndarray:
+    """[a]_x: the matrix of x -> a x x."""
+    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+
+
+def finite(value: float | None) -> bool:
+    """Whether a grip capacity bounds its wrench."""
+    return value is not None and math.isfinite(value)

@@ -54,7 +54,8 @@ class Squeeze:
 
 def unopened(model: EquilibriumModel, mu: float) -> np.ndarray:
     """The interfaces (a boolean mask) that the best of the virtual dilations (translations
-    of the free blocks away from a point far below, supports fixed) does not open with
+    of the free blocks away from a point far below, supports and held blocks fixed: the
+    robots' wrenches then do no virtual work) does not open with
     d_n > mu |d_t|. None unopened: no self-equilibrated compression exists (its virtual work
     on the dilation would be positive, yet A s = 0 makes it zero)."""
     if not len(model.interfaces):
@@ -63,6 +64,10 @@ def unopened(model: EquilibriumModel, mu: float) -> np.ndarray:
     centroids = np.array([b.centroid for b in blocks])
     free = np.zeros(len(blocks), dtype=bool)
     free[model.free] = True
+    held = {g.block for g in model.grips}          # a robot keeps a held block in place
+    free[[j for j, b in enumerate(blocks) if b.id in held]] = False
+    if not free.any():          # every free block held: nothing to squeeze
+        return np.zeros(len(model.interfaces), dtype=bool)
     up = _up(model)
     centre = centroids[free].mean(axis=0) - CENTRE_DEPTH * model.length_scale * up
     pairs = np.array([(it.a, it.b) for it in model.interfaces], dtype=int)

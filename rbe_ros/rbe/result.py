@@ -16,6 +16,7 @@ class Status(IntEnum):
     INFEASIBLE = 3
     SOLVER_FAILED = 4
     INVALID_INPUT = 5
+    HOLD_EXCEEDED = 6       # stands only with a hold wrench beyond the robot's capacity
 
 
 @dataclass(frozen=True)
@@ -48,6 +49,21 @@ class NearContact:
     block_b: str
     gap: float              # m, between the faces (negative: they overlap)
     overlap_area: float     # m^2, of the two faces projected on their mid-plane
+
+
+@dataclass(frozen=True)
+class HoldWrench:
+    """What a robot holding ``block`` must apply: ``force`` (N) at ``grip_point`` (world) and
+    ``torque`` (N m) about it, the smallest that lets the step stand (see
+    :data:`rbe_ros.rbe.solver.HOLD_WEIGHT`). ``utilisation``: the larger of |F| / max_force
+    and |M| / max_torque over the bounded ones (0 when both are unbounded; above 1 in a
+    HOLD_EXCEEDED report: the wrench needed)."""
+
+    block: str
+    force: np.ndarray           # (3,)
+    torque: np.ndarray          # (3,)
+    grip_point: np.ndarray      # (3,)
+    utilisation: float = 0.0
 
 
 #: margin_g of a report whose check computed no margin (a margin is never negative).
@@ -85,10 +101,11 @@ class Report:
     #: (unit, its motion into the pose; zeros when it cannot or nothing was checked).
     insertable: bool = True
     insertion_direction: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    hold_wrenches: tuple[HoldWrench, ...] = ()   # per held block: the robot's wrench
 
     def __post_init__(self):
         for name in ("interfaces", "unstable_blocks", "held_blocks", "suggested_holds",
-                     "near_contacts"):
+                     "near_contacts", "hold_wrenches"):
             object.__setattr__(self, name, tuple(getattr(self, name)))
 
     @property

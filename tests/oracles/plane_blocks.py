@@ -13,6 +13,12 @@ its ends, N_p n and N_q n, and a shear V along it with |V| <= mu (N_p + N_q) (ex
 the per-point Coulomb cones: the shear acts along the joint's line, so it adds no moment
 about any point of it). Feasibility of the equilibrium of every free block is one LP
 (scipy linprog, HiGHS). Supports and held blocks are fixed.
+
+A robot's hold (:func:`smallest_hold_force`) is a bounded external force instead: the held
+block stays free with a force (F_x, F_z) at its centroid (and with ``torque`` a moment M
+about it), and the LP minimises the largest |F| over the holds, with |F| bounded by a
+polygon of HOLD_DIRECTIONS facets around the circle (a relaxation by at most
+1 / cos(pi / HOLD_DIRECTIONS) - 1, 4e-5: the force found is a lower bound within that).
 """
 from __future__ import annotations
 
@@ -49,6 +55,57 @@ def stands(blocks: dict[str, Block], joints: list[Joint], present: set[str],
     free = sorted(present - fixed)
     if not free:
         return True
+    a_eq, b_eq, a_ub, b_ub, bounds = _system(blocks, joints, present, free, mu)
+    res = linprog(np.zeros(a_eq.shape[1]), A_ub=np.array(a_ub) if a_ub else None,
+                  b_ub=np.array(b_ub) if b_ub else None, A_eq=a_eq, b_eq=b_eq,
+                  bounds=bounds, method="highs")
+    return res.status == 0
+
+
+HOLD_DIRECTIONS = 360
+
+
+def smallest_hold_force(blocks: dict[str, Block], joints: list[Joint], present: set[str],
+                        fixed: set[str], held: set[str], mu: float = 0.6,
+                        torque: bool = False) -> float:
+    """The smallest largest |F| (N) over the robots holding the blocks of ``held`` (free,
+    each with a force at its centroid and with ``torque`` a free moment) for which the
+    blocks of ``present`` not ``fixed`` are in equilibrium; math.inf when none is."""
+    free = sorted(present - fixed)
+    a_eq, b_eq, a_ub, b_ub, bounds = _system(blocks, joints, present, free, mu)
+    n = a_eq.shape[1]
+    per = 3 if torque else 2
+    extra = per * len(held) + 1                      # the holds' F_x, F_z (, M), and t
+    a_eq = np.hstack([a_eq, np.zeros((a_eq.shape[0], extra))])
+    a_ub = [np.concatenate([r, np.zeros(extra)]) for r in a_ub]
+    angles = 2 * np.pi * np.arange(HOLD_DIRECTIONS) / HOLD_DIRECTIONS
+    for h, bid in enumerate(sorted(held)):
+        r, col = 3 * free.index(bid), n + per * h
+        cx, cz = _centroid(blocks[bid].polygon)
+        a_eq[r, col] = a_eq[r + 1, col + 1] = 1.0            # F at the centroid
+        a_eq[r + 2, col], a_eq[r + 2, col + 1] = -cz, cx       # its moment about the origin
+        if torque:
+            a_eq[r + 2, col + 2] = 1.0
+        for angle in angles:                                   # d . F <= t for every d
+            row = np.zeros(n + extra)
+            row[col], row[col + 1], row[-1] = math.cos(angle), math.sin(angle), -1.0
+            a_ub.append(row)
+    b_ub = list(b_ub) + [0.0] * (len(a_ub) - len(b_ub))
+    cost = np.zeros(n + extra)
+    cost[-1] = 1.0
+    res = linprog(cost, A_ub=np.array(a_ub), b_ub=np.array(b_ub), A_eq=a_eq, b_eq=b_eq,
+                  bounds=bounds + [(None, None)] * (extra - 1) + [(0, None)], method="highs")
+    return float(res.x[-1]) if res.status == 0 else math.inf
+
+
+def _centroid(poly: np.ndarray) -> tuple[float, float]:
+    """Centroid (x, z) of a polygon: the abscissa of it and of its mirror about x = z."""
+    return area_centroid_x(poly)[1], area_centroid_x(poly[:, ::-1])[1]
+
+
+def _system(blocks, joints, present, free, mu):
+    """A_eq x = b_eq (equilibrium of the blocks of ``free``), A_ub x <= b_ub (friction) and
+    the bounds of the joint forces x (N_p, N_q, V per joint among ``present`` blocks)."""
     row = {b: 3 * k for k, b in enumerate(free)}
     active = [j for j in joints if j.a in present and j.b in present
               and (j.a in row or j.b in row)]
@@ -76,11 +133,7 @@ def stands(blocks: dict[str, Block], joints: list[Joint], present: set[str],
             a_ub += [_row(len(active), k, (-mu, -mu, 1.0)),
                      _row(len(active), k, (-mu, -mu, -1.0))]
             b_ub += [0.0, 0.0]
-    bounds = [(0, None), (0, None), (None, None)] * len(active)
-    res = linprog(np.zeros(3 * len(active)), A_ub=np.array(a_ub) if a_ub else None,
-                  b_ub=np.array(b_ub) if b_ub else None, A_eq=a_eq, b_eq=b_eq,
-                  bounds=bounds, method="highs")
-    return res.status == 0
+    return a_eq, b_eq, a_ub, b_ub, [(0, None), (0, None), (None, None)] * len(active)
 
 
 def _row(n: int, k: int, coefs) -> np.ndarray:

@@ -23,6 +23,12 @@ test: setup browser ray
 	ROS_DOMAIN_ID=$(ROS_DOMAIN_ID) ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST \
 		$(PY) -m pytest tests -q
 
+# The whole suite 5 times in a row with 2 busy processes beside it (one per core here):
+# no timing assert may fail under load (scripts/suite_under_load.sh; 30-50 minutes).
+.PHONY: test-under-load
+test-under-load: setup browser ray
+	bash scripts/suite_under_load.sh 5 2
+
 # The property tests at length: 10,000 random scenes (hypothesis profile "long", see
 # tests/conftest.py; `make test` runs 500, derandomized). 5-15 minutes on 2 cores.
 .PHONY: test-long

@@ -168,8 +168,8 @@ tr { cursor: pointer; }
 <div class="legend" id="legend"></div>
 <div id="plot"></div>
 <table id="steps"><thead><tr><th>run</th><th>step</th><th>block</th><th>verdict</th>
-<th>max tension N</th><th>worst |V|/N</th><th>model</th><th>margin g</th><th>max hold N</th><th>approach</th>
-<th>reason</th>
+<th>max tension N</th><th>worst |V|/N</th><th>model</th><th>margin g</th><th>max hold N</th>
+<th>approach</th><th>reason</th>
 </tr></thead><tbody></tbody></table>
 <h3>Check options</h3><table id="options"><tbody></tbody></table>
 <script id="data" type="application/json">@DATA@</script>

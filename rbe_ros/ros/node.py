@@ -137,6 +137,13 @@ def _string(value: str, description: str, *, read_only: bool = False) -> tuple:
                                       description=description, read_only=read_only)
 
 
+def _double(low: float, high: float, description: str, *, read_only: bool = False) -> tuple:
+    """A float parameter from ``low`` (its default: off) to ``high``."""
+    return low, ParameterDescriptor(
+        type=ParameterType.PARAMETER_DOUBLE, description=description, read_only=read_only,
+        floating_point_range=[FloatingPointRange(from_value=low, to_value=high, step=0.0)])
+
+
 #: The node's parameters: every check option with a parameter (rbe_ros.analysis.option_spec),
 #: and those of the node itself.
 PARAMETERS = {
@@ -159,22 +166,17 @@ PARAMETERS = {
     "record_markers": (True, ParameterDescriptor(
         type=ParameterType.PARAMETER_BOOL, description="with mcap_path: record the markers of "
         "every report too (false: a lean log of states and reports)")),
-    "marker_rate_hz": (0.0, ParameterDescriptor(
-        type=ParameterType.PARAMETER_DOUBLE, description="markers of at most this many "
-        "reports a second are drawn, published and recorded (the newest report's always, at "
-        "most 1/rate s late); 0: every report's",
-        floating_point_range=[FloatingPointRange(from_value=0.0, to_value=1000.0, step=0.0)])),
-    "max_bag_size_mb": (0.0, ParameterDescriptor(
-        type=ParameterType.PARAMETER_DOUBLE, read_only=True, description="with mcap_path: "
-        "begin the next file of the bag (name_1.mcap, ...) when one reaches this many MB "
-        "(10^6 bytes); each file replays alone (settings, design and the poses measured so far "
-        "written again at its start); 0: no split by size",
-        floating_point_range=[FloatingPointRange(from_value=0.0, to_value=1e6, step=0.0)])),
-    "max_bag_duration_s": (0.0, ParameterDescriptor(
-        type=ParameterType.PARAMETER_DOUBLE, read_only=True, description="with mcap_path: "
-        "begin the next file of the bag when one spans this many seconds; 0: no split by "
-        "duration",
-        floating_point_range=[FloatingPointRange(from_value=0.0, to_value=1e7, step=0.0)])),
+    "marker_rate_hz": _double(
+        0.0, 1000.0, "markers of at most this many reports a second are drawn, published and "
+        "recorded (the newest report's always, at most 1/rate s late); 0: every report's"),
+    "max_bag_size_mb": _double(
+        0.0, 1e6, "with mcap_path: begin the next file of the bag (name_1.mcap, ...) when one "
+        "reaches this many MB (10^6 bytes); each file replays alone (settings, design and the "
+        "poses measured so far written again at its start); 0: no split by size",
+        read_only=True),
+    "max_bag_duration_s": _double(
+        0.0, 1e7, "with mcap_path: begin the next file of the bag when one spans this many "
+        "seconds; 0: no split by duration", read_only=True),
 }
 
 #: How often a report's markers held back by ``marker_rate_hz`` are looked at.

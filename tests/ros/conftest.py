@@ -57,3 +57,24 @@ def rclpy_context():
     rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)  # Ctrl-C is pytest's
     yield rclpy.get_default_context()
     rclpy.try_shutdown()
+
+
+@pytest.fixture
+def make_node(rclpy_context, request):
+    """Make in-process RbeNodes with parameter overrides, in the test module's NAMESPACE (apart
+    from other modules' nodes); destroyed after the test."""
+    from rclpy.parameter import Parameter
+
+    from rbe_ros.ros.node import RbeNode
+
+    nodes = []
+
+    def make(**overrides):
+        node = RbeNode(namespace=request.module.NAMESPACE, context=rclpy_context,
+                       parameter_overrides=[Parameter(k, value=v) for k, v in overrides.items()])
+        nodes.append(node)
+        return node
+
+    yield make
+    for node in nodes:
+        node.destroy_node()

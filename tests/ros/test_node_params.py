@@ -11,25 +11,9 @@ from scipy.spatial.transform import Rotation
 
 from rbe_ros.analysis.pipeline import check_scene
 from rbe_ros.rbe.result import Status
-from rbe_ros.ros.node import RbeNode
 from rbe_ros.scene import box_block, make_scene
 
 NAMESPACE = "/rbe_unit_test"   # apart from the node process of test_node.py
-
-
-@pytest.fixture
-def make_node(rclpy_context):
-    nodes = []
-
-    def make(**overrides):
-        node = RbeNode(namespace=NAMESPACE, context=rclpy_context, parameter_overrides=[
-            Parameter(k, value=v) for k, v in overrides.items()])
-        nodes.append(node)
-        return node
-
-    yield make
-    for node in nodes:
-        node.destroy_node()
 
 
 def slope(tan: float):

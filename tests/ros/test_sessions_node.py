@@ -5,9 +5,7 @@ from __future__ import annotations
 
 import time
 
-import pytest
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.parameter import Parameter
 from rclpy.serialization import serialize_message
 
 from rbe_ros import generators
@@ -16,24 +14,8 @@ from rbe_ros.io.markers import MARKER_TYPE
 from rbe_ros.io.messages import poses_to_dict, scene_from_state_dict, state_to_dict
 from rbe_ros.io.replay import REPORT_TYPE, replay_bag
 from rbe_ros.ros.convert import dict_to_message
-from rbe_ros.ros.node import RbeNode
 
 NAMESPACE = "/rbe_sessions_test"
-
-
-@pytest.fixture
-def make_node(rclpy_context):
-    nodes = []
-
-    def make(**overrides):
-        node = RbeNode(namespace=NAMESPACE, context=rclpy_context, parameter_overrides=[
-            Parameter(k, value=v) for k, v in overrides.items()])
-        nodes.append(node)
-        return node
-
-    yield make
-    for node in nodes:
-        node.destroy_node()
 
 
 def wait_for_checks(node, count: int, timeout: float = 120.0) -> None:

@@ -27,12 +27,15 @@ from rbe_ros.io.scene_json import scene_to_dict
 ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.mark.parametrize("scene, max_held", [
-    (generators.dome(slices=10, courses=5), 2),      # 40 free blocks: local regions answer
-    (generators.semicircular_arch(7), 1),            # one small component: full checks
-    (generators.side_by_side(generators.dome(slices=8, courses=4), 2, 12.0), 2),
+@pytest.mark.parametrize("scene, max_held, shortcuts", [
+    # 40 free blocks, held from the second course on: a held block's neighbours could be
+    # squeezed against it (rbe/prestress.py), so no local proof stands in for the full check
+    (generators.dome(slices=10, courses=5), 2, {"relaxed"}),
+    (generators.semicircular_arch(7), 1, set()),     # one small component: full checks
+    (generators.side_by_side(generators.dome(slices=8, courses=4), 2, 12.0), 2,
+     {"local", "relaxed"}),
 ])
-def test_every_candidate_verdict_is_the_full_checks(scene, max_held, monkeypatch):
+def test_every_candidate_verdict_is_the_full_checks(scene, max_held, shortcuts, monkeypatch):
     """Each set of holds tried for each candidate step, checked again in full (the plain
     check of the same blocks with the same holds): the same verdict; and the same plan as
     the search by whole components (``full_candidates``)."""
@@ -55,8 +58,7 @@ def test_every_candidate_verdict_is_the_full_checks(scene, max_held, monkeypatch
         seen.add(key)
         assert check(assembly).stable == stable, key
     models = {m.split()[0] for _, _, m in trials}
-    if len(scene.blocks) > 30:
-        assert {"local", "relaxed"} <= models, models      # the shortcuts are exercised
+    assert shortcuts <= models, models      # the shortcuts are exercised
     monkeypatch.undo()
     whole = plan_sequence(scene, max_held, full_candidates=True)
     assert (whole.order, whole.held) == (plan.order, plan.held)

@@ -16,7 +16,6 @@ from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
 
-from ..rbe.model import Grip
 from .assembly import Assembly
 from .options import CheckOptions
 from .robust import RobustJob, SampleResult, run_batch
@@ -82,10 +81,11 @@ def _plan_worker(assembly: Assembly, options: CheckOptions) -> None:
 
 def _check_step(present: tuple[str, ...], held: tuple[str, ...], assembly=None, options=None):
     """The plain check of one step of the planner's assembly (a worker's, or the given),
-    with a robot's grip on each held block (the step's report, with its hold wrenches)."""
+    the held blocks as supports: the full check the planner makes of a trial itself (whose
+    robots' capacities it checks after, in-process)."""
     assembly = _PLAN["assembly"] if assembly is None else assembly
     options = _PLAN["options"] if options is None else options
-    return check(assembly.subset(present, held, tuple(Grip(b) for b in held)), options)
+    return check(assembly.subset(present, held), options)
 
 
 class CheckPool:

@@ -178,13 +178,10 @@ class _Trial:
         if found is None:
             self.planner.poll()
             restrict = not (self.direct and set(self.previous) - key)
-            report = self.planner.ahead(self.present, key)      # gripped, when sent
-            if report is not None:
-                assembly = self.planner.gripped(self.present, key)
-            else:
-                assembly = self.planner.full.subset(self.present, key)
-                report = (self.checker.attempt(assembly, self.open_course, restrict=restrict)
-                          or check(assembly, self.planner.options))
+            assembly = self.planner.full.subset(self.present, key)
+            report = (self.planner.ahead(self.present, key)      # when sent
+                      or self.checker.attempt(assembly, self.open_course, restrict=restrict)
+                      or check(assembly, self.planner.options))
             if report.stable and key:
                 report = self.planner.within_capacity(self.present, key) or report
             self.planner.counted(report)

@@ -90,12 +90,19 @@ def squeeze(model: EquilibriumModel, options: SolveOptions, solution: Solution,
     """Whether the loads (scaled p; default the dead load) alone hold ``model``'s blocks,
     of which ``solution`` is an RBE field: None when a dilation opens every interface (no
     squeeze can arise), else the result of the test on the interfaces it leaves closed."""
-    if not math.isfinite(options.mu):     # no friction limit: no squeeze is needed
-        return None
-    shut = unopened(model, options.mu / _capacity_of_outer(options.cone))
+    shut = closed_interfaces(model, options)
     if not shut.any():
         return None
     return _unsqueezed(model, options, solution, load, shut)
+
+
+def closed_interfaces(model: EquilibriumModel, options: SolveOptions) -> np.ndarray:
+    """The interfaces (a boolean mask) where a squeeze could arise under ``options``'
+    friction: those the gate's dilations leave closed; none without a friction limit (no
+    squeeze is needed then)."""
+    if not math.isfinite(options.mu):
+        return np.zeros(len(model.interfaces), dtype=bool)
+    return unopened(model, options.mu / _capacity_of_outer(options.cone))
 
 
 def _unsqueezed(model, options: SolveOptions, solution: Solution, load,

@@ -17,6 +17,7 @@ from rbe_ros.analysis.assembly import Assembly
 from rbe_ros.analysis.insertion import block_insertion, interface_normals
 from rbe_ros.analysis.options import CheckOptions, InsertionOptions
 from rbe_ros.analysis.pipeline import check_scene, check_sequence
+from rbe_ros.analysis.validate import validate_assembly
 from rbe_ros.analysis.planning import plan_sequence
 from rbe_ros.geometry.insertion import PathCheck, cone_directions, in_cone, shrunk
 from rbe_ros.io.foxglove_scene import scene_update, x_onto
@@ -403,3 +404,75 @@ def test_ten_thousand_vertex_block_comes_down():
     found = _insertion(scene, "dome0")
     assert found.insertable
     np.testing.assert_allclose(found.direction, DOWN, atol=1e-12)
+
+
+def _declared(m=0.0, deg=0.0) -> CheckOptions:
+    options = CheckOptions()
+    return replace(options, contact=replace(options.contact, pose_uncertainty_m=m,
+                                            pose_uncertainty_deg=deg))
+
+
+def _as_built(scene, block, options):
+    """The insertion of ``block`` with every block present, and whether the scene passes the
+    interpenetration validation, both under ``options``' declared uncertainty."""
+    assembly = Assembly.from_scene(scene, options.contact)
+    try:
+        validate_assembly(assembly, options.limits, options.contact)
+        valid = True
+    except SceneError:
+        valid = False
+    return block_insertion(assembly, [b.id for b in scene.blocks], block, options), valid
+
+
+@pytest.mark.parametrize("overlap, m, insertable", [
+    (0.03, 0.0, False),     # beyond 2 x penetration_tol x size = 0.02 m: invalid, and blocked
+    (0.03, 0.02, True),     # within 0.01 + 2 x 0.02 declared: a contact, the path free
+    (0.08, 0.02, False),    # beyond 0.02 + 2 x 0.02 too: invalid, and still blocked
+])
+def test_as_built_neighbour_overlapping_within_the_declaration_does_not_block(
+        overlap, m, insertable):
+    """Two 1 m cubes side by side on the ground overlapping by ``overlap`` (the dome's
+    failure: neighbours overlapping by what their pose uncertainty explains blocked every
+    path). The rule is the validation's: the pair may overlap by penetration_tol x 1 m plus
+    each block's allowance (here m, no angle); the path check shrinks the moving block by
+    2 x that design tolerance plus its allowance and the present one by its allowance, so a
+    valid scene comes straight down and an invalid one stays blocked by the neighbour."""
+    scene = _ground(box_block("a", (1, 1, 1), (0, 0, 0.5), density=RHO),
+                    box_block("b", (1, 1, 1), (1 - overlap, 0, 0.5), density=RHO))
+    found, valid = _as_built(scene, "b", _declared(m))
+    assert valid == insertable
+    assert found.insertable == insertable
+    if insertable:
+        np.testing.assert_allclose(found.direction, DOWN, atol=1e-12)
+    else:
+        assert found.blocked_by == ("a",)
+
+
+def _overhang(a):
+    """A 0.2 m high block under a support whose shared face leans ``a`` over it (the
+    interface normal into the block points down by ``a``)."""
+    t = 0.2 * math.tan(a)
+    ground = box_block("ground", (4, 4, 0.2), (0, 0, -0.1), support=True, density=RHO)
+    return make_scene("overhang", [
+        ground, _prism("wall", [(-0.2, 0), (0, 0), (t, 0.2), (-0.2, 0.2)], 0.3, support=True),
+        _prism("b", [(0, 0), (0.4, 0), (0.4, 0.2), (t, 0.2)], 0.3)])
+
+
+def test_overhang_within_the_declared_angle_comes_straight_down():
+    """The face leans 2 deg, beyond the 1 deg design tolerance: by design the block slides
+    in along the face, 2 deg off vertical (the cone's closest direction); with 1 deg declared
+    the contact detection takes faces up to 1 + 2 x 1 = 3 deg from opposite as facing and the
+    cone the same, so down is feasible, and its path is free: the wall's corner overhangs by
+    0.2 m x sin 2 deg = 7.0 mm, less than 2 x 0.01 x size 0.288 m plus the two allowances
+    (1 deg x radius: 4.7 mm and 3.6 mm). 4 deg (beyond 3) keeps the slide along the face."""
+    lean = math.radians(2.0)
+    along = [-math.sin(lean), 0, -math.cos(lean)]
+    design, _ = _as_built(_overhang(lean), "b", _declared())
+    np.testing.assert_allclose(design.direction, along, atol=1e-9)
+    declared, valid = _as_built(_overhang(lean), "b", _declared(deg=1.0))
+    assert valid
+    np.testing.assert_allclose(declared.direction, DOWN, atol=1e-12)
+    steep = math.radians(4.0)
+    beyond, _ = _as_built(_overhang(steep), "b", _declared(deg=1.0))
+    np.testing.assert_allclose(beyond.direction, [-math.sin(steep), 0, -math.cos(steep)],
+                               atol=1e-9)

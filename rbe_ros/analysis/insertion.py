@@ -1,17 +1,22 @@
 """Insertion of the block placed at a step: from which direction it can arrive past the
 blocks present (:mod:`rbe_ros.geometry.insertion`), with the interfaces of the whole
 assembly, so that a held block's contacts with supports count too (a step's own assembly
-drops interfaces between two supports)."""
+drops interfaces between two supports). Under a declared pose uncertainty the path and the
+cone accept what the contact detection accepts as a contact: every block shrunk by its
+allowance, the cone's angle tolerance that of facing faces
+(:mod:`rbe_ros.geometry.uncertainty`)."""
 from __future__ import annotations
 
 import threading
 import weakref
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..geometry.contacts import ContactOptions
 from ..geometry.insertion import Insertion, PathCheck, insertion
+from ..geometry.uncertainty import allowances, contact_angle_deg
 from ..scene import ValidationLimits
 from .assembly import Assembly
 from .options import CheckOptions
@@ -34,6 +39,7 @@ class _Index:
     a: np.ndarray           # (m,)
     b: np.ndarray
     normals: np.ndarray     # (m, 3)
+    allow: dict = field(default_factory=dict)   # (m, deg) -> per block allowance (m)
 
     @classmethod
     def of(cls, assembly: Assembly) -> "_Index":
@@ -60,6 +66,16 @@ def _index(assembly: Assembly) -> _Index:
     with _LOCK:
         _LAST[:] = [weakref.ref(assembly), index]
     return index
+
+
+def block_allowances(assembly: Assembly, contact: ContactOptions) -> np.ndarray:
+    """Per block of ``assembly``, its allowance (m) under ``contact``'s declared pose
+    uncertainty (zeros without one), computed once per assembly and declaration."""
+    index = _index(assembly)
+    key = (contact.pose_uncertainty_m, contact.pose_uncertainty_deg)
+    if key not in index.allow:
+        index.allow[key] = allowances(list(assembly.blocks), *key)
+    return index.allow[key]
 
 
 def interface_normals(assembly: Assembly, block: int, present: np.ndarray) -> np.ndarray:
@@ -91,9 +107,11 @@ def block_insertion(assembly: Assembly, present: Sequence[str], block: str,
     others = np.flatnonzero(mask)
     moving = assembly.blocks[k]
     limits = options.limits or ValidationLimits()
+    allow = block_allowances(assembly, options.contact)
     path = PathCheck(moving, [assembly.blocks[j] for j in others],
                      approach_distance(assembly, k, options),
-                     CLEARANCE * limits.penetration_tol * moving.size, index.boxes[others])
+                     CLEARANCE * limits.penetration_tol * moving.size + allow[k],
+                     index.boxes[others], allow[others])
+    angle = contact_angle_deg(options.contact.angle_tol_deg, options.contact.pose_uncertainty_deg)
     return insertion(interface_normals(assembly, k, mask), path,
-                     np.asarray(assembly.gravity, dtype=float), given,
-                     np.radians(options.contact.angle_tol_deg))
+                     np.asarray(assembly.gravity, dtype=float), given, np.radians(angle))

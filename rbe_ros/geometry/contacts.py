@@ -23,7 +23,7 @@ from .clip import clip_convex, padded_rings
 from .kern import kern, kerns_ragged
 from .polygon import (PlaneFrame, cross, drop_collinear_rings, first_argmin, ring_neighbours,
                       ring_widths)
-from .uncertainty import NEAR_FACTOR, allowances, gaps, mid_frames
+from .uncertainty import NEAR_FACTOR, allowances, contact_angle_deg, gaps, mid_frames
 
 
 @dataclass(frozen=True)
@@ -197,9 +197,8 @@ def detect_contacts(blocks: list[PosedBlock], options: ContactOptions = ContactO
     outlines = np.concatenate([b.face_outlines for b in blocks])
 
     # faces of the candidate pairs with opposite normals, then those in one plane (or near)
-    angle = options.angle_tol_deg + 2 * options.pose_uncertainty_deg
-    pair_of, fa, fb = _facing(pairs, face_count, face_start, normals,
-                              -np.cos(np.radians(min(angle, 90.0))))
+    angle = contact_angle_deg(options.angle_tol_deg, options.pose_uncertainty_deg)
+    pair_of, fa, fb = _facing(pairs, face_count, face_start, normals, -np.cos(np.radians(angle)))
     first, second = pairs[pair_of, 0], pairs[pair_of, 1]
     scale = np.minimum(sizes[first], sizes[second])
     tol = options.distance_tol * scale + (allow[first] + allow[second])

@@ -21,6 +21,13 @@ the present ones are their convex hulls, so a path accepted is free, and a path 
 through a notch of a non-convex neighbour may still be free. The moving block has its faces
 moved in by a clearance first (:func:`shrunk`), so that its neighbours at contact (touching, or
 overlapping as much as the scene validation accepts) do not count as collisions.
+
+Under a declared pose uncertainty every block, the present ones too, is also shrunk by its
+allowance a (:func:`rbe_ros.geometry.uncertainty.allowances`: no point of the block is
+farther than a from where its pose puts it): the measured hull with its faces moved in by a
+lies inside the block wherever it truly is, so a path refused is blocked for every pose the
+declaration allows, and two blocks overlapping by what their allowances explain (a contact to
+the contact detection and the validation) do not block each other.
 """
 from __future__ import annotations
 
@@ -100,10 +107,11 @@ def cone_directions(normals: np.ndarray, down: np.ndarray) -> list[np.ndarray]:
 
 
 @lru_cache(maxsize=4096)
-def _hull_object(key: bytes) -> fcl.CollisionObject:
-    """An fcl object of the convex hull of the vertices serialised in ``key`` (cached: a
-    present block is tested against many moving blocks)."""
-    return fcl.CollisionObject(_convex(np.frombuffer(key).reshape(-1, 3)))
+def _hull_object(key: bytes, clearance: float) -> fcl.CollisionObject:
+    """An fcl object of the convex hull of the vertices serialised in ``key``, shrunk by
+    ``clearance`` (m) if > 0 (cached: a present block is tested against many moving blocks)."""
+    points = np.frombuffer(key).reshape(-1, 3)
+    return fcl.CollisionObject(_convex(shrunk(points, clearance) if clearance > 0 else points))
 
 
 def _convex(points: np.ndarray) -> fcl.Convex:
@@ -137,15 +145,19 @@ def shrunk(vertices: np.ndarray, clearance: float) -> np.ndarray:
 
 class PathCheck:
     """The swept-path test of one block moving into its pose past fixed ``present`` blocks
-    (their bounding boxes ``boxes``, (n, 2, 3), if known): its convex hull shrunk by
-    ``clearance`` (once), swept over ``distance`` m along each direction asked."""
+    (their bounding boxes ``boxes``, (n, 2, 3), if known; each shrunk by its ``allowances``
+    entry, m, if given): its convex hull shrunk by ``clearance`` (once), swept over
+    ``distance`` m along each direction asked."""
 
     def __init__(self, moving: PosedBlock, present: Sequence[PosedBlock], distance: float,
-                 clearance: float, boxes: np.ndarray | None = None):
+                 clearance: float, boxes: np.ndarray | None = None,
+                 allowances: np.ndarray | None = None):
         self.end = shrunk(moving.vertices, clearance)
         self.present = list(present)
         self.boxes = (np.array([b.aabb for b in self.present]).reshape(-1, 2, 3)
                       if boxes is None else boxes)
+        self.allowances = (np.zeros(len(self.present)) if allowances is None
+                           else np.asarray(allowances, dtype=float))
         self.distance = distance
 
     def blockers(self, direction: np.ndarray) -> tuple[str, ...]:
@@ -161,7 +173,8 @@ class PathCheck:
         request, hits = fcl.CollisionRequest(), []
         for k in near:
             other = _hull_object(np.ascontiguousarray(self.present[k].vertices,
-                                                      dtype=float).tobytes())
+                                                      dtype=float).tobytes(),
+                                 float(self.allowances[k]))
             if fcl.collide(body, other, request, fcl.CollisionResult()):
                 hits.append(self.present[k].id)
         return tuple(hits)

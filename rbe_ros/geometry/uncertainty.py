@@ -47,6 +47,12 @@ def allowances(blocks: list[PosedBlock], pose_uncertainty_m: float,
     return pose_uncertainty_m + math.radians(pose_uncertainty_deg) * radius
 
 
+def contact_angle_deg(angle_tol_deg: float, pose_uncertainty_deg: float) -> float:
+    """Degrees: how far from opposite two faces' normals may be in contact (the design
+    tolerance plus ``2 theta``, each face turned by up to theta), at most 90."""
+    return min(angle_tol_deg + 2 * pose_uncertainty_deg, 90.0)
+
+
 def mid_frames(n_a: np.ndarray, d_a: np.ndarray, o_a: np.ndarray, n_b: np.ndarray,
                d_b: np.ndarray, o_b: np.ndarray):
     """Row by row, the mid-plane of face a (normal n_a, plane n_a . x = d_a, a point o_a) and

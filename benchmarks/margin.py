@@ -24,6 +24,7 @@ import ray
 import scipy.sparse as sp
 import scs
 from machine import machine_summary
+from timing import best_of
 
 from rbe_ros import generators as gen
 from rbe_ros.analysis.executors import ProcessPool, ray_cluster
@@ -40,12 +41,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def best(f, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        f()
-        times.append(time.perf_counter() - start)
-    return min(times)
+    """The fastest of ``repeats`` runs of ``f``, in s (benchmarks/timing.py)."""
+    return best_of(repeats, f)[1]
 
 
 def best_in_solver(f, repeats: int) -> float:

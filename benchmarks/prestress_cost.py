@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import argparse
 import os
-import time
+
+from timing import best_of
 
 from rbe_ros import generators as gen
 from rbe_ros.analysis.assembly import Assembly
@@ -44,15 +45,6 @@ def cases():
             yield f"compas_cra {name}", Assembly.from_scene(scene), mu
 
 
-def best(repeats: int, run) -> float:
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        run()
-        times.append(time.perf_counter() - start)
-    return min(times)
-
-
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3)
@@ -65,8 +57,8 @@ def main(argv=None) -> int:
         model = build_model(assembly.blocks, assembly.interfaces, assembly.gravity)
         field = solve(model, options.deciding)
         closed = int(unopened(model, mu).sum())
-        t_check = best(args.repeats, lambda: check(assembly, options))
-        t_test = best(args.repeats, lambda: squeeze(model, options.deciding, field))
+        t_check = best_of(args.repeats, lambda: check(assembly, options))[1]
+        t_test = best_of(args.repeats, lambda: squeeze(model, options.deciding, field))[1]
         status = check(assembly, options).status.name
         print(f"| {name} | {len(assembly.blocks)} | {closed} of {len(model.interfaces)} |"
               f" {1e3 * t_check:.1f} ms | {1e3 * t_test:.2f} ms |"

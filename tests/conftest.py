@@ -13,7 +13,10 @@ $RBE_COMPAS_SAMPLES name others; those tests fail, never skip, when it is missin
 import os
 from pathlib import Path
 
+import pytest
 from hypothesis import HealthCheck, settings
+
+from rbe_ros.io.compas import compas_samples_dir
 
 _COMMON = dict(deadline=None, database=None, print_blob=True,
                suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
@@ -27,3 +30,12 @@ COMPAS_VENV = Path(__file__).resolve().parents[1] / ".venv-compas"
 os.environ.setdefault("RBE_COMPAS_VENV", str(COMPAS_VENV))
 os.environ.setdefault("RBE_COMPAS_SAMPLES", str(next(
     COMPAS_VENV.glob("lib/python*/site-packages/compas_cra/data/samples"), COMPAS_VENV)))
+
+
+@pytest.fixture(scope="session")
+def samples() -> Path:
+    """compas_cra's sample assemblies (from .venv-compas, which make setup builds)."""
+    found = compas_samples_dir()
+    assert found is not None and all((found / f"{n}.json").is_file() for n in ("A", "bridge")), \
+        "compas_cra's samples are missing: run make setup (it builds .venv-compas)"
+    return found

@@ -18,7 +18,7 @@ from rbe_ros.analysis.assembly import Assembly
 from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.analysis.pipeline import check_scene
 from rbe_ros.cli import main
-from rbe_ros.io.compas import (compas_interfaces, compas_samples_dir, load_compas_assembly,
+from rbe_ros.io.compas import (compas_interfaces, load_compas_assembly,
                                save_compas_assembly)
 from rbe_ros.geometry.block import pose_block
 from rbe_ros.geometry.contacts import ContactOptions
@@ -29,14 +29,6 @@ from rbe_ros.scene import SceneError
 from helpers import assert_physical
 
 SAMPLE = Path(__file__).parent / "data" / "compas_two_cubes.json"
-
-
-@pytest.fixture(scope="module")
-def samples() -> Path:
-    found = compas_samples_dir()
-    assert found is not None and (found / "bridge.json").is_file(), \
-        "compas_cra's samples are missing: run make setup (it builds .venv-compas)"
-    return found
 
 
 def test_bundled_sample_loads_blocks_supports_and_density():

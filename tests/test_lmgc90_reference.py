@@ -18,21 +18,13 @@ import pytest
 from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.analysis.pipeline import check_scene
 from rbe_ros.geometry.block import pose_blocks
-from rbe_ros.io.compas import compas_samples_dir, load_compas_assembly
+from rbe_ros.io.compas import load_compas_assembly
 from rbe_ros.rbe.solver import SolveOptions
 
 VERDICTS = json.loads((Path(__file__).resolve().parents[1] / "docs" / "lmgc90_verdicts.json")
                       .read_text())["samples"]
 DECIDED = {name: r for name, r in VERDICTS.items() if r["lmgc90"] in ("stands", "falls")}
 UNDECIDED = {name: r for name, r in VERDICTS.items() if name not in DECIDED}
-
-
-@pytest.fixture(scope="module")
-def samples() -> Path:
-    found = compas_samples_dir()
-    assert found is not None and (found / "A.json").is_file(), \
-        "compas_cra's samples are missing: run make setup (it builds .venv-compas)"
-    return found
 
 
 def sample_scene(samples: Path, record: dict):

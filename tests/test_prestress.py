@@ -22,7 +22,7 @@ from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.analysis.pipeline import check_scene, check_sequence
 from rbe_ros.analysis.verdict import is_stable
 from rbe_ros.generators import _box, _prism, dome, running_bond_wall, two_blocks
-from rbe_ros.io.compas import compas_samples_dir, load_compas_assembly
+from rbe_ros.io.compas import load_compas_assembly
 from rbe_ros.rbe.model import build_model
 from rbe_ros.rbe.prestress import squeeze, unopened
 from rbe_ros.rbe.result import Status
@@ -211,14 +211,6 @@ def test_step_checker_uses_the_same_criterion():
     assert local[-1].status == full[-1].status == Status.FRICTION_EXCEEDED
     assert StepChecker(options(0.6)).check(Assembly.from_scene(scene)).status \
         == Status.FRICTION_EXCEEDED
-
-
-@pytest.fixture(scope="module")
-def samples():
-    found = compas_samples_dir()
-    assert found is not None and (found / "A.json").is_file(), \
-        "compas_cra's samples are missing: run make setup (it builds .venv-compas)"
-    return found
 
 
 #: compas_cra's samples with the supports and mu of its example scripts; whether they stand

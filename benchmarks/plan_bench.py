@@ -3,7 +3,7 @@
 (496 blocks to place, --pose-uncertainty 0.005,2.5 --max-held 2) with its time, peak memory
 and --json size, against the plan's own re-check (`rbe-ros check --sequence` of the planned
 scene, in the same run); the paper's 14 x 10 dome planned by the incremental candidate checks
-and by whole components (--full-candidates, the planner before); --beam 2 against greedy.
+and with every trial checked whole (--full-candidates); --beam 2 against greedy.
 Each run is a separate process (peak RSS from wait4). Writes the planner section of
 docs/SCALING.md (the rest is benchmarks/scaling.py's).
 
@@ -32,12 +32,13 @@ UNCERTAIN = ["--pose-uncertainty", "0.005,2.5"]
 #: The section of docs/SCALING.md this script owns, from this line to the end of the file.
 MARK = "<!-- planner section: made by benchmarks/plan_bench.py (make plan-bench) -->"
 #: Why the time bar is missed: what a step costs that no region settles.
-LEVER = ("Each step that moves a held course's newest hold is a full solve of the partial "
-         "dome (friction at its limit, below); those steps are most of the time, one after "
-         "the other: the look-ahead runs the next ones on the workers while the search "
-         "does the rest, so the gain is bounded by the workers left free on a shared "
-         "machine, and a solve warm-started from the last step's (Clarabel has none) "
-         "remains the lever.")
+LEVER = ("Each step of a held course (robots at its first and at its newest block) is "
+         "a full check of the partial dome with the robots' grips: the RBE field (the "
+         "report's forces and wrenches) and the prestress test's field without friction at "
+         "the held blocks' closed contacts, two solves of the whole partial dome, whose cost "
+         "grows with it; those steps are most of the time, one after the other. The "
+         "look-ahead runs the next steps' checks on the workers while the search does the "
+         "rest, so on 2 cores shared with the search the gain stays below 2.")
 #: The issue's figures of the planner before (not re-run: 11 minutes and 10 GB).
 TODAY_527 = "11.5 min (608 s of planning), 10.7 GB peak, 1.03 GB JSON (issue 23)"
 
@@ -156,7 +157,7 @@ def main() -> int:
               "| candidate checks | time [s] | peak RSS [MB] | candidate checks | hold-steps |",
               "|---|---|---|---|---|"]
     for name, r in (("incremental (default)", incremental),
-                    ("whole components (`--full-candidates`)", whole)):
+                    ("every trial whole (`--full-candidates`)", whole)):
         lines.append(f"| {name} | {r['time']:.1f} | {r['rss_mb']:.0f} | "
                      f"{r['json']['search_checks']} | {hold_steps(r)[0]} |")
     lines += ["", f"Ratio: **{whole['time'] / incremental['time']:.1f}x**; the same order and "
@@ -177,12 +178,14 @@ def main() -> int:
               "candidates, the second often a block that needs the full problem).", "",
               "Which candidate checks still need a full solve: those the incremental "
               "checks cannot settle from the partial plan's kept forces, as for a sequence "
-              "(above): a ring that closes, and, while a course is open and held at its first "
-              "and its newest block, each step that releases the previous newest block: the "
-              "whole open course then carries its weight differently, into the lower courses "
-              "at the friction limit, and no region short of most of the dome keeps the "
-              "earlier forces admissible. The planner tries only to prove such a trial fails "
-              "(a relaxation) before solving it in full.", ""]
+              "(above): a ring that closes, and every set of held blocks that may stand: with "
+              "holds a smaller model only proves a failure (a relaxation, the held blocks "
+              "rigid), and a step that may stand is checked whole with the robots' grips, "
+              "whose wrenches its report carries. While a course is open and held at its "
+              "first and its newest block, each step releases the previous newest block: the "
+              "open course then carries its weight into the lower courses at the friction "
+              "limit, and no region short of most of the dome keeps the earlier forces "
+              "admissible.", ""]
     lines[4] = lines[4].replace(" (shared).", f", at the end {os.getloadavg()[0]:.1f} (shared).")
     text = (ROOT / "docs" / "SCALING.md").read_text()
     head = text.split(MARK)[0].rstrip("\n")

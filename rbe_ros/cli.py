@@ -245,8 +245,8 @@ def build_parser() -> argparse.ArgumentParser:
     _executor_arguments(plan, "the full checks of the steps ahead (the plan is the same)",
                         "; 'local': a new local instance of --workers CPUs")
     plan.add_argument("--full-candidates", action="store_true",
-                      help="check every candidate by solving whole components (the planner "
-                      "without incremental checks, to compare with)")
+                      help="check every candidate trial whole (without the incremental "
+                      "checks, to compare with)")
     _solver_arguments(plan)
     plan.set_defaults(run=_run_plan)
 

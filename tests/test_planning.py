@@ -20,7 +20,8 @@ from rbe_ros.io.scene_json import scene_to_dict
 
 
 def recheck(plan, original, max_held):
-    """Every step of ``plan.scene`` stands by the plain checker; returns the steps."""
+    """Every step of ``plan.scene`` stands by the plain checker, a robot's grip on each held
+    block (as ``check --sequence`` checks it); returns the steps."""
     assert plan.feasible, plan.message
     free = sorted(b.id for b in original.blocks if not b.support)
     assert sorted(plan.order) == free and list(plan.scene.sequence) == plan.order
@@ -29,7 +30,7 @@ def recheck(plan, original, max_held):
     assert [s.held for s in steps] == list(plan.held)
     for step in steps:
         assert len(step.held) <= max_held
-        report = check(full.subset(step.present, step.held))
+        report = check(full.subset(step.present, step.held, step.grips))
         assert report.stable, (step.index, step.block, step.held, report.message)
     last = steps[-1]
     assert last.held == () and set(last.present) == {b.id for b in original.blocks}

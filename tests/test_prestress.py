@@ -10,6 +10,7 @@ top bar stands exactly when tan(theta) <= mu (the bar carries nothing). compas_c
 A, H, shelf and snake fall by its own CRA (``cra_solve``: infeasible), A, H and shelf by
 LMGC90 too (issue 24; it cannot take snake's non-convex blocks: tests/test_lmgc90_reference.py).
 """
+import functools
 import math
 from dataclasses import replace
 
@@ -20,10 +21,13 @@ from rbe_ros.analysis.assembly import Assembly
 from rbe_ros.analysis.incremental import StepChecker
 from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.analysis.pipeline import check_scene, check_sequence
-from rbe_ros.analysis.verdict import is_stable
+from rbe_ros.analysis import verdict as verdict_module
+from rbe_ros.analysis.steps import gripped
+from rbe_ros.analysis.verdict import check, is_stable
 from rbe_ros.generators import _box, _prism, dome, running_bond_wall, two_blocks
 from rbe_ros.io.compas import load_compas_assembly
 from rbe_ros.rbe.model import build_model
+from rbe_ros.rbe import prestress
 from rbe_ros.rbe.prestress import squeeze, unopened
 from rbe_ros.rbe.result import Status
 from rbe_ros.rbe.solver import SolveOptions, solve
@@ -249,3 +253,56 @@ def test_friction_cap_bounds_the_interface_friction_resultant(cone):
     assert solve(model, options, friction_cap=np.array([needed * 1.01 / h])).solved
     assert not solve(model, options, friction_cap=np.array([needed * 0.99 / h])).solved
     assert solve(model, options, friction_cap=np.array([math.inf])).solved
+
+
+def _held_dome_step(placed_in_ring: int):
+    """The 8 x 5 dome with its first two rings and ``placed_in_ring`` blocks of the third,
+    the last of them held by a robot's grip (as the planner holds the newest block)."""
+    scene = dome(8, 5)
+    full = Assembly.from_scene(scene)
+    ring = [f"course3_slice{k:02d}" for k in range(placed_in_ring)]
+    present = [b.id for b in scene.blocks if b.support or b.id.startswith(("course1",
+                                                                           "course2"))]
+    return gripped(full, present + ring, ring[-1:])
+
+
+def _no_shortcut(model, shut):
+    return np.full(len(shut), -1.0)     # a negative cap: that field never exists
+
+
+@pytest.mark.parametrize("case", ["bar", "bar on base", "incline 15", "incline 35",
+                                  "held ring 1", "held ring 2", "held ring 3"])
+def test_a_field_without_friction_on_closed_interfaces_decides_as_the_whole_test(case,
+                                                                                 monkeypatch):
+    """The first solve of the test (friction resultant 0 on every closed interface, within
+    any Tresca cap) gives the verdict of the test without it, in one solve where it has a
+    field: beside the held block of a dome ring of one or three blocks it decides (2 solves
+    in all: RBE's field and this one); with two the field needs friction there and the stick
+    field decides (a third solve); on the squeezed bar neither can."""
+    if case.startswith("held"):
+        assembly = _held_dome_step(int(case[-1]))
+    else:
+        scene = {"bar": bar_between_posts(False), "bar on base": bar_between_posts(True),
+                 "incline 15": incline_with_bar(15.0),
+                 "incline 35": incline_with_bar(35.0)}[case]
+        assembly = Assembly.from_scene(scene)
+    calls = []
+    counted = functools.partial(_counting, calls)
+    monkeypatch.setattr(prestress, "solve", counted)
+    monkeypatch.setattr(verdict_module, "solve", counted)
+    with_shortcut = check(assembly, options(0.6))
+    solves = len(calls)
+    monkeypatch.setattr(prestress, "_least_caps", _no_shortcut)
+    without = check(assembly, options(0.6))
+    assert (with_shortcut.status, with_shortcut.stable) == (without.status, without.stable)
+    expected = {"bar": False, "bar on base": True, "incline 15": True, "incline 35": False}
+    if case in expected:
+        assert with_shortcut.stable == expected[case]
+    else:                       # the held ring stands
+        assert with_shortcut.stable, with_shortcut.message
+        assert (solves == 2) == (case != "held ring 2"), solves
+
+
+def _counting(calls, *args, **kwargs):
+    calls.append(kwargs.get("friction_cap") is not None)
+    return solve(*args, **kwargs)

@@ -48,9 +48,14 @@ class Assembly:
         blocks = tuple(replace(self.blocks[i], support=True) if self.blocks[i].id in held
                        else self.blocks[i] for i in index)
         grips = tuple(g for g in grips if g.block in held and g.block in keep)
-        rigid = [b.support and b.id not in {g.block for g in grips} for b in blocks]
-        interfaces, near = (tuple(it.between(index[it.a], index[it.b])
-                                  for it in found if it.a in index and it.b in index
-                                  and not (rigid[index[it.a]] and rigid[index[it.b]]))
-                            for found in (self.interfaces, self.near))
+        gripped = {g.block for g in grips}
+        rigid = [b.support and b.id not in gripped for b in blocks]
+        if len(index) == len(self.blocks):      # every block kept: no renumbering
+            interfaces, near = (tuple(it for it in found if not (rigid[it.a] and rigid[it.b]))
+                                for found in (self.interfaces, self.near))
+        else:
+            interfaces, near = (tuple(it.between(index[it.a], index[it.b])
+                                      for it in found if it.a in index and it.b in index
+                                      and not (rigid[index[it.a]] and rigid[index[it.b]]))
+                                for found in (self.interfaces, self.near))
         return Assembly(blocks, interfaces, self.gravity, near, grips)

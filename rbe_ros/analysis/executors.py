@@ -4,7 +4,7 @@ ahead, run: a local process pool or a Ray cluster.
 Both map :func:`rbe_ros.analysis.robust.run_batch` over the batches and yield the results in
 batch order; since every sample is seeded by its index, the numbers are the executor's
 business only in speed. For the planner (:class:`CheckPool`, :func:`ray_checks`) each task is
-the plain check of one step, the same wherever it runs. Workers import the ROS-free core
+the full check of one step, the same wherever it runs. Workers import the ROS-free core
 only (no rclpy) and run one solver thread each: the processes are the parallelism.
 """
 from __future__ import annotations
@@ -19,6 +19,7 @@ from contextlib import contextmanager
 from .assembly import Assembly
 from .options import CheckOptions
 from .robust import RobustJob, SampleResult, run_batch
+from .steps import gripped
 from .verdict import check
 
 #: Thread pools of numeric libraries capped at one thread per worker process.
@@ -80,12 +81,12 @@ def _plan_worker(assembly: Assembly, options: CheckOptions) -> None:
 
 
 def _check_step(present: tuple[str, ...], held: tuple[str, ...], assembly=None, options=None):
-    """The plain check of one step of the planner's assembly (a worker's, or the given),
-    the held blocks as supports: the full check the planner makes of a trial itself (whose
-    robots' capacities it checks after, in-process)."""
+    """The full check of one step of the planner's assembly (a worker's, or the given), a
+    robot's grip on each held block: the check the planner makes of a trial itself when
+    no smaller model settles it."""
     assembly = _PLAN["assembly"] if assembly is None else assembly
     options = _PLAN["options"] if options is None else options
-    return check(assembly.subset(present, held), options)
+    return check(gripped(assembly, present, held), options)
 
 
 class CheckPool:

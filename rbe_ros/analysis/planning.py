@@ -15,13 +15,15 @@ largest contact area with present blocks, then scene order; of these the first
 :mod:`rbe_ros.analysis.insertion`; those that cannot are named when the step fails). For a
 candidate the holds are
 found as a robot would keep them: nothing, if the step stands so; else the blocks held at
-the previous step plus the new block, with more blocks added greedily while the step does
-not stand (those the failed check names as moving first), then every hold whose release
-keeps the step standing is released, oldest first; if that leaves more than K, the exact
-minimal hold search (:func:`rbe_ros.analysis.holds.minimal_holds`, within its budget). A
-candidate is feasible with at most K holds, each robot within the hold capacities of the
-options (``hold_force_max``, ``hold_torque_max``: see :class:`~rbe_ros.analysis.holds.
-StabilityOracle`); when no candidate is, the message names the wrench the best one needs.
+the previous step plus the new block, less every hold whose release keeps the step
+standing (oldest first); when none can go and the set does not stand, one more block is
+held (the highest the failed check names as moving first) and the releases are tried again;
+if that ends with more than K, the exact minimal hold search
+(:func:`rbe_ros.analysis.holds.minimal_holds`, within its budget). A held block has a
+robot's grip at its centroid, as ``check --sequence`` checks the planned scene: a candidate
+is feasible with at most K holds, each robot within the hold capacities of the options
+(``hold_force_max``, ``hold_torque_max``); when no candidate is, the message names the
+wrench the best one needs.
 Each partial plan keeps the first ``beam`` feasible candidates; of all children the ``beam``
 best survive (fewest hold-steps so far, then fewest holds now, then candidate rank).
 No child at a step: the plan fails there.
@@ -29,10 +31,11 @@ No child at a step: the plan fails there.
 A candidate step is the partial plan's last standing state plus one block, so it is checked
 as :func:`check_sequence` checks a step (:class:`StepChecker`: the kept forces of that state,
 a local region around the blocks that changed, the component only when no region settles
-it); every set of holds tried is such a step, and the verdict is the full problem's. The
-report of the accepted candidate is the step's report (no second check of the plan);
-``full_candidates`` solves whole components per trial instead (the planner before, kept to
-compare with).
+it), and the verdict is the full problem's. With blocks held, a smaller model only proves a
+failure (a relaxation, the held blocks rigid); a step that may stand is checked whole, with
+the robots' grips, since their wrenches are the report's. The report of the accepted
+candidate is the step's report (no second check of the plan); ``full_candidates`` checks
+every trial whole instead (to compare with).
 
 The finished assembly must stand with nothing held; if the last step holds blocks, a release
 step follows (its report: the finished assembly's check).
@@ -43,13 +46,12 @@ import collections
 import copy
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from typing import Protocol
 
 import numpy as np
 
-from ..rbe.model import Grip
 from ..rbe.result import Report, Status
 from ..scene import Hold, Scene, SceneError, make_scene
 from .asbuilt import declared
@@ -59,7 +61,7 @@ from .incremental import StepChecker
 from .insertion import block_insertion
 from .options import CheckOptions
 from .pipeline import check_sequence
-from .steps import supports_present
+from .steps import gripped, supports_present
 from .verdict import UNEXPLAINED, check
 
 #: How the message of a plan stopped by ``should_stop`` begins (a time limit, a cancel).
@@ -155,10 +157,14 @@ class _Partial:
 class _Trial:
     """One candidate step (the partial plan's blocks and the candidate) checked with sets of
     held blocks: through the partial plan's kept forces (:class:`StepChecker`, local
-    regions first), else the full check; each set once."""
+    regions first; with holds, failures only), else the full check with the robots' grips
+    (sent ahead to the look-ahead's workers, or made here); each set once. ``options``:
+    the check's (the planner's, or with unbounded robots for the capacity note)."""
 
-    def __init__(self, planner: _Planner, partial: _Partial, block: str):
+    def __init__(self, planner: _Planner, partial: _Partial, block: str,
+                 options: CheckOptions | None = None):
         self.planner, self.checker = planner, partial.checker
+        self.options = options or planner.options
         self.order = (*partial.order, block)
         self.previous = partial.held[-1] if partial.held else ()
         unheld = max((j for j, h in enumerate(partial.held) if not h), default=-1)
@@ -169,6 +175,7 @@ class _Trial:
         self.direct = (len(partial.held) >= 2 and bool(set(partial.held[-2]) - set(self.previous))
                        and partial.reports[-1].model == "full")
         self.present = planner.present(self.order, len(self.order) - 1)
+        self.assembly = planner.full.subset(self.present)   # each set of holds from it
         self.free = {b for b in self.present if b in planner.free_set}
         self.reports: dict[frozenset, tuple[Assembly, Report]] = {}
 
@@ -176,15 +183,20 @@ class _Trial:
         key = frozenset(held)
         found = self.reports.get(key)
         if found is None:
-            self.planner.poll()
-            restrict = not (self.direct and set(self.previous) - key)
-            assembly = self.planner.full.subset(self.present, key)
-            report = (self.planner.ahead(self.present, key)      # when sent
-                      or self.checker.attempt(assembly, self.open_course, restrict=restrict)
-                      or check(assembly, self.planner.options))
-            if report.stable and key:
-                report = self.planner.within_capacity(self.present, key) or report
-            self.planner.counted(report)
+            planner = self.planner
+            planner.poll()
+            restrict = not (key or (self.direct and self.previous))
+            assembly = self.assembly.subset(self.present, key)
+            report = None if (planner.plan.full_candidates
+                              or (self.present, key) in planner.submitted) \
+                else self.checker.attempt(assembly, self.open_course, restrict=restrict)
+            if report is None or (key and report.stable):
+                # with holds only a failure is taken from a smaller model (a relaxation): the
+                # verdict is that of the robots' grips, and the report needs their wrenches
+                assembly = gripped(self.assembly, self.present, key)
+                report = ((planner.ahead(self.present, key) if self.options is planner.options
+                           else None) or check(assembly, self.options))
+            planner.counted(report)
             found = self.reports[key] = (assembly, report)
         return found
 
@@ -231,6 +243,7 @@ class _Planner:
             self.contacts[b].append((a, it.area, n_up >= RESTS_ON))
             self.contacts[a].append((b, it.area, -n_up >= RESTS_ON))
         self.cache: dict = {}
+        self.insertions: dict = {}              # order -> insertion of its last block
         self.checks = 0
         self.models: collections.Counter = collections.Counter()
         self.start = time.perf_counter()
@@ -249,9 +262,10 @@ class _Planner:
         """The supports present at step ``k`` (those with holds while active) and ``order``."""
         return supports_present(self.base, k) + tuple(order)
 
-    def candidates(self, order: tuple[str, ...], blocked: dict[str, str]) -> list[str]:
-        """The first ``candidates`` blocks, in rank order, that can reach their pose; those
-        that cannot go into ``blocked`` with the reason."""
+    def candidates(self, order: tuple[str, ...], blocked: dict[str, str]) -> Iterator[str]:
+        """The first ``candidates`` blocks, in rank order, that can reach their pose (each
+        found when asked for: the search mostly takes the first); those that cannot go into
+        ``blocked`` with the reason."""
         k = len(order)
         prefix = self.scene.sequence if self.plan.keep_sequence else ()
         if k < len(prefix):
@@ -271,26 +285,30 @@ class _Planner:
         return self.insertable(order, [b for _, b in sorted(resting) + sorted(touching)],
                                blocked)
 
-    def insertable(self, order, ranked, blocked: dict[str, str]) -> list[str]:
+    def insertable(self, order, ranked, blocked: dict[str, str]) -> Iterator[str]:
         """The first ``candidates`` of ``ranked`` that can reach their pose after ``order``."""
-        found = []
+        found = 0
         for b in ranked:
             why = self.blocked((*order, b))
             if why:
                 blocked.setdefault(b, why)
                 continue
-            found.append(b)
-            if len(found) == self.plan.candidates:
-                break
-        return found
+            yield b
+            found += 1
+            if found == self.plan.candidates:
+                return
 
     def insertion(self, order: tuple[str, ...]):
         """How ``order[-1]`` reaches its pose past the blocks present (None when insertion
-        is not checked)."""
+        is not checked); kept for the step (the search and the step report ask again)."""
         if not self.options.insertion.enabled:
             return None
-        return block_insertion(self.full, self.present(order, len(order) - 1), order[-1],
-                               self.options, self.scene.approach_of(order[-1]))
+        found = self.insertions.get(order)
+        if found is None:
+            found = self.insertions[order] = block_insertion(
+                self.full, self.present(order, len(order) - 1), order[-1], self.options,
+                self.scene.approach_of(order[-1]))
+        return found
 
     def blocked(self, order: tuple[str, ...]) -> str:
         """Why ``order[-1]`` cannot reach its pose past the blocks present ("" when it can,
@@ -301,14 +319,11 @@ class _Planner:
     def holds_for(self, partial: _Partial, block: str):
         """(held blocks, within K, step report or None, its assembly) for the step that
         places ``block`` after ``partial``."""
-        order = (*partial.order, block)
         previous = partial.held[-1] if partial.held else ()
-        if self.plan.full_candidates:
-            return (*self._holds_by_components(order, previous), None, None)
         trial = _Trial(self, partial, block)
         held = self._repair(trial, block, previous)
         if len(held) > self.plan.max_held or not trial.stands(held):
-            assembly = self.full.subset(trial.present)
+            assembly = trial.assembly
             self.poll()
             oracle = StabilityOracle(assembly, self.options, self.cache)
             result = minimal_holds(assembly, self.options, prefer=(*previous, block),
@@ -322,94 +337,49 @@ class _Planner:
 
     def _repair(self, trial: _Trial, new: str, previous) -> tuple[str, ...]:
         """Nothing held if the step stands so; else the previous holds and the new block,
-        more while it does not stand, then those whose release keeps it standing."""
+        less every hold whose release keeps the step standing (oldest first); if none can
+        go and the set does not stand, one more hold and the releases again. (A set is
+        checked only when no release settles it: a step held by the previous holds and
+        the new block that stands with fewer needs no proof that it stands with all.)"""
         if trial.stands(()):
             return ()
         held = [b for b in previous if b in trial.free] + [new]
-        while not trial.stands(held):
+        while True:
+            fewer = release_unneeded(trial, held)
+            if len(fewer) < len(held) or trial.stands(held):
+                held = fewer
+                break
             more = trial.next_hold(held)
             if more is None:
                 break
             held.append(more)
-        held = release_unneeded(trial, held)
         return tuple(sorted(held, key=self.position.__getitem__))
 
-    def _holds_by_components(self, order: tuple[str, ...], previous: tuple[str, ...],
-                             options=None):
-        """(held blocks, within K) for the step that places ``order[-1]`` (under ``options``,
-        default the plan's), every check solving whole components: the search before the
-        incremental checks (``full_candidates``), and the capacity note's."""
-        k = len(order) - 1
-        options = options or self.options
-        assembly = self.full.subset(self.present(order, k))
-        oracle = StabilityOracle(assembly, options, self.cache)
-        try:
-            held = self._repair_components(oracle, order[-1], previous)
-            if len(held) > self.plan.max_held or not oracle.stands(self._indices(oracle, held)):
-                result = minimal_holds(assembly, options, prefer=(*previous, order[-1]),
-                                       oracle=oracle)
-                if result.stands and (len(result.blocks) < len(held)
-                                      or not oracle.stands(self._indices(oracle, held))):
-                    held = result.blocks
-            ok = len(held) <= self.plan.max_held and oracle.stands(self._indices(oracle, held))
-        finally:
-            self.checks += oracle.checks
-        return held, ok
-
-    @staticmethod
-    def _indices(oracle: StabilityOracle, held) -> list[int]:
-        return [oracle.index[b] for b in held]
-
-    def _capacity_note(self, order: tuple[str, ...], previous) -> str:
+    def _capacity_note(self, partial: _Partial, block: str) -> str:
         """What the robots would need beyond their capacities at the step that places
-        ``order[-1]``, held as the plan would hold it with unbounded robots ("" when the
-        capacities are unbounded, or that needs more than K holds or is within them)."""
+        ``block`` after ``partial``, held as the plan would hold it with unbounded robots
+        ("" when the capacities are unbounded, or that needs more than K holds or is within
+        them)."""
         if self.options.hold_force_max is None and self.options.hold_torque_max is None:
             return ""
         unbounded = replace(self.options, hold_force_max=None, hold_torque_max=None)
-        held, ok = self._holds_by_components(order, previous, unbounded)
-        oracle = StabilityOracle(self.full.subset(self.present(order, len(order) - 1)),
-                                 self.options, self.cache)
-        over = oracle.capacity(self._indices(oracle, held)) if ok else None
+        trial = _Trial(self, partial, block, unbounded)
+        held = self._repair(trial, block, partial.held[-1] if partial.held else ())
+        if len(held) > self.plan.max_held or not trial.stands(held):
+            return ""
+        over = self.within_capacity(trial.assembly, held, self.options)
         return (f"; with {', '.join(held)} held (fewest with unbounded robots), {over.message}"
                 if over is not None else "")
 
-    def _repair_components(self, oracle: StabilityOracle, new: str, previous
-                           ) -> tuple[str, ...]:
-        if oracle.stands(()):
-            return ()
-        held = [oracle.index[b] for b in previous if b in oracle.index] + [oracle.index[new]]
-        while True:
-            fails = oracle.failing(held)
-            if not fails:
-                break
-            comp, report = fails[0]
-            if not comp:            # a robot over its capacity that no other hold can relieve
-                break
-            named = [oracle.index[b] for b in report.unstable_blocks
-                     if b in oracle.index and oracle.index[b] in comp]
-            held.append(sorted(named or comp, key=lambda j: (-oracle.height[j], j))[0])
-        held = release_unneeded(oracle, held)
-        return tuple(oracle.ids[j] for j in sorted(held))
-
-    def step_report(self, order, held, report, assembly, checker: StepChecker
-                    ) -> tuple[Report, Assembly]:
-        """The full report of the step placing ``order[-1]`` and its assembly (checked as
-        a sequence step when the search used the component checks)."""
-        present = self.present(order, len(order) - 1)
-        if held and (report is None or not report.hold_wrenches):
-            # the robots' wrenches: the step with a grip on each held block, solved whole
-            assembly = self.gripped(present, held)
-            report = check(assembly, self.options)
-        elif report is None:
-            assembly = self.full.subset(present, held)
-            report = checker.attempt(assembly) or check(assembly, self.options)
+    def step_report(self, order, held, report: Report, assembly: Assembly) -> Report:
+        """The report of the step placing ``order[-1]`` with ``held``: the accepted trial's
+        ``report`` of ``assembly`` as a step of the plan, with how the block arrives."""
         found = self.insertion(order)
         extra = {} if found is None else {"insertable": found.insertable,
                                           "insertion_direction": found.direction}
         return replace(report, step_index=len(order) - 1, block_placed=order[-1],
-                       held_blocks=tuple(held), num_blocks=len(assembly.blocks),
-                       **extra), assembly
+                       held_blocks=tuple(held),
+                       num_blocks=len(assembly.blocks), **extra)
 
     def run(self) -> Plan:
         n = len(self.free)
@@ -422,6 +392,7 @@ class _Planner:
         beam = [_Partial((), (), (0, 0, 0), (), StepChecker(self.options, explain=False))]
         for k in range(n):
             blocked: dict[str, str] = {}
+            self.insertions = {o: f for o, f in self.insertions.items() if len(o) > k}
             try:
                 children, best_rejected = self._children(beam, blocked)
             except _Stopped:
@@ -432,8 +403,7 @@ class _Planner:
                 best = beam[0]
                 why = (f"; the best candidate, {best_rejected[0]}, needs {count} held "
                        f"block{'' if count == 1 else 's'} ({', '.join(best_rejected[1])})"
-                       + self._capacity_note((*best.order, best_rejected[0]),
-                                             best.held[-1] if best.held else ())
+                       + self._capacity_note(best, best_rejected[0])
                        if best_rejected else
                        "; no unplaced block touches the placed ones" if not blocked else "")
                 why += "".join(f"; {b} cannot be inserted: {r}" for b, r in blocked.items())
@@ -465,8 +435,7 @@ class _Planner:
                         best_rejected = (b, held)
                     continue
                 total, worst, ranks = partial.score
-                report, assembly = self.step_report(order, held, report, assembly,
-                                                    partial.checker)
+                report = self.step_report(order, held, report, assembly)
                 report = replace(report, solve_time=time.perf_counter() - start)
                 checker = copy.copy(partial.checker)
                 checker.advance(assembly, report)
@@ -494,10 +463,10 @@ class _Planner:
         for _ in range(self.pool.workers):
             if not held or order[-1] not in held:
                 break
-            following = self.candidates(order, {})
-            if not following:
+            following = next(self.candidates(order, {}), None)
+            if following is None:
                 break
-            order = (*order, following[0])
+            order = (*order, following)
             held = tuple(sorted({*held} - {order[-2]} | {order[-1]},
                                 key=self.position.__getitem__))
             key = (self.present(order, len(order) - 1), frozenset(held))
@@ -507,18 +476,14 @@ class _Planner:
         for key in set(self.submitted) - wanted:     # off the path taken: not needed
             self.submitted.pop(key).cancel()
 
-    def within_capacity(self, present: tuple[str, ...], held: frozenset) -> Report | None:
-        """The HOLD_EXCEEDED report of the step with a robot's grip on each held block, when
-        the options bound the wrenches and one is over (as
-        :meth:`~rbe_ros.analysis.holds.StabilityOracle.capacity`); else None."""
-        if self.options.hold_force_max is None and self.options.hold_torque_max is None:
+    @staticmethod
+    def within_capacity(assembly: Assembly, held, options: CheckOptions) -> Report | None:
+        """The HOLD_EXCEEDED report of the step ``assembly`` with a robot's grip on each
+        ``held`` block, when ``options`` bound the wrenches and one is over; else None."""
+        if options.hold_force_max is None and options.hold_torque_max is None:
             return None
-        report = check(self.gripped(present, held), self.options)
+        report = check(gripped(assembly, [b.id for b in assembly.blocks], held), options)
         return report if report.status == Status.HOLD_EXCEEDED else None
-
-    def gripped(self, present, held) -> Assembly:
-        """The step with a robot's grip (at the centroid) on each held block."""
-        return self.full.subset(present, held, tuple(Grip(b) for b in sorted(held)))
 
     def ahead(self, present: tuple[str, ...], held: frozenset) -> Report | None:
         """The look-ahead's full check of this step with ``held``, if it was sent."""

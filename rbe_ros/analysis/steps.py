@@ -66,6 +66,12 @@ def step_grips(scene: Scene, k: int, held) -> tuple[Grip, ...]:
     return tuple(out)
 
 
+def gripped(assembly, present, held):
+    """The step of ``assembly`` with the blocks ``present``, a robot's grip at the centroid
+    of each block of ``held`` (the capacities: the check's options). The planner's holds."""
+    return assembly.subset(present, held, tuple(Grip(b) for b in sorted(held)))
+
+
 def _final_step(scene: Scene) -> tuple[list[str], int]:
     order = [b.id for b in scene.blocks if not b.support]
     return order, len(order) + 1

@@ -14,7 +14,9 @@ Rigid-Block Analysis). The test (docs/METHOD.md, "Prestress"):
    the RBE problem is solved again with the friction resultant of every closed interface
    capped at mu times the stick field's normal resultant there (a Tresca bound, fixed before
    the solve, that no squeeze can raise: one step of Panagiotopoulos' fixed point). No
-   field: they stand only squeezed.
+   field: they stand only squeezed. A field with no friction on the closed interfaces is
+   within every such cap: tried first, it decides most steps beside a held block in one
+   solve, without the stick field.
 """
 from __future__ import annotations
 
@@ -105,13 +107,23 @@ def closed_interfaces(model: EquilibriumModel, options: SolveOptions) -> np.ndar
     return unopened(model, options.mu / _capacity_of_outer(options.cone))
 
 
+def _least_caps(model: EquilibriumModel, shut: np.ndarray) -> np.ndarray:
+    """Friction caps (N per interface, inf: none) no larger than any cap of the test on the
+    ``shut`` interfaces (the additive tolerance alone): a field within them passes it
+    whatever the stick field, so it stands without that solve."""
+    return np.where(shut, SHARE_TOL * model.force_scale, math.inf)
+
+
 def _unsqueezed(model, options: SolveOptions, solution: Solution, load,
                 shut: np.ndarray) -> Squeeze:
     """Caps on the friction resultant of every ``shut`` interface: mu times the normal
     resultant of the stick field (no friction limit) there, a Tresca bound no squeeze can
-    raise. They stand if ``solution`` keeps the caps, or the stick field lies within the
-    vertex cones, or the RBE problem solved with the caps has a field."""
+    raise. They stand if the RBE problem has a field within the least caps (none needs the
+    stick field), or ``solution`` keeps the caps, or the stick field lies within the vertex
+    cones, or the RBE problem solved with the caps has a field."""
     options = replace(options, objective="qp", friction="net")
+    if solve(model, options, load=load, friction_cap=_least_caps(model, shut)).solved:
+        return Squeeze(np.zeros(model.num_vertices, dtype=bool))
     stick = solve(model, replace(options, mu=math.inf), load=load)
     if not stick.solved:
         return Squeeze(shut[model.vertex_interface])

@@ -3,6 +3,7 @@ of the same step, progress is reported, and a plan stopped by a time limit, a ca
 SIGINT returns (and writes) the best partial plan with the reports of its steps."""
 from __future__ import annotations
 
+import collections
 import functools
 import json
 import os
@@ -62,6 +63,32 @@ def test_every_candidate_verdict_is_the_full_checks(scene, max_held, shortcuts, 
     monkeypatch.undo()
     whole = plan_sequence(scene, max_held, full_candidates=True)
     assert (whole.order, whole.held) == (plan.order, plan.held)
+
+
+def test_a_held_course_costs_one_whole_check_per_step(monkeypatch):
+    """On the 10 x 5 dome, whose fourth ring is built held at its first and its newest
+    block, each step of that ring is decided by one whole check: the other sets of holds
+    fail by relaxations (the held blocks rigid), and the set of the previous holds and the
+    new block is never checked, since a release of one of them stands."""
+    trials = collections.defaultdict(list)
+    result = planning._Trial.result
+
+    def audited(self, held):
+        new = frozenset(held) not in self.reports
+        assembly, report = result(self, held)
+        if new:
+            trials[len(self.order) - 1].append((frozenset(held), report.model.split()[0]))
+        return assembly, report
+
+    monkeypatch.setattr(planning._Trial, "result", audited)
+    plan = plan_sequence(generators.dome(slices=10, courses=5), 2)
+    assert plan.feasible, plan.message
+    course = [k for k in range(1, len(plan.order))
+              if len(plan.held[k]) == 2 == len(plan.held[k - 1])]   # the newest hold moved on
+    assert len(course) >= 7
+    for k in course:
+        assert [model for _, model in trials[k]].count("full") == 1, (k, trials[k])
+        assert frozenset(plan.held[k - 1]) | {plan.order[k]} not in dict(trials[k])
 
 
 def _scene_file(tmp_path, scene) -> str:

@@ -131,8 +131,9 @@ class Plan:
 
 
 class LookAhead(Protocol):
-    """Full checks (:func:`check`) of sub-assemblies of the planner's assembly, run by
-    ``workers`` workers: ``submit(present, held)`` returns a future of the report."""
+    """Full checks (:func:`check`) of steps of the planner's assembly, a robot's grip on each
+    held block, run by ``workers`` workers: ``submit(present, held)`` returns a future of
+    the report."""
 
     workers: int
 

@@ -43,13 +43,18 @@ LEVER = ("Each step of a held course (robots at its first and at its newest bloc
 TODAY_527 = "11.5 min (608 s of planning), 10.7 GB peak, 1.03 GB JSON (issue 23)"
 
 
-def run(args: list[str]) -> dict:
-    """`rbe-ros ARGS` in its own process: wall time, peak RSS, stdout size and JSON."""
+#: The commit on which issue 23 was filed: the planner before it ("today's").
+BEFORE = "670975d"
+
+
+def run(args: list[str], code: Path = ROOT) -> dict:
+    """`rbe-ros ARGS` in its own process (the package of ``code``): wall time, peak RSS,
+    stdout size and JSON."""
     start = time.perf_counter()
     with tempfile.TemporaryFile() as out:
         proc = subprocess.Popen([sys.executable, "-m", "rbe_ros.cli", *args], stdout=out,
-                                stderr=subprocess.DEVNULL, cwd=ROOT,
-                                env={**os.environ, "PYTHONPATH": str(ROOT)})
+                                stderr=subprocess.DEVNULL, cwd=code,
+                                env={**os.environ, "PYTHONPATH": str(code)})
         _pid, status, usage = os.wait4(proc.pid, 0)
         elapsed = time.perf_counter() - start
         size = out.tell()
@@ -63,9 +68,16 @@ def run(args: list[str]) -> dict:
             "status": os.waitstatus_to_exitcode(status)}
 
 
-def plan(scene: Path, *extra: str, out: Path | None = None) -> dict:
+def plan(scene: Path, *extra: str, out: Path | None = None, code: Path = ROOT) -> dict:
     args = ["plan", str(scene), "--max-held", "2", "--json", *extra]
-    return run(args + (["-o", str(out)] if out else []))
+    return run(args + (["-o", str(out)] if out else []), code)
+
+
+def checkout(commit: str, where: Path) -> Path:
+    """A work tree of ``commit`` at ``where`` (this repository's history)."""
+    subprocess.run(["git", "worktree", "add", "--detach", "--force", str(where), commit],
+                   cwd=ROOT, check=True, capture_output=True)
+    return where
 
 
 def hold_steps(result: dict) -> tuple[int, int]:
@@ -151,17 +163,29 @@ def main() -> int:
 
     incremental = plan(dome)
     whole = plan(dome, "--full-candidates")
-    print(f"14 x 10 dome: {incremental['time']:.1f} s, whole components "
-          f"{whole['time']:.1f} s", flush=True)
+    try:
+        before = plan(dome, code=checkout(BEFORE, work / "before"))
+    finally:
+        subprocess.run(["git", "worktree", "remove", "--force", str(work / "before")],
+                       cwd=ROOT, capture_output=True)
+    print(f"14 x 10 dome: {incremental['time']:.1f} s, every trial whole "
+          f"{whole['time']:.1f} s, the planner of {BEFORE} {before['time']:.1f} s", flush=True)
     lines += ["### The paper's 14 x 10 dome (126 blocks to place)", "",
-              "| candidate checks | time [s] | peak RSS [MB] | candidate checks | hold-steps |",
-              "|---|---|---|---|---|"]
+              "| candidate checks | time [s] | peak RSS [MB] | candidate checks |",
+              "|---|---|---|---|"]
     for name, r in (("incremental (default)", incremental),
-                    ("every trial whole (`--full-candidates`)", whole)):
+                    ("every trial whole (`--full-candidates`)", whole),
+                    (f"the planner before issue 23 ({BEFORE})", before)):
         lines.append(f"| {name} | {r['time']:.1f} | {r['rss_mb']:.0f} | "
-                     f"{r['json']['search_checks']} | {hold_steps(r)[0]} |")
-    lines += ["", f"Ratio: **{whole['time'] / incremental['time']:.1f}x**; the same order and "
-              f"holds: {'yes' if same(incremental, whole) else 'NO'}.", ""]
+                     f"{r['json']['search_checks']} |")
+    lines += ["", f"Ratios: **{before['time'] / incremental['time']:.1f}x** the planner "
+              f"before (issue 23's bar: 5x), {whole['time'] / incremental['time']:.1f}x every "
+              f"trial whole; the same order as before: "
+              f"{'yes' if before['json']['order'] == incremental['json']['order'] else 'NO'}; "
+              f"the same order and holds with every trial whole: "
+              f"{'yes' if same(incremental, whole) else 'NO'}. The planner before had no "
+              "prestress test (issue 24): beside a held block, a step now also asks for a "
+              "field without friction on the contacts a squeeze could load.", ""]
 
     lines += ["### --beam 2 against greedy", "",
               "| scene | beam | time [s] | hold-steps | largest hold count |",

@@ -171,7 +171,7 @@ def main() -> int:
     print(f"14 x 10 dome: {incremental['time']:.1f} s, every trial whole "
           f"{whole['time']:.1f} s, the planner of {BEFORE} {before['time']:.1f} s", flush=True)
     lines += ["### The paper's 14 x 10 dome (126 blocks to place)", "",
-              "| candidate checks | time [s] | peak RSS [MB] | candidate checks |",
+              "| planner | time [s] | peak RSS [MB] | candidate checks |",
               "|---|---|---|---|"]
     for name, r in (("incremental (default)", incremental),
                     ("every trial whole (`--full-candidates`)", whole),

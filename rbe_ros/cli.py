@@ -24,7 +24,7 @@ from .analysis.assembly import Assembly
 from .analysis.friction import minimum_friction
 from .analysis.option_spec import BY_PATH, OPTIONS, from_outer
 from .analysis.options import CheckOptions
-from .analysis.pipeline import check_scene, check_sequence, first_failing_step
+from .analysis.pipeline import check_scene, check_sequence, first_failing_step, slim
 from .analysis.executors import CheckPool, ProcessPool, ray_checks, ray_cluster
 from .analysis.perturb import PoseNoise
 from .analysis.robust import RobustJob, estimate, sample_scene, serial
@@ -319,7 +319,9 @@ def _run_check(args) -> int:
                       file=sys.stderr)
             _progress(report, total)
 
-        reports = check_sequence(scene, options, on_step=None if args.json else progress)
+        # the table needs no interfaces: kept, they would grow with the steps squared
+        reports = check_sequence(scene, options, on_step=None if args.json else progress,
+                                 keep=None if args.json or args.bag else slim)
         out = {"scene": scene.name, "first_failing_step": first_failing_step(reports),
                "reports": [report_json(r) for r in reports]}
     else:

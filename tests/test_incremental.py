@@ -11,7 +11,7 @@ import pytest
 from helpers import equilibrium_residual
 from rbe_ros import generators as gen
 from rbe_ros.analysis.options import CheckOptions, HoldSearch
-from rbe_ros.analysis.pipeline import check_sequence
+from rbe_ros.analysis.pipeline import check_sequence, slim
 from rbe_ros.analysis.steps import sequence_steps
 from rbe_ros.scene import make_scene
 
@@ -92,3 +92,18 @@ def test_a_relaxed_report_names_why_the_step_fails(runs):
         if l_report.model.startswith("relaxed"):
             assert not l_report.stable and not f_report.stable
             assert l_report.unstable_blocks and l_report.message
+
+
+def test_a_sequence_can_keep_only_the_slim_reports():
+    """``keep=slim``: each step's whole report reaches ``on_step`` and the list keeps the
+    verdicts without the interfaces (the table of ``check --sequence``), so a long sequence's
+    memory grows with its steps, not with every interface of every partial assembly."""
+    scene = gen.dome(slices=8, courses=4)
+    seen = []
+    kept = check_sequence(scene, keep=slim, on_step=lambda r, _total: seen.append(r))
+    whole = check_sequence(scene)
+    assert [r.status for r in kept] == [r.status for r in whole] == [r.status for r in seen]
+    assert [r.worst_friction_ratio for r in kept] == [r.worst_friction_ratio for r in whole]
+    assert all(not r.interfaces for r in kept)
+    assert [len(r.interfaces) for r in seen] == [len(r.interfaces) for r in whole]
+    assert sum(len(r.interfaces) for r in whole) > 10 * len(whole)

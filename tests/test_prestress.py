@@ -306,3 +306,16 @@ def test_a_field_without_friction_on_closed_interfaces_decides_as_the_whole_test
 def _counting(calls, *args, **kwargs):
     calls.append(kwargs.get("friction_cap") is not None)
     return solve(*args, **kwargs)
+
+
+def test_a_grip_and_a_support_can_differ_beside_a_squeeze():
+    """The stick field of a held block with a grip carries the robot's wrench at a cost, a
+    support's for free: beside the held second block of the 8 x 5 dome's third ring the
+    step stands with a grip and is squeezed with a support (README, holds)."""
+    assembly = _held_dome_step(2)
+    held = [g.block for g in assembly.grips]
+    assert held == ["course3_slice01"]
+    assert check(assembly, options(0.6)).stable
+    as_support = check(assembly.subset([b.id for b in assembly.blocks], held), options(0.6))
+    assert as_support.status == Status.FRICTION_EXCEEDED
+    assert "without prestress" in as_support.message

@@ -54,15 +54,25 @@ def check_scene(scene: Scene, options: CheckOptions = CheckOptions(),
     return replace(report, solve_time=time.perf_counter() - start)
 
 
+def slim(report: Report) -> Report:
+    """``report`` without its interfaces and near contacts: what a long sequence or plan
+    keeps of each step, so that its memory grows with the steps, not with every interface
+    of every partial assembly."""
+    return replace(report, interfaces=(), near_contacts=())
+
+
 def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
                    on_step: Callable[[Report, int], None] | None = None,
-                   cancelled: Callable[[], bool] | None = None) -> list[Report]:
+                   cancelled: Callable[[], bool] | None = None,
+                   keep: Callable[[Report], Report] | None = None) -> list[Report]:
     """One report per step, in order. Contacts are detected once on the whole scene.
 
-    ``on_step(report, total)`` is called after each step; when ``cancelled()`` turns true
-    the reports so far are returned. The solve options' ``time_limit`` bounds each step, and
-    the contact detection on the whole scene: a step over it is SOLVER_FAILED naming the
-    stage, and the sequence goes on; contacts over it make every step's report SOLVER_FAILED.
+    ``on_step(report, total)`` is called after each step with its whole report; the list
+    returned holds ``keep(report)`` (e.g. :func:`slim`; default the whole report). When
+    ``cancelled()`` turns true the reports so far are returned. The solve options'
+    ``time_limit`` bounds each step, and the contact detection on the whole scene: a step
+    over it is SOLVER_FAILED naming the stage, and the sequence goes on; contacts over it
+    make every step's report SOLVER_FAILED.
     """
     start = time.perf_counter()
     options = declared(options, scene)
@@ -96,7 +106,7 @@ def check_sequence(scene: Scene, options: CheckOptions = CheckOptions(), *,
         # the step's time, with its share of the contact detection done once for all steps
         report = replace(report, step_index=step.index, block_placed=step.block,
                          solve_time=time.perf_counter() - step_start + contact_time / total)
-        reports.append(report)
+        reports.append(report if keep is None else keep(report))
         if on_step is not None:
             on_step(report, total)
     return reports

@@ -60,7 +60,7 @@ from .holds import StabilityOracle, minimal_holds, release_unneeded
 from .incremental import StepChecker
 from .insertion import block_insertion
 from .options import CheckOptions
-from .pipeline import check_sequence
+from .pipeline import check_sequence, slim
 from .steps import gripped, supports_present
 from .verdict import UNEXPLAINED, check
 
@@ -442,7 +442,7 @@ class _Planner:
                 checker.advance(assembly, report)
                 child = _Partial(order, (*partial.held, held),
                                  (total + len(held), len(held), ranks + rank),
-                                 (*partial.reports, _slim(report)), checker)
+                                 (*partial.reports, slim(report)), checker)
                 if self.plan.beam == 1 and self.on_report is not None:
                     self.on_report(report)          # greedy: this step is the plan's
                 key = frozenset(order)
@@ -507,7 +507,7 @@ class _Planner:
         if release:
             held.append(())                          # release step
             report = replace(self.final, step_index=n, block_placed="")
-            reports.append(_slim(report))
+            reports.append(slim(report))
             if self.plan.beam == 1 and self.on_report is not None:
                 self.on_report(report)
         holds = []
@@ -538,11 +538,6 @@ class _Planner:
             check_sequence(scene, self.options, on_step=lambda r, _total: self.on_report(r))
         return Plan(feasible, order, held, message, failed, scene, reports, self.checks,
                     models=dict(self.models))
-
-
-def _slim(report: Report) -> Report:
-    """``report`` without its interfaces (what a plan keeps of each step)."""
-    return replace(report, interfaces=(), near_contacts=())
 
 
 def _planned_under(options: CheckOptions) -> tuple[float, float] | None:

@@ -18,7 +18,7 @@ import numpy as np
 from ..scene import Scene, SceneError
 from .options import CheckOptions, HoldSearch
 from .perturb import PoseNoise, perturb_scene
-from .pipeline import check_scene, check_sequence
+from .pipeline import check_scene, check_sequence, slim
 from .steps import sequence_steps
 
 #: Declared pose uncertainty of a sample, in standard deviations of the noise.
@@ -108,7 +108,7 @@ def run_batch(job: RobustJob, indices: Iterable[int]) -> list[SampleResult]:
         scene = sample_scene(job, k)
         try:
             if job.sequence:
-                steps = tuple(r.stable for r in check_sequence(scene, options))
+                steps = tuple(r.stable for r in check_sequence(scene, options, keep=slim))
                 stands = all(steps)
             else:
                 steps, stands = (), check_scene(scene, options).stable

@@ -320,21 +320,26 @@ class _Planner:
     def holds_for(self, partial: _Partial, block: str):
         """(held blocks, within K, step report or None, its assembly) for the step that
         places ``block`` after ``partial``."""
-        previous = partial.held[-1] if partial.held else ()
         trial = _Trial(self, partial, block)
+        held = self._holds(trial, partial.held[-1] if partial.held else ())
+        ok = len(held) <= self.plan.max_held and trial.stands(held)
+        assembly, report = trial.result(held) if ok else (None, None)
+        return held, ok, report, assembly
+
+    def _holds(self, trial: _Trial, previous) -> tuple[str, ...]:
+        """The holds of ``trial``'s step as a robot would keep them (the module docstring):
+        the repair, else the exact search when that needs more than K or fails."""
+        block = trial.order[-1]
         held = self._repair(trial, block, previous)
         if len(held) > self.plan.max_held or not trial.stands(held):
-            assembly = trial.assembly
             self.poll()
-            oracle = StabilityOracle(assembly, self.options, self.cache)
-            result = minimal_holds(assembly, self.options, prefer=(*previous, block),
+            oracle = StabilityOracle(trial.assembly, trial.options, self.cache)
+            result = minimal_holds(trial.assembly, trial.options, prefer=(*previous, block),
                                    oracle=oracle)
             self.checks += oracle.checks
             if result.stands and (len(result.blocks) < len(held) or not trial.stands(held)):
                 held = result.blocks
-        ok = len(held) <= self.plan.max_held and trial.stands(held)
-        assembly, report = trial.result(held) if ok else (None, None)
-        return held, ok, report, assembly
+        return held
 
     def _repair(self, trial: _Trial, new: str, previous) -> tuple[str, ...]:
         """Nothing held if the step stands so; else the previous holds and the new block,
@@ -365,7 +370,7 @@ class _Planner:
             return ""
         unbounded = replace(self.options, hold_force_max=None, hold_torque_max=None)
         trial = _Trial(self, partial, block, unbounded)
-        held = self._repair(trial, block, partial.held[-1] if partial.held else ())
+        held = self._holds(trial, partial.held[-1] if partial.held else ())
         if len(held) > self.plan.max_held or not trial.stands(held):
             return ""
         over = self.within_capacity(trial.assembly, held, self.options)

@@ -52,7 +52,7 @@ from typing import Protocol
 
 import numpy as np
 
-from ..rbe.result import Report, Status
+from ..rbe.result import Report
 from ..scene import Hold, Scene, SceneError, make_scene
 from .asbuilt import declared
 from .assembly import Assembly
@@ -80,8 +80,8 @@ class PlanOptions:
     beam: int = 1                # partial plans kept per step (1: greedy)
     candidates: int = 8          # insertable candidates tried per partial plan and step
     keep_sequence: bool = False  # the scene's sequence is a fixed prefix of the order
-    #: every candidate check solves the components of the whole partial assembly (the
-    #: planner before the incremental checks; for comparison)
+    #: every trial of a candidate checked whole, without the incremental checks (to
+    #: compare with)
     full_candidates: bool = False
     time_limit: float = math.inf  # s: then the best partial plan is returned
 
@@ -209,7 +209,7 @@ class _Trial:
         names as moving, else the highest free one (None: nothing left to hold)."""
         assembly, report = self.result(held)
         if report.message == UNEXPLAINED:
-            report = check(assembly, self.planner.options)
+            report = check(assembly, self.options)
         left = self.free - set(held)
         named = [b for b in report.unstable_blocks if b in left]
         pool = named or left
@@ -373,7 +373,8 @@ class _Planner:
         held = self._holds(trial, partial.held[-1] if partial.held else ())
         if len(held) > self.plan.max_held or not trial.stands(held):
             return ""
-        over = self.within_capacity(trial.assembly, held, self.options)
+        oracle = StabilityOracle(trial.assembly, self.options, self.cache)
+        over = oracle.capacity([oracle.index[b] for b in held])
         return (f"; with {', '.join(held)} held (fewest with unbounded robots), {over.message}"
                 if over is not None else "")
 
@@ -481,15 +482,6 @@ class _Planner:
                 self.submitted[key] = self.pool.submit(*key)
         for key in set(self.submitted) - wanted:     # off the path taken: not needed
             self.submitted.pop(key).cancel()
-
-    @staticmethod
-    def within_capacity(assembly: Assembly, held, options: CheckOptions) -> Report | None:
-        """The HOLD_EXCEEDED report of the step ``assembly`` with a robot's grip on each
-        ``held`` block, when ``options`` bound the wrenches and one is over; else None."""
-        if options.hold_force_max is None and options.hold_torque_max is None:
-            return None
-        report = check(gripped(assembly, [b.id for b in assembly.blocks], held), options)
-        return report if report.status == Status.HOLD_EXCEEDED else None
 
     def ahead(self, present: tuple[str, ...], held: frozenset) -> Report | None:
         """The look-ahead's full check of this step with ``held``, if it was sent."""

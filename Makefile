@@ -21,7 +21,7 @@ demo: setup
 test: setup browser ray
 	@echo "[test] ROS_DOMAIN_ID=$(ROS_DOMAIN_ID) ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST"
 	ROS_DOMAIN_ID=$(ROS_DOMAIN_ID) ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST \
-		$(PY) -m pytest tests -q
+		$(PY) -m pytest tests -q -m "not long"
 
 # The whole suite 5 times in a row with 2 busy processes beside it (one per core here):
 # no timing assert may fail under load (scripts/suite_under_load.sh; 30-50 minutes).
@@ -29,10 +29,13 @@ test: setup browser ray
 test-under-load: setup browser ray
 	bash scripts/suite_under_load.sh 5 2
 
-# The property tests at length: 10,000 random scenes (hypothesis profile "long", see
-# tests/conftest.py; `make test` runs 500, derandomized). 5-15 minutes on 2 cores.
+# The long runs: the tests marked long (whole suites planned or checked against references)
+# and the property tests at length, 10,000 random scenes (hypothesis profile "long", see
+# tests/conftest.py; `make test` runs 500, derandomized). 15-30 minutes on 2 cores.
 .PHONY: test-long
-test-long: setup
+test-long: setup browser ray
+	ROS_DOMAIN_ID=$(ROS_DOMAIN_ID) ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST \
+		$(PY) -m pytest tests -q -m long
 	HYPOTHESIS_PROFILE=long $(PY) -m pytest tests/test_properties.py -q \
 		--hypothesis-show-statistics
 

@@ -9,6 +9,9 @@ derandomized and without an example database, so every run checks the same scene
 The compas_cra comparison (tests/test_compas_cra.py, the real samples of test_compas_io.py)
 uses .venv-compas, which scripts/setup.sh builds, unless $RBE_COMPAS_VENV and
 $RBE_COMPAS_SAMPLES name others; those tests fail, never skip, when it is missing.
+
+Tests marked ``long`` (minutes each: whole suites planned or checked against references) are
+left out of ``make test`` (``-m "not long"``) and run by ``make test-long``.
 """
 import os
 from pathlib import Path
@@ -25,6 +28,12 @@ settings.register_profile("long", max_examples=2000, **_COMMON)
 settings.register_profile("dev", max_examples=20, **_COMMON)
 settings.register_profile("mutation", max_examples=10, derandomize=True, **_COMMON)  # make mutation
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
+
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "long: minutes long; make test-long runs it, make test not")
+
 
 COMPAS_VENV = Path(__file__).resolve().parents[1] / ".venv-compas"
 os.environ.setdefault("RBE_COMPAS_VENV", str(COMPAS_VENV))

@@ -335,6 +335,130 @@ def convex_domes(count: int = 1, vertices: int = 10_000, rim: int = 1000, radius
                       sequence=[b.id for b in blocks[1:]])
 
 
+# --------------------------------------------------------------------------- squeezes
+
+def _xz_prism(block_id: str, quad, depth: float, *, density: float,
+              support: bool = False) -> Block:
+    """A prism over the quadrilateral ``quad`` ((x, z) corners in cyclic order), ``depth``
+    deep along y and centred on y = 0."""
+    corners = [(x, -depth / 2, z) for x, z in quad] + [(x, depth / 2, z) for x, z in quad]
+    return _prism(block_id, corners, density=density, support=support)
+
+
+def _mirror(quad) -> list[tuple[float, float]]:
+    """``quad`` reflected in x = 0 (the same cyclic order, reversed)."""
+    return [(-x, z) for x, z in reversed(quad)]
+
+
+SQUEEZE_KINDS = ("pillars", "lintel", "posts", "leaning-posts", "flat-arch", "wedged-arch",
+                 "incline", "incline-pressed", "cantilever", "shelf", "shelf-pressed", "tower")
+
+
+def squeeze(kind: str = "pillars", angle_deg: float = 0.0, overhang: float = 0.55,
+            top_block: bool = True, density: float = 2000.0) -> Scene:
+    """Scenes where friction could hold blocks only if they were squeezed (pre-loaded), and
+    their controls (issue 29; tests/data/squeeze/ is the suite, written by
+    scripts/squeeze_suite.py). All are 0.3 m deep (y), on a support "ground" (top z = 0);
+    blocks are listed in the order they are placed. ``kind``:
+
+    - ``pillars``: a bar 0.5 x 0.2 between two free pillars 0.3 x 1.0 (vertical faces only);
+    - ``lintel``: the control, the bar lying on the two pillars (0.7 high);
+    - ``posts``: the bar between two fixed posts whose inner faces lean by ``angle_deg`` from
+      vertical, > 0 the opening narrows downward (a keystone wedge), < 0 it widens;
+    - ``leaning-posts``: free posts of a parallelogram section (foot 0.2, height 1.0) leaning
+      inwards by ``angle_deg`` (their centroid beyond the foot: they lean on the bar) and the
+      bar between them;
+    - ``flat-arch``: three blocks 0.3 x 0.2 between fixed abutments, vertical joints;
+    - ``wedged-arch``: the same with joints through one point below the arch, the outer joints
+      ``angle_deg`` from vertical (narrowing downward);
+    - ``incline``: a block 0.3 x 0.2 on a fixed ramp of ``angle_deg``; ``incline-pressed``: and
+      a fixed bar lying on it parallel to the ramp;
+    - ``cantilever``: a beam 1.0 x 0.15 on a fixed pier, ``overhang`` of its length beyond the
+      edge, a block 0.3 x 0.3 on its inner end (``top_block``);
+    - ``shelf``: a board 0.08 thick, ``overhang`` m long, against a fixed wall and on a fixed
+      corbel 0.15 deep, a block 0.15 x 0.4 on it over the corbel (``top_block``);
+      ``shelf-pressed``: the board against the wall under a fixed block, no corbel;
+    - ``tower``: five blocks 0.3 x 0.2, each shifted by ``overhang`` x 0.3 along x from the one
+      below.
+    """
+    if kind not in SQUEEZE_KINDS:
+        raise ValueError(f"squeeze: kind must be one of {', '.join(SQUEEZE_KINDS)}; got {kind!r}")
+    if kind == "wedged-arch" and not angle_deg > 0:
+        raise ValueError(f"squeeze: a wedged arch needs angle_deg > 0; got {angle_deg:g}")
+    if kind == "tower":
+        scene = stack(5, width=0.3, depth=0.3, height=0.2,
+                      offsets=[k * overhang * 0.3 for k in range(5)], density=density)
+        return replace(scene, name=f"squeeze(tower, overhang={overhang:g})")
+    d = 0.3
+    blocks = [_box("ground", (-1.5, -d, -0.2), (1.5, d, 0.0), density=density, support=True)]
+
+    def add(block_id, quad, support=False, both=False):
+        if both:
+            blocks.append(_xz_prism(f"{block_id}_l", quad, d, density=density, support=support))
+            blocks.append(_xz_prism(f"{block_id}_r", _mirror(quad), d, density=density,
+                                    support=support))
+        else:
+            blocks.append(_xz_prism(block_id, quad, d, density=density, support=support))
+
+    t = math.tan(math.radians(angle_deg))
+    if kind in ("pillars", "lintel"):
+        h = 1.0 if kind == "pillars" else 0.7
+        add("pillar", [(-0.55, 0.0), (-0.25, 0.0), (-0.25, h), (-0.55, h)], both=True)
+        span = 0.25 if kind == "pillars" else 0.55
+        add("bar", [(-span, 0.7), (span, 0.7), (span, 0.9), (-span, 0.9)])
+    elif kind == "posts":
+        def face(z):                      # the left post's inner face
+            return -0.25 - (z - 0.7) * t
+        add("post", [(-0.6, 0.0), (face(0.0), 0.0), (face(1.0), 1.0), (-0.6, 1.0)], support=True,
+            both=True)
+        add("bar", [(face(0.7), 0.7), (-face(0.7), 0.7), (-face(0.9), 0.9), (face(0.9), 0.9)])
+    elif kind == "leaning-posts":
+        def face(z):
+            return -0.4 + z * t
+        add("post", [(-0.6, 0.0), (-0.4, 0.0), (face(1.0), 1.0), (face(1.0) - 0.2, 1.0)],
+            both=True)
+        add("bar", [(face(0.7), 0.7), (-face(0.7), 0.7), (-face(0.9), 0.9), (face(0.9), 0.9)])
+    elif kind in ("flat-arch", "wedged-arch"):
+        z0, z1 = 0.4, 0.6
+        zc = z0 - 0.45 / t if kind == "wedged-arch" else None
+
+        def joint(xb, z):                 # a joint's x at height z, xb at the arch's bottom
+            return xb if zc is None else xb * (z - zc) / (z0 - zc)
+        add("abutment", [(-0.9, 0.0), (joint(-0.45, 0.0), 0.0), (joint(-0.45, z1), z1),
+                         (-0.9, z1)], support=True, both=True)
+        for bid, (a, b) in zip(("a0", "a1", "a2"), ((-0.45, -0.15), (-0.15, 0.15), (0.15, 0.45))):
+            add(bid, [(joint(a, z0), z0), (joint(b, z0), z0), (joint(b, z1), z1),
+                      (joint(a, z1), z1)])
+    elif kind in ("incline", "incline-pressed"):
+        c, s = math.cos(math.radians(angle_deg)), math.sin(math.radians(angle_deg))
+        base = 0.1 + 0.8 * t                       # ramp top at x = 0
+
+        def at(u, v):                              # u along the slope, v normal to it
+            return (u * c - v * s, base + u * s + v * c)
+        add("ramp", [(-0.8, 0.0), (0.8, 0.0), (0.8, base + 0.8 * t), (-0.8, base - 0.8 * t)],
+            support=True)
+        add("block", [at(-0.15, 0.0), at(0.15, 0.0), at(0.15, 0.2), at(-0.15, 0.2)])
+        if kind == "incline-pressed":
+            add("bar", [at(-0.4, 0.2), at(0.4, 0.2), at(0.4, 0.3), at(-0.4, 0.3)], support=True)
+    elif kind == "cantilever":
+        inner = -(1.0 - overhang)
+        add("pier", [(-1.2, 0.0), (0.0, 0.0), (0.0, 0.5), (-1.2, 0.5)], support=True)
+        add("beam", [(inner, 0.5), (overhang, 0.5), (overhang, 0.65), (inner, 0.65)])
+        if top_block:
+            add("top", [(inner, 0.65), (inner + 0.3, 0.65), (inner + 0.3, 0.95), (inner, 0.95)])
+    else:                                          # shelf, shelf-pressed
+        add("wall", [(-0.3, 0.0), (0.0, 0.0), (0.0, 1.2), (-0.3, 1.2)], support=True)
+        if kind == "shelf":
+            add("corbel", [(0.0, 0.5), (0.15, 0.5), (0.15, 0.6), (0.0, 0.6)], support=True)
+        add("board", [(0.0, 0.6), (overhang, 0.6), (overhang, 0.68), (0.0, 0.68)])
+        if top_block:
+            add("top", [(0.0, 0.68), (0.15, 0.68), (0.15, 1.08), (0.0, 1.08)],
+                support=kind == "shelf-pressed")
+    sequence = [b.id for b in blocks if not b.support]
+    return make_scene(f"squeeze({kind}, angle={angle_deg:g}, overhang={overhang:g})", blocks,
+                      sequence=sequence)
+
+
 GENERATORS = {
     "two-blocks": two_blocks,
     "stack": stack,
@@ -344,4 +468,5 @@ GENERATORS = {
     "dome": dome,
     "running-bond-wall": running_bond_wall,
     "convex-domes": convex_domes,
+    "squeeze": squeeze,
 }

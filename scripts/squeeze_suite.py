@@ -54,11 +54,32 @@ def _shelf(length: float, top: bool) -> tuple[str, str]:
                                   f" without pre-load): stands iff length <= {limit:.4f}")
 
 
+def _leaning_posts(angle_deg: float):
+    """Statics without pre-load: each post (foot 0.2, height 1.0) tips about its inner foot
+    edge O, whose line is the post's inner face, so only the bar's normal force N has a moment
+    about O: N = W_post arm / s (arm: the post's centroid beyond O, s: distance along the face
+    from O to where N acts, at least 0.7 / cos(angle), the contact's lower edge: N at its
+    largest). The bar hangs on the two faces: 2 (F cos - N sin) = W_bar, so it needs
+    mu >= F / N. LMGC90's limit is lower (the posts' fall wedges the bar in: dynamic jamming)."""
+    a = math.radians(angle_deg)
+    arm = 0.5 * math.tan(a) - 0.1
+    bar = 0.2 * (0.4 - 0.7 * math.tan(a) + 0.4 - 0.9 * math.tan(a))     # trapezoid area
+    normal = 0.2 * arm / (0.7 / math.cos(a))                            # per unit rho g depth
+    limit = (bar / 2 + normal * math.sin(a)) / math.cos(a) / normal
+
+    def verdict(mu):
+        return _stands(mu >= limit), (
+            f"free posts leaning {angle_deg:g} deg on the bar: the posts' weight alone presses"
+            f" it (no pre-load), which holds it iff mu >= {limit:.3f}; near that limit"
+            f" LMGC90 can stand lower (the falling posts wedge the bar in)")
+    return verdict, None
+
+
 def suite() -> list[dict]:
     """The scenes: name, generator parameters, mu, closed-form verdict (or None) and why."""
     out = []
 
-    def add(name, params, mus, closed, why):
+    def add(name, params, mus, closed, why=None):
         for mu in mus:
             verdict, reason = closed(mu) if callable(closed) else (closed, why)
             out.append({"name": f"{name}_mu{mu:.2f}", "kind": params["kind"], "mu": mu,
@@ -75,9 +96,8 @@ def suite() -> list[dict]:
         " carry its weight without friction, stands for any mu")
     add("wedge_inverted10", {"kind": "posts", "angle_deg": -10.0}, (0.6, 1.2), "falls",
         "the faces widen downward (10 deg): moving down opens both contacts, falls for any mu")
-    add("leaning_posts15", {"kind": "leaning-posts", "angle_deg": 15.0}, (0.3, 0.6, 1.2), None,
-        "free posts lean on the bar (their weight's moment about the foot makes the only"
-        " normal force): no closed form for the limit")
+    add("leaning_posts15", {"kind": "leaning-posts", "angle_deg": 15.0}, (0.6, 1.2, 5.0),
+        *_leaning_posts(15.0))
     add("flat_arch", {"kind": "flat-arch"}, (0.6, 0.84, 1.2), "falls",
         "three blocks with vertical joints between fixed abutments: no load makes a normal"
         " force on a vertical joint and the rigid blocks cannot rotate (locked), so they slide"

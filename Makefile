@@ -63,13 +63,19 @@ bench: setup
 bench-holds: setup
 	$(PY) benchmarks/hold_wrench.py
 
-# LMGC90 alone (non-smooth contact dynamics, the accuracy reference; about 10 minutes): its
-# verdicts on the near-limit suite and on compas_cra's samples, ours re-timed beside it,
-# merged into the last full run's docs/bench/results.json; writes docs/BENCHMARKS.md (section
-# 4) and docs/lmgc90_verdicts.json. LMGC90 goes into a scratch venv (RBE_LMGC90_VENV, default
-# .venv-lmgc90, about 1 GB, made on first use from requirements/lmgc90.txt, pip check'ed);
-# make bench runs it too.
-bench-lmgc90: setup
+# LMGC90 (compas-lmgc90) in a venv of its own for check --second-opinion lmgc90 and the
+# benchmarks: RBE_LMGC90_VENV, default .venv-lmgc90, about 1 GB, made from
+# requirements/lmgc90.txt and pip check'ed (nothing to do when it is there and up to date).
+.PHONY: lmgc90
+lmgc90: setup
+	$(PY) -c "from rbe_ros.io.lmgc90 import ensure_venv; print(ensure_venv())"
+
+# LMGC90 alone (non-smooth contact dynamics, the accuracy reference; about 12 minutes): its
+# verdicts on the near-limit suite, on compas_cra's samples (and the turned type-a..d) and on
+# the squeeze suite, ours re-timed beside it, merged into the last full run's
+# docs/bench/results.json; writes docs/BENCHMARKS.md (section 4), docs/lmgc90_verdicts.json
+# and tests/data/squeeze/lmgc90_verdicts.json. make bench runs it too.
+bench-lmgc90: setup lmgc90
 	nice -n 10 $(PY) benchmarks/bench.py --only lmgc90
 
 # As-built noise suite: perturbed poses under the declared uncertainty, the design rule with

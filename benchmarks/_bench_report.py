@@ -212,6 +212,10 @@ def write(result: dict, out: Path) -> None:
     verdicts = _lmgc90_report.verdicts(result)
     if verdicts:
         (out / "lmgc90_verdicts.json").write_text(json.dumps(verdicts, indent=1, default=_json_default) + "\n")
+    squeeze = _lmgc90_report.squeeze_verdicts(result)
+    if squeeze:
+        _lmgc90_report.squeeze_target(out).write_text(
+            json.dumps(squeeze, indent=1, default=_json_default) + "\n")
 
 
 def _json_default(o):
@@ -301,7 +305,7 @@ def markdown(result: dict) -> str:
           " elliptic cones (its default pyramidal cone is coarser), time step 1 ms, otherwise"
           " defaults; the same collapse test.",
           "- **LMGC90** (`compas-lmgc90`, scratch venv `.venv-lmgc90` from requirements/lmgc90.txt,"
-          " `benchmarks/_lmgc90.py`; one process per check): see section 4 for its verdict.",
+          " `rbe_ros/io/lmgc90.py`; one process per check): see section 4 for its verdict.",
           "- Timing: wall clock, best of "
           f"{result['settings']['repeat']} for ours and cvxpy, one run for the others (physics"
           " runs are long; compas_cra's detection is timed once per scene).",

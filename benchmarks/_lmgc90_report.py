@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import statistics
 
-from bench import DEFAULT, method_label
+from bench import DEFAULT, SQUEEZE, method_label
 
 #: Columns of the agreement table, in order (those present in the results).
 COLUMNS = (DEFAULT, "lmgc90", "pybullet-240", "pybullet-1k", "mujoco-1k")
@@ -156,6 +156,7 @@ def section(result: dict) -> list[str]:
           "- The dome's tilted cases are not run (as for the physics engines: 140 blocks, a"
           " simulation per case).", ""]
     L += _samples(info)
+    L += _squeeze(info)
     return L
 
 
@@ -180,6 +181,9 @@ def _samples(info: dict) -> list[str]:
          " them; a non-convex one stops it in POLYR::read_bodies, \"impossible to create the HE"
          " structure\"), so such a block goes in as its convex hull, which overlaps its"
          " neighbours where the blocks interlock.", "",
+         "`rot90 y` (x, xy30): the sample turned 90 deg about the y axis (x, [sqrt 3, 1, 0])"
+         " through the origin after its interfaces are found, as compas_cra's"
+         " examples/05_wedge.py turns type-a..d.", "",
          "| sample | blocks | supports | mu | LMGC90 | largest motion (x size, deg) | rbe_ros (default) |",
          "|---|---|---|---|---|---|---|"]
     for name, r in samples.items():
@@ -218,7 +222,67 @@ def verdicts(result: dict) -> dict | None:
                       " section 4 says how a verdict is decided",
             "date": info["date"], "versions": info["versions"], "settings": info["settings"],
             "samples": {name: {k: r.get(k) for k in ("file", "supports", "mu", "density",
-                                                       "densities", "lmgc90", "stable",
+                                                       "densities", "rotation", "lmgc90", "stable",
                                                        "max_disp", "max_rot_deg", "simulated",
                                                        "slabs", "hulls", "on_hulls", "rbe_ros")}
                         for name, r in info["samples"].items()}}
+
+
+def _squeeze(info: dict) -> list[str]:
+    """The squeeze suite's table: closed form, LMGC90 and ours on every scene, times."""
+    rows = info.get("squeeze") or []
+    if not rows:
+        return []
+    decided = [r for r in rows if r["lmgc90"] in DECIDED]
+    unsafe = [r["name"] for r in decided if r["rbe_ros_stable"] and r["lmgc90"] == "falls"]
+    alarms = [r["name"] for r in decided if not r["rbe_ros_stable"] and r["lmgc90"] == "stands"]
+    closed = [r for r in decided if r["closed_form"]]
+    off = [r["name"] for r in closed if r["closed_form"] != r["lmgc90"]]
+    ratios = [r["time_process"] / r["time_ours"] for r in decided if r.get("time_ours")]
+    L = ["### The squeeze suite", "",
+         f"{len(rows)} scenes where friction could hold blocks only if they were squeezed"
+         " (pre-loaded), which blocks set one at a time never are, and their controls, each at"
+         " mu on both sides of its limit (issue 29; tests/data/squeeze/, written by"
+         " scripts/squeeze_suite.py, each scene's closed form and why in its manifest.json;"
+         " LMGC90's verdicts in tests/data/squeeze/lmgc90_verdicts.json, which"
+         " tests/test_squeeze_suite.py holds rbe_ros to). LMGC90 decides"
+         f" {len(decided)} of {len(rows)}; it differs from the closed form on {len(off)} of"
+         f" {len(closed)}{': ' + ', '.join(off) if off else ''}. rbe_ros (this run's default"
+         f" check): {len(unsafe)} unsafe STABLE{' (' + ', '.join(unsafe) + ')' if unsafe else ''},"
+         f" {len(alarms)} false alarms{' (' + ', '.join(alarms) + ')' if alarms else ''}."
+         + (f" Time: LMGC90 (its whole process) over ours, median"
+            f" {statistics.median(ratios):.0f}x." if ratios else ""), "",
+         "| scene | mu | closed form | LMGC90 | largest motion (x size, deg) | moved | rbe_ros |"
+         " LMGC90 s | rbe_ros ms |", "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        motion = (f"{r['max_disp']:.1e}, {r['max_rot_deg']:.2g}" if r.get("max_disp") is not None
+                  else r.get("error") or "-")
+        mark = "" if r["lmgc90"] not in DECIDED else (
+            "✓ " if r["rbe_ros_stable"] == (r["lmgc90"] == "stands") else "✗ ")
+        L.append(f"| {r['name']} | {r['mu']:g} | {r['closed_form'] or '-'} | {r['lmgc90']} |"
+                 f" {motion} | {', '.join(r.get('moved') or []) or '-'} | {mark}{r['rbe_ros']} |"
+                 f" {r['time_process']:.2f} | {1e3 * r['time_ours']:.1f} |")
+    L.append("")
+    return L
+
+
+def squeeze_verdicts(result: dict) -> dict | None:
+    """tests/data/squeeze/lmgc90_verdicts.json: LMGC90's verdict per squeeze scene."""
+    info = result.get("lmgc90")
+    if not info or not info.get("squeeze"):
+        return None
+    return {"source": "make bench-lmgc90 (benchmarks/bench.py --only lmgc90); docs/BENCHMARKS.md"
+                      " section 4 says how a verdict is decided",
+            "date": info["date"], "versions": info["versions"], "settings": info["settings"],
+            "scenes": {r["name"]: {k: r.get(k) for k in ("mu", "closed_form", "lmgc90", "stable",
+                                                         "moved", "max_disp", "max_rot_deg",
+                                                         "simulated", "time_process")}
+                       for r in info["squeeze"]}}
+
+
+def squeeze_target(out):
+    """Where the squeeze verdicts go: beside the suite for a run that writes docs/, else
+    into that run's own folder."""
+    if out.resolve() == (SQUEEZE.parents[2] / "docs").resolve():
+        return SQUEEZE / "lmgc90_verdicts.json"
+    return out / "squeeze_lmgc90_verdicts.json"

@@ -13,7 +13,7 @@ own venv, see _bench_cra_driver.py):
 * compas_cra 0.8.0 ``rbe_solve`` (IPOPT), on the same scenes exported with
   ``rbe_ros.io.compas.save_compas_assembly``;
 * PyBullet at 240 Hz and at 1 kHz, MuJoCo at 1 kHz (``_physics.py``);
-* LMGC90 (non-smooth contact dynamics, ``_lmgc90.py``, in a scratch venv of its own), the
+* LMGC90 (non-smooth contact dynamics, ``rbe_ros/io/lmgc90.py``, in a scratch venv of its own), the
   accuracy reference, and on compas_cra's samples (docs/lmgc90_verdicts.json).
 
 Writes docs/BENCHMARKS.md, docs/bench/*.png and docs/bench/results.json. Every number is
@@ -42,7 +42,6 @@ ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(ROOT / "tests"))   # the independent references (tests/oracles/)
 
-import _lmgc90 as lmgc90  # noqa: E402
 import compas_compare  # noqa: E402
 import _physics as physics  # noqa: E402
 from machine import machine_summary  # noqa: E402
@@ -54,10 +53,12 @@ from rbe_ros.analysis.assembly import Assembly  # noqa: E402
 from rbe_ros.analysis.options import CheckOptions  # noqa: E402
 from rbe_ros.analysis.pipeline import check_scene  # noqa: E402
 from rbe_ros.analysis.tilt import horizontal, tilt_capacity  # noqa: E402
+from rbe_ros.io import lmgc90  # noqa: E402
+from rbe_ros.io.compas import EXAMPLE_AXES, rotated_as_example  # noqa: E402
 from rbe_ros.geometry.contacts import ContactOptions  # noqa: E402
 from rbe_ros.rbe.model import build_model  # noqa: E402
 from rbe_ros.rbe.solver import SolveOptions  # noqa: E402
-from rbe_ros.scene import Scene, box_block, make_scene  # noqa: E402
+from rbe_ros.scene import Scene, box_block, gravity_down, make_scene  # noqa: E402
 
 G = 9.81
 #: Ours: (objective, cone); the first is the default configuration.
@@ -88,11 +89,17 @@ ARMADILLO_REPEAT = 5
 LMGC90_TILT_FAMILIES = ("single block", "yawed block")
 #: compas_cra's samples for LMGC90 (docs/lmgc90_verdicts.json), set up as compas_cra's example
 #: scripts set them up (compas_compare.SAMPLES: supports, mu, the bridge's 3.51 x density on
-#: nodes 11-15); type-a..d have no example script: the two side blocks are the supports, mu
-#: as A and H.
+#: nodes 11-15); type-a..d as examples/05_wedge.py loads them: the two side blocks are the
+#: supports, mu 0.84, and also turned 90 deg about the y, x and xy30 axes as it turns them
+#: (rotate_assembly after detecting the interfaces: the same contacts).
 LMGC90_SAMPLES = {name: compas_compare.SAMPLES[name]
                   for name in ("A", "H", "shelf", "cubes", "snake", "bridge")} | {
-    f"type-{c}": {"file": f"type-{c}.json", "supports": [0, 1], "mu": 0.84} for c in "abcd"}
+    f"type-{c}": {"file": f"type-{c}.json", "supports": [0, 1], "mu": 0.84} for c in "abcd"} | {
+    f"type-{c} rot90 {axis}": {"file": f"type-{c}.json", "supports": [0, 1], "mu": 0.84,
+                               "rotation": {"axis": list(EXAMPLE_AXES[axis]), "deg": 90.0}}
+    for c in "abcd" for axis in EXAMPLE_AXES}
+#: The squeeze suite (issue 29; scripts/squeeze_suite.py): LMGC90's verdicts go beside it.
+SQUEEZE = ROOT / "tests" / "data" / "squeeze"
 
 
 def method_label(mid: str) -> str:
@@ -125,22 +132,6 @@ def tilted(scene: Scene, alpha_deg: float, direction: str = "x") -> Scene:
     a = math.radians(alpha_deg)
     gravity = np.linalg.norm(g) * (math.cos(a) * g / np.linalg.norm(g) + math.sin(a) * h)
     return replace(scene, gravity=gravity)
-
-
-def rotated_for_gravity(scene: Scene) -> Scene:
-    """The scene turned rigidly so that its gravity points along -z (for tools that only
-    know self-weight along -z, as compas_cra)."""
-    g = np.asarray(scene.gravity, dtype=float)
-    down = g / np.linalg.norm(g)
-    target = np.array([0.0, 0.0, -1.0])
-    if np.allclose(down, target):
-        return scene
-    rot, _ = Rotation.align_vectors([target], [down])
-    blocks = []
-    for b in scene.blocks:
-        q = (rot * Rotation.from_quat(b.orientation)).as_quat()
-        blocks.append(replace(b, position=rot.apply(b.position), orientation=q))
-    return replace(scene, blocks=tuple(blocks), gravity=np.array([0.0, 0.0, -np.linalg.norm(g)]))
 
 
 # ----------------------------------------------------------------------------- cases
@@ -338,18 +329,18 @@ def run_physics(case: Case, engines: list[str], tilt_engines: list[str]) -> None
 def run_lmgc90(case: Case, python: Path) -> None:
     """LMGC90's verdict (gravity turned to -z, as it only knows that), and on the tilt families
     of :data:`LMGC90_TILT_FAMILIES` its tilt capacity by bisection on its verdict."""
-    res = lmgc90.check(rotated_for_gravity(case.scene), case.mu, python)
+    res = lmgc90.check(gravity_down(case.scene), case.mu, python)
     res["time_ours"] = case.results[DEFAULT]["time"]
     if case.kind == "tilt" and case.family in LMGC90_TILT_FAMILIES and not res["failed"]:
         start = time.perf_counter()
         res["capacity"], res["trials"] = bisect_tilt(lambda a: lmgc90.check(
-            rotated_for_gravity(tilted(case.scene, a)), case.mu, python, T=lmgc90.T_TILT)["stable"])
+            gravity_down(tilted(case.scene, a)), case.mu, python, T=lmgc90.T_TILT)["stable"])
         res["time_bisection"] = time.perf_counter() - start
     case.results["lmgc90"] = res
 
 
 def sample_densities(spec: dict) -> dict[str, float]:
-    """kg/m^3 of a sample's blocks whose density is not :data:`_lmgc90.DENSITY` (the example
+    """kg/m^3 of a sample's blocks whose density is not :data:`rbe_ros.io.lmgc90.DENSITY` (the example
     script's relative densities times it), by block id (the node key)."""
     return {key: lmgc90.DENSITY * float(rel) for key, rel in (spec.get("density") or {}).items()
             if float(rel) != 1.0}
@@ -357,9 +348,9 @@ def sample_densities(spec: dict) -> dict[str, float]:
 
 def lmgc90_samples(python: Path, samples_dir: Path) -> dict:
     """LMGC90's and our verdicts on compas_cra's samples (:data:`LMGC90_SAMPLES`), density
-    :data:`_lmgc90.DENSITY` (their files give none) times the example script's relative one.
+    :data:`rbe_ros.io.lmgc90.DENSITY` (their files give none) times the example script's relative one.
     A sample with a non-convex free block is not comparable: compas_lmgc90 takes one convex
-    polyhedron per body, and such a block goes in as its hull (see _lmgc90.bodies), which
+    polyhedron per body, and such a block goes in as its hull (see rbe_ros.io.lmgc90.bodies), which
     overlaps its neighbours where the blocks interlock."""
     from rbe_ros.io.compas import load_compas_assembly
     out = {}
@@ -372,6 +363,8 @@ def lmgc90_samples(python: Path, samples_dir: Path) -> dict:
         scene = load_compas_assembly(path, supports=supports, density=lmgc90.DENSITY)
         scene = replace(scene, blocks=tuple(replace(b, density=densities.get(b.id, b.density))
                                             for b in scene.blocks))
+        if spec.get("rotation"):
+            scene = rotated_as_example(scene, spec["rotation"]["axis"], spec["rotation"]["deg"])
         ours = check_scene(scene, ours_options("qp", "soc", mu))
         res = lmgc90.check(scene, mu, python)
         word = _word(res)
@@ -379,12 +372,32 @@ def lmgc90_samples(python: Path, samples_dir: Path) -> dict:
             res["on_hulls"], res["stable"], word = word, None, "not comparable"
         out[name] = {"file": path.name, "supports": supports, "mu": mu,
                      "density": lmgc90.DENSITY, "densities": densities,
+                     **({"rotation": spec["rotation"]} if spec.get("rotation") else {}),
                      "blocks": len(scene.blocks), "lmgc90": word, "rbe_ros": ours.status.name,
                      "rbe_ros_stable": bool(ours.stable)} | {
                          k: res.get(k) for k in ("stable", "max_disp", "max_rot_deg", "simulated",
                                                  "time", "slabs", "hulls", "on_hulls", "error")}
         print(f"[lmgc90] sample {name}: LMGC90 {word}, rbe_ros {ours.status.name}", flush=True)
     return out
+
+
+def lmgc90_squeeze(python: Path) -> list[dict]:
+    """LMGC90's and our verdicts on the squeeze suite (:data:`SQUEEZE`, its manifest's mu per
+    scene), our check timed in the same run (best of 3)."""
+    from rbe_ros.io.scene_json import load_scene
+    rows = []
+    for entry in json.loads((SQUEEZE / "manifest.json").read_text())["scenes"]:
+        scene = load_scene(SQUEEZE / entry["file"])
+        ours, t = best_of(3, lambda: check_scene(scene, ours_options("qp", "soc", entry["mu"])))
+        res = lmgc90.check(scene, entry["mu"], python)
+        rows.append({k: entry[k] for k in ("name", "kind", "mu", "closed_form")} | {
+            "lmgc90": _word(res), "rbe_ros": ours.status.name, "rbe_ros_stable": bool(ours.stable),
+            "time_ours": t} | {k: res.get(k) for k in ("stable", "moved", "max_disp", "max_rot_deg",
+                                                       "simulated", "time", "time_process",
+                                                       "error")})
+        print(f"[lmgc90] squeeze {entry['name']}: closed form {entry['closed_form']}, LMGC90"
+              f" {rows[-1]['lmgc90']}, rbe_ros {ours.status.name}", flush=True)
+    return rows
 
 
 def _word(res: dict) -> str:
@@ -428,7 +441,7 @@ class Cra:
         from rbe_ros.io.compas import save_compas_assembly
         self.count += 1
         path = self.tmp / f"scene{self.count:04d}.json"
-        save_compas_assembly(rotated_for_gravity(scene), path, interfaces=interfaces)
+        save_compas_assembly(gravity_down(scene), path, interfaces=interfaces)
         return str(path)
 
     def verdict(self, scene: Scene, mu: float, repeat: int = 1) -> dict:
@@ -737,9 +750,10 @@ def lmgc90_run_info(python: Path, args, cases: list[Case], load0: float, t0: flo
     verdicts on compas_cra's samples (also written to docs/lmgc90_verdicts.json)."""
     samples_dir = cra_samples_dir(args.cra_venv)
     samples = lmgc90_samples(python, samples_dir) if samples_dir else {}
+    squeeze = lmgc90_squeeze(python)
     answered = [c.results["lmgc90"] for c in cases if "versions" in c.results.get("lmgc90", {})]
     return {"settings": lmgc90.settings(), "versions": answered[0]["versions"] if answered else {},
-            "samples": samples, "load_average_1min": [load0, os.getloadavg()[0]],
+            "samples": samples, "squeeze": squeeze, "load_average_1min": [load0, os.getloadavg()[0]],
             "runtime_s": time.perf_counter() - t0, "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
 
 

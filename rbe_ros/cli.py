@@ -33,6 +33,7 @@ from .analysis.validate import validated_assembly
 from .analysis.verdict import check
 from .analysis.virtual import ANALYSES, virtual_assembly
 from .generators import GENERATORS
+from .io import lmgc90
 from .io.figures import draw_report
 from .io.messages import header_dict, json_safe, report_json, report_to_dict, state_to_dict
 from .io.replay import (REPORT_TOPIC, STATE_TOPIC, Run, RunReader, bag_options,
@@ -72,8 +73,9 @@ def _input_arguments(parser: argparse.ArgumentParser) -> None:
                    "detected ones")
 
 
-def _solver_arguments(parser: argparse.ArgumentParser) -> None:
-    """The input arguments and every check option of :data:`OPTIONS` with a flag."""
+def _solver_arguments(parser: argparse.ArgumentParser, command: str = "") -> None:
+    """The input arguments and every check option of :data:`OPTIONS` with a flag (for
+    ``command``)."""
     _input_arguments(parser)
     groups = {"contact": parser.add_argument_group(
                   "contact detection (lengths relative to the smaller block's size, the cube "
@@ -81,7 +83,7 @@ def _solver_arguments(parser: argparse.ArgumentParser) -> None:
               "holds": parser.add_argument_group("suggested holds (unstable checks)")}
     model = parser.add_argument_group("RBE model")
     for option in OPTIONS:
-        if option.flag is None:
+        if option.flag is None or option.commands and command not in option.commands:
             continue
         group = groups.get(option.path.split(".")[0], model)
         if option.kind is bool:     # on by default: the flag turns it off
@@ -127,7 +129,8 @@ def _executor_arguments(parser: argparse.ArgumentParser, what: str, ray_more: st
 
 def _options(args) -> CheckOptions:
     """The check options of the flags (ValueError naming a flag out of its range)."""
-    values = {o: getattr(args, o.path) for o in OPTIONS if o.flag is not None}
+    values = {o: getattr(args, o.path) for o in OPTIONS
+              if o.flag is not None and hasattr(args, o.path)}
     if args.pose_uncertainty is not None:
         m, deg = BY_PATH["contact.pose_uncertainty_m"], BY_PATH["contact.pose_uncertainty_deg"]
         values[m], values[deg] = args.pose_uncertainty
@@ -179,7 +182,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help="--bag without the markers of the reports (a lean log)")
     check.add_argument("--strict", action="store_true",
                        help="exit 1 when an assembly or step is not stable")
-    _solver_arguments(check)
+    _solver_arguments(check, "check")
     check.set_defaults(run=_run_check)
 
     tilt = sub.add_parser("tilt", help="largest tilt of gravity the assembly stands")
@@ -307,6 +310,8 @@ def build_parser() -> argparse.ArgumentParser:
 def _run_check(args) -> int:
     scene, stored = _scene(args)
     options = declared(_options(args), scene)      # recorded in the bag as checked
+    if options.second_opinion != "none":
+        lmgc90.installed_python()       # not installed: one line before any work
     if args.bag:
         _prepare_bag_dir(Path(args.bag), args.force)
     if stored is not None and (args.sequence or args.bag):
@@ -329,12 +334,21 @@ def _run_check(args) -> int:
         out = {"scene": scene.name, **report_json(reports[0])}
     if args.interfaces == "compare":
         out["interfaces_compare"] = args.interfaces_compare.to_json()
+    opinions = lmgc90.second_opinions(
+        scene, reports, options, args.sequence,
+        on_state=lambda k, n: print(f"second opinion ({options.second_opinion}): state {k + 1}"
+                                    f" of {n}", file=sys.stderr, flush=True))
+    for report, opinion in zip(out["reports"] if args.sequence else [out], opinions):
+        report["second_opinion"] = opinion
     if args.bag:
         _record(Path(args.bag), scene, reports, options, args.sequence, not args.no_markers)
     if args.json:
         print(json.dumps(out, indent=1))
     else:
         print(format_table(reports))
+        for report, opinion in zip(reports, opinions):
+            step = f"step {report.step_index}: " if args.sequence else ""
+            print(step + lmgc90.describe(opinion, report.solve_time, report.status.name))
         if args.bag:
             print(f"bag written to {args.bag}")
     return 1 if args.strict and not all(r.stable for r in reports) else 0
@@ -616,7 +630,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     try:
         return args.run(args)
-    except (SceneError, ValueError, OSError) as exc:
+    except (SceneError, ValueError, OSError, lmgc90.NotInstalled) as exc:
         print(f"rbe-ros: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

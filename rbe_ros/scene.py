@@ -12,6 +12,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 DEFAULT_GRAVITY = (0.0, 0.0, -9.81)
 
@@ -184,6 +185,27 @@ class Scene:
         keep = set(ids)
         return replace(self, blocks=tuple(b for b in self.blocks if b.id in keep), sequence=(),
                        holds=(), approach=())
+
+
+def turned(scene: Scene, rotation: Rotation) -> Scene:
+    """``scene`` turned rigidly by ``rotation`` about the world origin, gravity kept (as
+    compas_cra's examples turn an assembly: ``rotate_assembly([0, 0, 0], axis, deg)``)."""
+    blocks = tuple(replace(b, position=rotation.apply(b.position),
+                           orientation=(rotation * Rotation.from_quat(b.orientation)).as_quat())
+                   for b in scene.blocks)
+    approach = tuple(None if d is None else rotation.apply(d) for d in scene.approach)
+    return replace(scene, blocks=blocks, approach=approach)
+
+
+def gravity_down(scene: Scene) -> Scene:
+    """``scene`` turned rigidly so that its gravity points along -z, for tools that only know
+    self-weight along -z (compas_cra, LMGC90)."""
+    g = np.asarray(scene.gravity, dtype=float)
+    target = np.array([0.0, 0.0, -1.0])
+    if np.allclose(g / np.linalg.norm(g), target):
+        return scene
+    rotation, _ = Rotation.align_vectors([target], [g / np.linalg.norm(g)])
+    return replace(turned(scene, rotation), gravity=np.linalg.norm(g) * target)
 
 
 BOX_FACES = ((0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (2, 3, 7, 6), (1, 2, 6, 5), (0, 4, 7, 3))

@@ -22,7 +22,7 @@ from ..rbe.cones import CONES, FRICTION_MODELS
 from ..rbe.solver import OBJECTIVES
 from ..scene import ValidationLimits
 from .margin import DEFAULT_DIRECTIONS
-from .options import CheckOptions
+from .options import SECOND_OPINIONS, CheckOptions
 
 NONE, INFINITE = "none", "inf"
 
@@ -44,6 +44,7 @@ class Option:
     true_as: int | None = None  # a bool outside for an integer inside: true is this, false 0
     stored: bool = True         # in the options stored in bags (a replay checks with them)
     metavar: str | None = None
+    commands: tuple[str, ...] = ()  # the CLI commands with the flag (empty: all)
 
     @property
     def default(self):
@@ -183,6 +184,11 @@ OPTIONS: tuple[Option, ...] = (
            "held block (about its grip); a scene hold's \"max_torque\" wins (0 there: a pin "
            "grip); 0: unbounded", "--hold-torque-max", "hold_torque_max", 0.0, 1e9,
            zero=NONE, metavar="NM"),
+    Option("second_opinion", str, "check: run the same states through another engine too "
+           "(lmgc90: LMGC90's non-smooth contact dynamics, 1 s from rest, in its own venv made "
+           "by make lmgc90; seconds per state) and report where it disagrees, with its time",
+           "--second-opinion", "second_opinion", choices=SECOND_OPINIONS, stored=False,
+           commands=("check",)),
     # fixed in the CLI and the node; stored so that a replay uses what a recording used
     Option("solve.weights.compression", float, "objective weight of compression"),
     Option("solve.weights.tension", float, "objective weight of tension (friction+ penalty)"),

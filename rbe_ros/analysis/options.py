@@ -44,6 +44,10 @@ class InsertionOptions:
     approach_distance: float = 0.0
 
 
+#: Engines of the opt-in second opinion ("none": none).
+SECOND_OPINIONS = ("none", "lmgc90")
+
+
 @dataclass(frozen=True)
 class CheckOptions:
     """Everything that decides a check's result."""
@@ -66,6 +70,9 @@ class CheckOptions:
     #: None: unbounded (a held block then stands like a support).
     hold_force_max: float | None = None
     hold_torque_max: float | None = None
+    #: An engine that checks the same states again beside ours (SECOND_OPINIONS; the CLI's
+    #: check and the node run it, rbe_ros/io/lmgc90.py): its verdict never changes ours.
+    second_opinion: str = "none"
 
     def __post_init__(self):
         for name in ("hold_force_max", "hold_torque_max"):

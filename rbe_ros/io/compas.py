@@ -18,9 +18,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from ..analysis.assembly import Assembly
-from ..scene import Block, Scene, SceneError, make_block, make_scene
+from ..scene import Block, Scene, SceneError, make_block, make_scene, turned
 from .scene_json import read_json
 
 DEFAULT_DENSITY = 2500.0
@@ -156,6 +157,18 @@ def load_compas_assembly(path, supports=None, density: float | None = None,
     attribute, else ``default_density`` (2500 kg/m^3).
     """
     return compas_scene(*_read(path), supports, density, default_density)
+
+
+#: The axes compas_cra's examples/05_wedge.py turns its samples about (type-a..d, 90 deg).
+EXAMPLE_AXES = {"y": (0.0, 1.0, 0.0), "x": (1.0, 0.0, 0.0), "xy30": (3.0 ** 0.5, 1.0, 0.0)}
+
+
+def rotated_as_example(scene: Scene, axis, deg: float) -> Scene:
+    """``scene`` turned as compas_cra's examples turn an assembly,
+    ``assembly.rotate_assembly([0, 0, 0], axis, deg)``: about ``axis`` through the origin,
+    gravity kept along -z."""
+    axis = np.asarray(axis, dtype=float)
+    return turned(scene, Rotation.from_rotvec(np.radians(deg) * axis / np.linalg.norm(axis)))
 
 
 def compas_scene(doc: dict, stem: str, supports=None, density: float | None = None,

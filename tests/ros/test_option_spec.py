@@ -35,9 +35,10 @@ SETTABLE = [o for o in OPTIONS if o.flag and o.param]
 
 def test_every_option_with_a_flag_has_a_parameter_and_the_other_way_round():
     assert {o.path for o in OPTIONS if o.flag} == {o.path for o in OPTIONS if o.param}
-    # stored in bags: all but the limits of the machine that checks
+    # stored in bags: all but the limits of the machine that checks and the second opinion
     assert {o.path for o in OPTIONS if not o.stored} == {"solve.time_limit",
-                                                          "limits.max_blocks"}
+                                                          "limits.max_blocks",
+                                                          "second_opinion"}
 
 
 @pytest.mark.parametrize("option", SETTABLE, ids=lambda o: o.path)

@@ -1,0 +1,81 @@
+"""The squeeze suite (issue 29): rbe_ros's verdict is LMGC90's on every scene LMGC90 decides,
+and the closed form's where there is one.
+
+tests/data/squeeze/ holds scenes where friction could hold blocks only if they were squeezed
+(pre-loaded), which blocks set one at a time never are: a bar between free pillars, between
+fixed posts, between leaning posts, flat arches with vertical joints, a block on an incline
+under a fixed bar, a shelf against a wall, and their controls (a lintel, wedges, wedged arches,
+a block alone on the incline, cantilevers and shelves held down by a top block, towers), each
+at mu on both sides of its limit. scripts/squeeze_suite.py writes them with a closed-form
+verdict where one exists (manifest.json, with why); ``make bench-lmgc90`` ran LMGC90 on each
+(lmgc90_verdicts.json beside them; docs/BENCHMARKS.md section 4 says how it decides). No
+LMGC90 here: the test reads its committed verdicts.
+"""
+import importlib.util
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+from rbe_ros.analysis.options import CheckOptions
+from rbe_ros.analysis.pipeline import check_scene
+from rbe_ros.io.scene_json import load_scene
+from rbe_ros.rbe.solver import SolveOptions
+
+ROOT = Path(__file__).resolve().parents[1]
+SUITE = ROOT / "tests" / "data" / "squeeze"
+MANIFEST = {e["name"]: e for e in json.loads((SUITE / "manifest.json").read_text())["scenes"]}
+LMGC90 = json.loads((SUITE / "lmgc90_verdicts.json").read_text())
+VERDICTS = LMGC90["scenes"]
+DECIDED = sorted(n for n, r in VERDICTS.items() if r["lmgc90"] in ("stands", "falls"))
+
+
+def _script():
+    spec = importlib.util.spec_from_file_location("squeeze_suite",
+                                                  ROOT / "scripts" / "squeeze_suite.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_files_are_what_the_script_writes(tmp_path):
+    """Deterministic: the script writes the committed scenes and manifest byte for byte."""
+    _script().write(tmp_path)
+    written = sorted(p.name for p in tmp_path.iterdir())
+    assert written == sorted(p.name for p in SUITE.glob("*.json") if p.name != "lmgc90_verdicts.json")
+    for name in written:
+        assert (tmp_path / name).read_bytes() == (SUITE / name).read_bytes(), name
+
+
+def test_the_suite_covers_every_kind_both_ways():
+    """At least 30 scenes; LMGC90 decided every one and ran on the manifest's mu; each kind
+    with a limit in mu has scenes on both sides of it."""
+    assert len(MANIFEST) >= 30 and sorted(VERDICTS) == sorted(MANIFEST) == DECIDED
+    assert all(VERDICTS[n]["mu"] == MANIFEST[n]["mu"] for n in MANIFEST)
+    kinds = {}
+    for n in DECIDED:
+        kinds.setdefault(MANIFEST[n]["kind"], set()).add(VERDICTS[n]["lmgc90"])
+    assert len(kinds) == 12
+    for kind in ("leaning-posts", "incline", "incline-pressed", "cantilever", "shelf", "tower"):
+        assert kinds[kind] == {"stands", "falls"}, kind
+    for kind in ("pillars", "flat-arch", "shelf-pressed"):     # squeezed: no mu holds them
+        assert kinds[kind] == {"falls"}, kind
+
+
+@pytest.mark.parametrize("name", [n for n in DECIDED if MANIFEST[n]["closed_form"]])
+def test_lmgc90_agrees_with_the_closed_form(name):
+    """The two references agree wherever a closed form exists (a wrong scene or a too short
+    simulation would show here first)."""
+    assert VERDICTS[name]["lmgc90"] == MANIFEST[name]["closed_form"], MANIFEST[name]["why"]
+
+
+@pytest.mark.parametrize("name", DECIDED)
+def test_our_verdict_is_lmgc90s(name):
+    entry = MANIFEST[name]
+    report = check_scene(load_scene(SUITE / entry["file"]),
+                         replace(CheckOptions(), solve=SolveOptions(mu=entry["mu"])))
+    expected = VERDICTS[name]["lmgc90"]
+    assert report.stable == (expected == "stands"), (
+        f"{name} (mu {entry['mu']}): LMGC90 {expected}, closed form {entry['closed_form']}"
+        f" ({entry['why']}); rbe_ros {report.status.name}: {report.message}")

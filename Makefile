@@ -29,11 +29,12 @@ test: setup browser ray
 test-under-load: setup browser ray
 	bash scripts/suite_under_load.sh 5 2
 
-# The long runs: the tests marked long (whole suites planned or checked against references)
+# The long runs: the tests marked long (whole suites planned or checked against references,
+# a real LMGC90 second opinion: hence make lmgc90)
 # and the property tests at length, 10,000 random scenes (hypothesis profile "long", see
 # tests/conftest.py; `make test` runs 500, derandomized). 15-30 minutes on 2 cores.
 .PHONY: test-long
-test-long: setup browser ray
+test-long: setup browser ray lmgc90
 	ROS_DOMAIN_ID=$(ROS_DOMAIN_ID) ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST \
 		$(PY) -m pytest tests -q -m long
 	HYPOTHESIS_PROFILE=long $(PY) -m pytest tests/test_properties.py -q \

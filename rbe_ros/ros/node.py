@@ -76,7 +76,7 @@ from ..analysis.options import CheckOptions
 from ..analysis.pipeline import StateCheck, check_state
 from ..analysis.planning import STOPPED
 from ..analysis.steps import sequence_step
-from ..io import cdr
+from ..io import cdr, lmgc90
 from ..io.bag import BagWriter, typestore
 from ..io.inputs import load_design
 from ..io.foxglove_scene import SceneServer
@@ -593,6 +593,7 @@ class RbeChecks:
             return scene_from_msg(state, sequence=with_sequence, limits=options.limits)
 
         def publish(report: Report, scene: Scene, total: int) -> None:
+            report = self._second_opinion(scene, report, sequence, options)
             sent.append(self._publish(scene, report, header))
             if on_step is not None:
                 on_step(report, sent[-1], total)
@@ -605,6 +606,23 @@ class RbeChecks:
         if result.error is not None:
             sent.append(self._publish(result.scene, result.error, header, state))
         return result, sent
+
+    def _second_opinion(self, scene: Scene, report: Report, sequence: bool,
+                        options) -> Report:
+        """``report`` with the second opinion (parameter ``second_opinion``) of its state at
+        the end of its message, logged (a warning where it disagrees or is unavailable);
+        StabilityReport has no field for it."""
+        if options.second_opinion == "none":
+            return report
+        try:
+            opinion = lmgc90.second_opinions(scene, [report], options, sequence)[0]
+            line = lmgc90.describe(opinion, report.solve_time, report.status.name)
+            agrees = opinion["agrees"]
+        except lmgc90.NotInstalled as exc:
+            line, agrees = f"second opinion unavailable: {exc}", None
+        (self.get_logger().info if agrees else self.get_logger().warning)(
+            f"step {report.step_index}: {line}")
+        return replace(report, message=f"{report.message} | {line}")
 
     def check_whole(self, state: AssemblyState, header: dict) -> bytes:
         """Check the assembly of ``state`` as it is (sequence ignored); publish the report

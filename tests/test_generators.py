@@ -27,6 +27,7 @@ SMALL = {  # every generator, small enough to be quick
     "dome": dict(slices=8, courses=4),
     "running-bond-wall": dict(courses=3, bricks_per_course=3),
     "convex-domes": dict(count=2, vertices=200, rim=40),
+    "squeeze": dict(kind="wedged-arch", angle_deg=30.0),
 }
 
 
@@ -192,3 +193,28 @@ def test_buttressed_arch_tilting_capacity_is_about_12_degrees():
     inner = gen.buttressed_arch(springing="inner")
     assert checked(tilted(inner, 13.0), opts(0.8, 0.6)).stable
     assert not checked(tilted(inner, 14.0), opts(0.8, 0.6)).stable
+
+
+#: Interfaces of each squeeze kind, counted by hand from its docstring (supports touching
+#: supports have none): pillars: 2 feet + 2 bar faces; lintel: 2 feet + 2 bearings; posts: the
+#: bar's 2 faces; leaning posts: 2 feet + 2 faces; arches: 4 joints; incline: 1 (+ the bar);
+#: cantilever: pier|beam, beam|top; shelf: wall|board, corbel|board, board|top, wall|top;
+#: pressed shelf: wall|board, board|top; tower: 5 beds.
+SQUEEZE_INTERFACES = {"pillars": 4, "lintel": 4, "posts": 2, "leaning-posts": 4, "flat-arch": 4,
+                      "wedged-arch": 4, "incline": 1, "incline-pressed": 2, "cantilever": 2,
+                      "shelf": 4, "shelf-pressed": 2, "tower": 5}
+
+
+@pytest.mark.parametrize("kind", gen.SQUEEZE_KINDS)
+def test_squeeze_kinds_have_their_contacts(kind):
+    params = {"angle_deg": 30.0} if kind in ("wedged-arch", "incline", "incline-pressed") else {}
+    scene = gen.squeeze(kind, **params)
+    assert len(interfaces(scene)) == SQUEEZE_INTERFACES[kind]
+    assert all(len(b.faces) == 6 for b in scene.blocks)
+
+
+def test_squeeze_refuses_an_unknown_kind_and_a_flat_wedged_arch():
+    with pytest.raises(ValueError, match="kind must be one of pillars"):
+        gen.squeeze("bridge")
+    with pytest.raises(ValueError, match="angle_deg > 0"):
+        gen.squeeze("wedged-arch")

@@ -84,7 +84,21 @@ def summary(result: dict) -> list[str]:
         undecided = sorted(set(samples) - set(decided))
         if undecided:
             line += f" (not comparable: {', '.join(undecided)})"
+    rows = result["lmgc90"].get("squeeze") or []
+    if rows:
+        unsafe, alarms, decided_rows = _squeeze_misses(rows)
+        line += (f". On the squeeze suite ours is unsafe (STABLE where LMGC90's blocks fall) on"
+                 f" {len(unsafe)} and a false alarm on {len(alarms)} of the {len(decided_rows)}"
+                 f" scenes LMGC90 decides")
     return [line + "."]
+
+
+def _squeeze_misses(rows: list[dict]) -> tuple[list[str], list[str], list[dict]]:
+    """(unsafe STABLE, false alarms, decided rows) of ours against LMGC90 on the suite."""
+    decided = [r for r in rows if r["lmgc90"] in DECIDED]
+    unsafe = [r["name"] for r in decided if r["rbe_ros_stable"] and r["lmgc90"] == "falls"]
+    alarms = [r["name"] for r in decided if not r["rbe_ros_stable"] and r["lmgc90"] == "stands"]
+    return unsafe, alarms, decided
 
 
 def section(result: dict) -> list[str]:
@@ -213,19 +227,23 @@ def _density(samples: dict) -> str:
     return ", ".join(f"{d:g}" for d in sorted(found)) or "?"
 
 
+def _verdict_file(info: dict, key: str, rows: dict, fields: tuple[str, ...]) -> dict:
+    """A committed verdict file: where it comes from, the run's settings, ``fields`` of each
+    of ``rows`` under ``key``."""
+    return {"source": "make bench-lmgc90 (benchmarks/bench.py --only lmgc90); docs/BENCHMARKS.md"
+                      " section 4 says how a verdict is decided",
+            "date": info["date"], "versions": info["versions"], "settings": info["settings"],
+            key: {name: {k: r.get(k) for k in fields} for name, r in rows.items()}}
+
+
 def verdicts(result: dict) -> dict | None:
     """docs/lmgc90_verdicts.json: LMGC90's verdict per compas_cra sample, with its set-up."""
     info = result.get("lmgc90")
     if not info or not info.get("samples"):
         return None
-    return {"source": "make bench-lmgc90 (benchmarks/bench.py --only lmgc90); docs/BENCHMARKS.md"
-                      " section 4 says how a verdict is decided",
-            "date": info["date"], "versions": info["versions"], "settings": info["settings"],
-            "samples": {name: {k: r.get(k) for k in ("file", "supports", "mu", "density",
-                                                       "densities", "rotation", "lmgc90", "stable",
-                                                       "max_disp", "max_rot_deg", "simulated",
-                                                       "slabs", "hulls", "on_hulls", "rbe_ros")}
-                        for name, r in info["samples"].items()}}
+    return _verdict_file(info, "samples", info["samples"], (
+        "file", "supports", "mu", "density", "densities", "rotation", "lmgc90", "stable",
+        "max_disp", "max_rot_deg", "simulated", "slabs", "hulls", "on_hulls", "rbe_ros"))
 
 
 def _squeeze(info: dict) -> list[str]:
@@ -233,12 +251,12 @@ def _squeeze(info: dict) -> list[str]:
     rows = info.get("squeeze") or []
     if not rows:
         return []
-    decided = [r for r in rows if r["lmgc90"] in DECIDED]
-    unsafe = [r["name"] for r in decided if r["rbe_ros_stable"] and r["lmgc90"] == "falls"]
-    alarms = [r["name"] for r in decided if not r["rbe_ros_stable"] and r["lmgc90"] == "stands"]
+    unsafe, alarms, decided = _squeeze_misses(rows)
     closed = [r for r in decided if r["closed_form"]]
     off = [r["name"] for r in closed if r["closed_form"] != r["lmgc90"]]
     ratios = [r["time_process"] / r["time_ours"] for r in decided if r.get("time_ours")]
+    twice = [r for r in decided if r.get("lmgc90_2T") in DECIDED]
+    same = sum(r["lmgc90_2T"] == r["lmgc90"] for r in twice)
     L = ["### The squeeze suite", "",
          f"{len(rows)} scenes where friction could hold blocks only if they were squeezed"
          " (pre-loaded), which blocks set one at a time never are, and their controls, each at"
@@ -250,6 +268,9 @@ def _squeeze(info: dict) -> list[str]:
          f" {len(closed)}{': ' + ', '.join(off) if off else ''}. rbe_ros (this run's default"
          f" check): {len(unsafe)} unsafe STABLE{' (' + ', '.join(unsafe) + ')' if unsafe else ''},"
          f" {len(alarms)} false alarms{' (' + ', '.join(alarms) + ')' if alarms else ''}."
+         + (f" Simulated twice as long ({2 * info['settings']['T']:g} s), LMGC90 gives the same"
+            f" verdict on {same} of {len(twice)}: the verdicts do not hang on the duration."
+            if twice else "")
          + (f" Time: LMGC90 (its whole process) over ours, median"
             f" {statistics.median(ratios):.0f}x." if ratios else ""), "",
          "| scene | mu | closed form | LMGC90 | largest motion (x size, deg) | moved | rbe_ros |"
@@ -271,13 +292,9 @@ def squeeze_verdicts(result: dict) -> dict | None:
     info = result.get("lmgc90")
     if not info or not info.get("squeeze"):
         return None
-    return {"source": "make bench-lmgc90 (benchmarks/bench.py --only lmgc90); docs/BENCHMARKS.md"
-                      " section 4 says how a verdict is decided",
-            "date": info["date"], "versions": info["versions"], "settings": info["settings"],
-            "scenes": {r["name"]: {k: r.get(k) for k in ("mu", "closed_form", "lmgc90", "stable",
-                                                         "moved", "max_disp", "max_rot_deg",
-                                                         "simulated", "time_process")}
-                       for r in info["squeeze"]}}
+    return _verdict_file(info, "scenes", {r["name"]: r for r in info["squeeze"]}, (
+        "mu", "closed_form", "lmgc90", "stable", "moved", "max_disp", "max_rot_deg",
+        "simulated", "time_process", "lmgc90_2T"))
 
 
 def squeeze_target(out):

@@ -383,15 +383,17 @@ def lmgc90_samples(python: Path, samples_dir: Path) -> dict:
 
 def lmgc90_squeeze(python: Path) -> list[dict]:
     """LMGC90's and our verdicts on the squeeze suite (:data:`SQUEEZE`, its manifest's mu per
-    scene), our check timed in the same run (best of 3)."""
+    scene), our check timed in the same run (best of 3); LMGC90's verdict simulating twice as
+    long beside it (``lmgc90_2T``: whether a verdict hangs on the duration)."""
     from rbe_ros.io.scene_json import load_scene
     rows = []
     for entry in json.loads((SQUEEZE / "manifest.json").read_text())["scenes"]:
         scene = load_scene(SQUEEZE / entry["file"])
         ours, t = best_of(3, lambda: check_scene(scene, ours_options("qp", "soc", entry["mu"])))
         res = lmgc90.check(scene, entry["mu"], python)
+        longer = lmgc90.check(scene, entry["mu"], python, T=2 * lmgc90.T)
         rows.append({k: entry[k] for k in ("name", "kind", "mu", "closed_form")} | {
-            "lmgc90": _word(res), "rbe_ros": ours.status.name, "rbe_ros_stable": bool(ours.stable),
+            "lmgc90": _word(res), "lmgc90_2T": _word(longer), "rbe_ros": ours.status.name, "rbe_ros_stable": bool(ours.stable),
             "time_ours": t} | {k: res.get(k) for k in ("stable", "moved", "max_disp", "max_rot_deg",
                                                        "simulated", "time", "time_process",
                                                        "error")})

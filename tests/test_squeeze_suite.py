@@ -70,6 +70,13 @@ def test_lmgc90_agrees_with_the_closed_form(name):
     assert VERDICTS[name]["lmgc90"] == MANIFEST[name]["closed_form"], MANIFEST[name]["why"]
 
 
+def test_lmgc90s_verdicts_do_not_hang_on_the_duration():
+    """Simulated twice as long (2 s: the issue's words), LMGC90 says the same everywhere."""
+    assert LMGC90["settings"]["T"] == 1.0
+    assert {n: r["lmgc90_2T"] for n, r in VERDICTS.items()} == \
+        {n: r["lmgc90"] for n, r in VERDICTS.items()}
+
+
 @pytest.mark.parametrize("name", DECIDED)
 def test_our_verdict_is_lmgc90s(name):
     entry = MANIFEST[name]

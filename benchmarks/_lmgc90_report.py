@@ -175,7 +175,7 @@ def section(result: dict) -> list[str]:
 
 
 def _convexified(cases: list[dict]) -> str:
-    """Which cases needed slabs or hulls (see _lmgc90.bodies), in words."""
+    """Which cases needed slabs or hulls (see rbe_ros.io.lmgc90.bodies), in words."""
     changed = [c["name"] for c in cases
                if c["results"]["lmgc90"].get("slabs") or c["results"]["lmgc90"].get("hulls")]
     return ("every block of this suite is convex" if not changed else

@@ -13,8 +13,9 @@ own venv, see _bench_cra_driver.py):
 * compas_cra 0.8.0 ``rbe_solve`` (IPOPT), on the same scenes exported with
   ``rbe_ros.io.compas.save_compas_assembly``;
 * PyBullet at 240 Hz and at 1 kHz, MuJoCo at 1 kHz (``_physics.py``);
-* LMGC90 (non-smooth contact dynamics, ``rbe_ros/io/lmgc90.py``, in a scratch venv of its own), the
-  accuracy reference, and on compas_cra's samples (docs/lmgc90_verdicts.json).
+* LMGC90 (non-smooth contact dynamics, ``rbe_ros/io/lmgc90.py``, in a venv of its own made by
+  make lmgc90), the accuracy reference, also on compas_cra's samples (docs/lmgc90_verdicts.json)
+  and on the squeeze suite (tests/data/squeeze/lmgc90_verdicts.json).
 
 Writes docs/BENCHMARKS.md, docs/bench/*.png and docs/bench/results.json. Every number is
 measured in the run that writes it; rerunning refreshes all of them.

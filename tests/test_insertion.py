@@ -204,9 +204,10 @@ def test_brick_under_lintel_refused_down_inserted_sideways():
     assert not _independent_sweep_free(scene, [b.id for b in scene.blocks], "brick", DOWN)
 
 
-def test_non_convex_neighbour_is_its_convex_hull():
-    """Conservative for non-convex blocks: a block in the notch of a U-shaped neighbour is
-    refused from above (the U's hull covers the notch) though the notch is open upwards."""
+def test_non_convex_neighbour_is_its_true_shape():
+    """A block in the notch of a U-shaped neighbour (its caps triangulated) comes straight
+    down, as the sampled sweep of the true shapes says (the U's hull would cover the notch),
+    and not from the side (through an arm)."""
     u = [(-0.3, 0), (0.3, 0), (0.3, 0.3), (0.1, 0.3), (0.1, 0.1), (-0.1, 0.1), (-0.1, 0.3),
          (-0.3, 0.3)]
     caps = [(0, 1, 4), (0, 4, 5), (1, 2, 3), (1, 3, 4), (0, 5, 6), (0, 6, 7)]
@@ -214,13 +215,18 @@ def test_non_convex_neighbour_is_its_convex_hull():
                              box_block("b", (0.2, 0.3, 0.2), (0, 0, 0.2), density=RHO)])
     assert _independent_sweep_free(scene, ["u", "b"], "b", DOWN)     # truly free
     found = _insertion(scene, "b")
-    assert not found.insertable and found.blocked_by == ("u",)
+    assert found.insertable
+    np.testing.assert_allclose(found.direction, DOWN, atol=1e-12)
+    side = _insertion(scene, "b", given=np.array([0.0, 0.6, -0.8]))
+    assert side.insertable == _independent_sweep_free(scene, ["u", "b"], "b", [0, 0.6, -0.8])
+    assert side.insertable      # along the open ends and down
+    assert not _insertion(scene, "b", given=np.array([0.6, 0.0, -0.8])).insertable
 
 
-def test_non_convex_moving_block_is_its_convex_hull():
-    """Conservative for a non-convex moving block too: an inverted U coming down over a post
-    that fits its notch is refused (its hull would sweep through the post), though the
-    sampled sweep of the true shape is free."""
+def test_non_convex_moving_block_is_its_true_shape():
+    """A non-convex moving block too: an inverted U coming down over a post that fits its
+    notch comes straight down (its hull would sweep through the post), as the sampled sweep
+    of the true shape says."""
     u = [(-0.3, 0.3), (-0.3, 0), (-0.1, 0), (-0.1, 0.2), (0.1, 0.2), (0.1, 0), (0.3, 0),
          (0.3, 0.3)]
     scene = _ground(box_block("post", (0.1, 0.3, 0.15), (0, 0, 0.075), support=True,
@@ -229,7 +235,8 @@ def test_non_convex_moving_block_is_its_convex_hull():
                                          (4, 6, 7)]))
     assert _independent_sweep_free(scene, ["ground", "post", "u"], "u", DOWN)
     found = _insertion(scene, "u")
-    assert not found.insertable and "post" in found.blocked_by
+    assert found.insertable
+    np.testing.assert_allclose(found.direction, DOWN, atol=1e-12)
 
 
 def _independent_sweep_free(scene, present, block, direction, samples=40) -> bool:

@@ -150,6 +150,27 @@ def tetromino_wall(squares_x: int = 2, squares_z: int = 2, size: float = 0.1,
     return make_scene(f"tetromino-wall({squares_x}x{squares_z})", blocks)
 
 
+def cradle_row(bars: int = 4, depth: int = 3, size: float = 0.1,
+               density: float = 2000.0) -> Scene:
+    """A non-convex support "cradle" (a comb: ``bars`` grooves along y, open above and at
+    both ends), a bar "bar{i}" set into each groove standing one cube proud, and over each
+    bar an inverted U "cap{i}" whose legs stand on the cradle beside the groove: blocks in
+    a non-convex base, non-convex blocks over them (no sequence: a plan chooses)."""
+    width = 4 * bars + 1
+    grooves = [4 * i + 2 for i in range(bars)]
+    base = [(x, y, z) for x in range(width) for y in range(depth) for z in (0, 1)
+            if not (z == 1 and x in grooves)]
+    blocks = [polycube("cradle", base, size, density=density, support=True)]
+    for i, g in enumerate(grooves):
+        blocks.append(polycube(f"bar{i}", [(g, y, z) for y in range(depth) for z in (1, 2)],
+                               size, density=density))
+        blocks.append(polycube(f"cap{i}", [(x, y, 3) for x in (g - 1, g, g + 1)
+                                           for y in range(depth)]
+                               + [(x, y, 2) for x in (g - 1, g + 1) for y in range(depth)],
+                               size, density=density))
+    return make_scene(f"cradle-row({bars})", blocks)
+
+
 def two_blocks(shift: float = 0.0, incline_deg: float = 0.0, width: float = 1.0,
                depth: float = 1.0, height: float = 0.5, density: float = 2000.0) -> Scene:
     """Two stacked blocks (Kao et al. 2021, Sec. 3.1): support "base" under free "top".

@@ -20,11 +20,11 @@ identical blocks in any pose share one decomposition.
 """
 from __future__ import annotations
 
+import itertools
 from functools import lru_cache
 
 import numpy as np
-from scipy.optimize import linprog
-from scipy.spatial import ConvexHull, HalfspaceIntersection
+from scipy.spatial import ConvexHull, QhullError
 
 #: Larger meshes, or meshes needing more pieces, are not decomposed (their hull is used).
 MAX_TRIANGLES = 4000
@@ -65,19 +65,19 @@ def _pieces(vertex_bytes: bytes, triangle_bytes: bytes):
                                  REFLEX_TOL * scale)
     low, high = vertices.min(axis=0), vertices.max(axis=0)
     pad = 1e-3 * scale
-    stack = [(np.vstack([np.eye(3), -np.eye(3)]), np.concatenate([high + pad, pad - low]))]
+    corners = np.array(list(itertools.product(*zip(low - pad, high + pad))))
+    stack = [(np.vstack([np.eye(3), -np.eye(3)]), np.concatenate([high + pad, pad - low]),
+              corners)]
     pieces, total, cells = [], 0.0, 0
     while stack:
         cells += 1
         if cells > 4 * MAX_PIECES or len(pieces) > MAX_PIECES:
             return None
-        a, b = stack.pop()
-        if _polytope(a, b, tol) is None:
-            continue
+        a, b, corners = stack.pop()
         cut = _reflex_cut(ends, planes, a, b, tol)
         if cut is None:
             try:
-                found = _cell_piece(tri, normals, offsets, a, b, tol)
+                found = _cell_piece(tri, normals, offsets, a, b, corners, tol)
             except _NotExact:
                 return None
             if isinstance(found, tuple):        # the cell holds more than one convex part
@@ -89,7 +89,10 @@ def _pieces(vertex_bytes: bytes, triangle_bytes: bytes):
             else:
                 continue
         n, d = cut
-        stack += [(np.vstack([a, n]), np.append(b, d)), (np.vstack([a, -n]), np.append(b, -d))]
+        for sign in (1.0, -1.0):
+            part = _cut(corners, sign * n, sign * d, tol)
+            if part is not None:
+                stack.append((np.vstack([a, sign * n]), np.append(b, sign * d), part))
     if not pieces or abs(total - volume) > VOLUME_TOL * volume + 1e-12 * scale ** 3:
         return None
     for p in pieces:
@@ -97,16 +100,20 @@ def _pieces(vertex_bytes: bytes, triangle_bytes: bytes):
     return tuple(pieces)
 
 
-def _cell_piece(tri, normals, offsets, a, b, tol):
-    """The solid's part in the cell a x <= b when it is convex: its vertices (None: empty);
-    else a plane (n, d) of a face crossing the cell to cut it by (a tuple)."""
+def _cell_piece(tri, normals, offsets, a, b, corners, tol):
+    """The solid's part in the cell a x <= b (vertices ``corners``) when it is convex: its
+    vertices (None: empty); else a plane (n, d) of a face crossing the cell to cut it by
+    (a tuple)."""
     meets, clipped = _meets(tri, a, b, tol)
     if not meets.any():                         # the cell is all inside or all outside
-        corners = _polytope(a, b, tol)
-        hull = ConvexHull(corners)
-        return corners[hull.vertices] if _winding(tri, _hull_centroid(corners, hull)) > 0.5 \
+        return corners if _winding(tri, _hull_centroid(corners, ConvexHull(corners))) > 0.5 \
             else None
-    piece = _polytope(np.vstack([a, normals[meets]]), np.concatenate([b, offsets[meets]]), tol)
+    piece = corners
+    for plane in np.unique(np.round(np.column_stack([normals[meets], offsets[meets]]), 12),
+                           axis=0):
+        piece = _cut(piece, plane[:3], plane[3], tol)
+        if piece is None:
+            break
     # convex and connected: every face's part in the cell lies on the piece's boundary, no
     # face cuts into the piece, and the piece is inside the solid
     if piece is not None:
@@ -116,7 +123,6 @@ def _cell_piece(tri, normals, offsets, a, b, tol):
         if on and not _meets(tri, eq[:, :3], -eq[:, 3], tol)[0].any() \
                 and _winding(tri, _hull_centroid(piece, hull)) > 0.5:
             return piece[hull.vertices]
-    corners = _polytope(a, b, tol)
     side = corners @ normals[meets].T - offsets[meets]
     crossing = np.flatnonzero((side.max(axis=0) > tol) & (side.min(axis=0) < -tol))
     if not len(crossing):
@@ -191,12 +197,15 @@ def _segments_inside(ends, a, b, tol):
 
 def _meets(tri, a, b, tol):
     """Whether each triangle (m, 3, 3) crosses the interior of the cell a x <= b (its part
-    in the cell, by Sutherland-Hodgman clipping, lies in no boundary plane: more than
-    ``tol`` inside), and those parts."""
+    in the cell, by Sutherland-Hodgman clipping, lies in no boundary plane: its centroid is
+    more than ``tol`` inside), and those parts."""
     hit = np.zeros(len(tri), dtype=bool)
-    parts = []
     bounds = np.einsum("mvk,hk->mvh", tri, a) - b      # (m, 3, h) <= 0 inside
-    for i in np.flatnonzero(~np.any(np.all(bounds > -tol, axis=1), axis=1)):
+    within = np.all(bounds <= 0.0, axis=(1, 2))         # the whole triangle: no clipping
+    hit[within] = np.all(tri[within].mean(axis=1) @ a.T - b < -tol, axis=1)
+    parts = list(tri[hit])
+    straddle = ~within & ~np.any(np.all(bounds > -tol, axis=1), axis=1)
+    for i in np.flatnonzero(straddle):
         poly = tri[i]
         for n, d in zip(a, b):
             if not len(poly):
@@ -224,15 +233,26 @@ def _clip(poly, n, d):
     return np.array(out).reshape(-1, 3)
 
 
-def _polytope(a, b, tol):
-    """The vertices of {x : a x <= b}, None when it has no interior ball of radius > tol."""
-    norms = np.linalg.norm(a, axis=1)
-    found = linprog(np.r_[0.0, 0.0, 0.0, -1.0], A_ub=np.column_stack([a, norms]), b_ub=b,
-                    bounds=[(None, None)] * 3 + [(0, None)], method="highs")
-    if found.status != 0 or found.x[3] <= tol:
+def _cut(corners, n, d, tol):
+    """The vertices of the part n . x <= d of the convex hull of ``corners``; None when it
+    has no interior (thinner than ``tol``). Its vertices are among the corners inside and
+    the points where the plane crosses the segments between corners on either side."""
+    side = corners @ n - d
+    if np.all(side <= tol):
+        return corners
+    if np.all(side >= -tol):
         return None
-    hs = HalfspaceIntersection(np.column_stack([a, -b]), found.x[:3])
-    return np.unique(np.round(hs.intersections, 12), axis=0)
+    inner, outer = corners[side < -tol], corners[side > tol]
+    s_in, s_out = side[side < -tol][:, None, None], side[side > tol][None, :, None]
+    crossing = inner[:, None] + (outer[None, :] - inner[:, None]) * (s_in / (s_in - s_out))
+    points = np.vstack([corners[side <= tol], crossing.reshape(-1, 3)])
+    try:
+        hull = ConvexHull(points)
+    except QhullError:
+        return None
+    if hull.volume <= tol * float(np.max(np.ptp(points, axis=0))) ** 2:
+        return None
+    return points[hull.vertices]
 
 
 def _hull_centroid(points, hull):

@@ -8,19 +8,21 @@ feasible one closest to straight down along gravity (a top-down approach suits g
 
 That direction is exact without a solver: the unit direction of a 3D polyhedral cone closest
 to g is g itself, or g projected onto one face's plane, or onto one edge (the cross product of
-two face normals), so :func:`cone_directions` enumerates these few candidates, keeps the
-feasible ones and sorts them by their angle to g. When g lies in the cone's polar (a block in
-a slot across gravity), several directions tie at 90 deg; the sorted list then holds the
-cone's edges and its faces' in-plane axes too, so the path check can try them in turn.
+two face normals). :func:`cone_directions` enumerates these with a set that generates the
+cone (its extreme rays and its lineality space both ways: a piece locked in a planar wall
+comes in along the wall's normal), keeps the feasible ones within the largest approach angle
+from g and sorts them by their angle to g, so the path check can try them in turn.
 
-The path: the moving block's convex hull translated along -d over the approach distance
-sweeps exactly the convex hull of its start and end vertices, one convex body, so one
-discrete collision test of that body per present block decides the path (python-fcl's GJK,
-after a bounding-box broad phase). Conservative for non-convex blocks: the moving block and
-the present ones are their convex hulls, so a path accepted is free, and a path refused
-through a notch of a non-convex neighbour may still be free. The moving block has its faces
-moved in by a clearance first (:func:`shrunk`), so that its neighbours at contact (touching, or
-overlapping as much as the scene validation accepts) do not count as collisions.
+The path: a convex body translated along -d sweeps exactly the convex hull of its start and
+end vertices, so one discrete collision test of that body per present convex body decides the
+path (python-fcl's GJK, after a bounding-box broad phase). A non-convex block, moving or
+present, is its exact convex pieces (:mod:`rbe_ros.geometry.decompose`), so its path is exact
+too; without a decomposition it is its convex hull (conservative: a path accepted is free).
+The path runs from where the block is clear of every present block's bounding box to its
+pose, or over a given distance. The moving block's pieces have their faces moved in by a
+clearance first (:func:`shrunk`), so that its neighbours at contact (touching, or
+overlapping as much as the scene validation accepts) do not count as collisions, and a slide
+along a face in contact is free.
 
 Under a declared pose uncertainty every block, the present ones too, is also shrunk by its
 allowance a (:func:`rbe_ros.geometry.uncertainty.allowances`: no point of the block is
@@ -31,11 +33,11 @@ the contact detection and the validation) do not block each other.
 """
 from __future__ import annotations
 
+import math
+import threading
 from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-import math
-import threading
 
 import fcl
 import numpy as np

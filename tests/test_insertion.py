@@ -750,3 +750,20 @@ def test_without_a_decomposition_the_hull_is_conservative(monkeypatch):
 def _local_mesh(scene, block_id):
     posed = Assembly.from_scene(scene.subset([block_id])).blocks[0]
     return posed.local_vertices, posed.triangles
+
+
+def test_exported_meshes_with_rounding_noise_keep_their_true_shapes():
+    """Every vertex of the tetromino wall moved by up to 1 micrometre (a mesh as exported,
+    its faces not quite planar): each piece still has a decomposition (at the exported
+    tolerance, 1e-4 of its diagonal, far below the 2% clearance), and the locked piece still
+    comes in along the wall's normal."""
+    wall = gen.tetromino_wall(1, 1, VOXEL)
+    rng = np.random.default_rng(5)
+    noisy = make_scene("noisy", [replace(b, vertices=b.vertices + rng.uniform(
+        -1e-6, 1e-6, b.vertices.shape)) if not b.support else b for b in wall.blocks])
+    assembly = Assembly.from_scene(noisy)
+    for b in assembly.blocks[1:]:
+        assert not b.convex
+        assert decompose.convex_pieces(b.local_vertices, b.triangles) is not None, b.id
+    found = block_insertion(assembly, [b.id for b in noisy.blocks], "t01", CheckOptions())
+    assert found.insertable and abs(found.direction[1]) == pytest.approx(1.0)

@@ -8,7 +8,8 @@ the same load, in CPU time of this process (``time.process_time``: the machine i
 wall time counts the other users' load). The bar of issue 22: insertion at most 0.5x the stability check.
 
 Per plan of non-convex assemblies (walls of T tetrominoes, a row of bars in a comb cradle
-under inverted U caps: exact paths of the true shapes), ``plan_sequence`` with at most 2
+under inverted U caps, and the interlocking suite of tests/data/interlock/ when the tree has
+it: exact paths of the true shapes), ``plan_sequence`` with at most 2
 held, the time in the path checks (every ``block_insertion`` the planner asks) against the
 time in its stability checks (``StepChecker.attempt`` and ``check`` as the planner calls
 them; the hold search's own checks are left out, so the ratio is if anything too high).
@@ -33,6 +34,7 @@ from rbe_ros.analysis.insertion import block_insertion
 from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.analysis.steps import sequence_step, step_count
 from rbe_ros.analysis.validate import validated_assembly
+from rbe_ros.io.scene_json import load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -97,9 +99,13 @@ def main(argv=None) -> int:
                     f"| {np.median(ratio):.3f} | {np.percentile(ratio, 95):.3f} |")
         print(rows[-1], flush=True)
     plans = []
-    for name, scene in (("T tetromino wall 3x2 squares (24 pieces)", gen.tetromino_wall(3, 2)),
-                        ("T tetromino wall 4x3 squares (48 pieces)", gen.tetromino_wall(4, 3)),
-                        ("cradle row, 8 bars and 8 caps (17 blocks)", gen.cradle_row(8))):
+    assemblies = [("T tetromino wall 3x2 squares (24 pieces)", gen.tetromino_wall(3, 2)),
+                  ("T tetromino wall 4x3 squares (48 pieces)", gen.tetromino_wall(4, 3)),
+                  ("cradle row, 8 bars and 8 caps (17 blocks)", gen.cradle_row(8))]
+    # the interlocking suite, when the tree has it
+    assemblies += [(f"interlock/{path.name}", load_scene(path))
+                   for path in sorted((ROOT / "tests" / "data" / "interlock").glob("*.json"))]
+    for name, scene in assemblies:
         stability, insertion, n_stability, n_insertion, planned = plan_times(scene)
         plans.append(f"| {name} | {'yes' if planned else 'no'} | {n_stability} | "
                      f"{1e3 * stability:.0f} | {n_insertion} | {1e3 * insertion:.0f} | "
@@ -124,7 +130,8 @@ def main(argv=None) -> int:
         "",
         "## Plans of non-convex assemblies",
         "",
-        "Per plan (`plan_sequence`, at most 2 held), the time in its path checks (every",
+        "Per plan (`plan_sequence`, at most 2 held; the interlocking suite's assemblies",
+        "of tests/data/interlock/ too when the tree has them), the time in its path checks (every",
         "`block_insertion` the planner asks: cone, candidate directions, the swept convex",
         "pieces of the true shapes until clear of every present block) against the time in",
         "its stability checks (`StepChecker.attempt` and `check` as the planner calls them),",

@@ -726,10 +726,12 @@ def _ray_parity(triangles, points):
     return ((u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)).sum(axis=1) % 2 == 1
 
 
-def test_without_a_decomposition_the_hull_is_conservative(monkeypatch):
-    """A non-convex block with no decomposition within the limits is its convex hull: the
-    block in the U's notch is refused from above (the hull covers the notch), though the
-    true shapes let it down."""
+def test_without_a_decomposition_present_is_its_mesh_moving_its_hull(monkeypatch):
+    """A non-convex block with no decomposition within the limits: present, it is its
+    triangle mesh (exact): the block in the U's notch comes straight down or along the
+    notch (the U's hull would hold it from every side); moving, it is its
+    convex hull (conservative): the inverted U lowered over a post that fits its notch is
+    refused, though the sampled sweep of the true shapes is free."""
     monkeypatch.setattr(decompose, "MAX_PIECES", 1)
     decompose._pieces.cache_clear()
     insertion_module._PRESENT.clear()
@@ -737,11 +739,21 @@ def test_without_a_decomposition_the_hull_is_conservative(monkeypatch):
         u = [(-0.3, 0), (0.3, 0), (0.3, 0.3), (0.1, 0.3), (0.1, 0.1), (-0.1, 0.1),
              (-0.1, 0.3), (-0.3, 0.3)]
         caps = [(0, 1, 4), (0, 4, 5), (1, 2, 3), (1, 3, 4), (0, 5, 6), (0, 6, 7)]
-        scene = make_scene("u", [_prism("u2", u, 0.31, caps, support=True),
-                                 box_block("b", (0.2, 0.31, 0.2), (0, 0, 0.2), density=RHO)])
-        assert decompose.convex_pieces(*_local_mesh(scene, "u2")) is None
+        scene = make_scene("u", [_prism("u", u, 0.3, caps, support=True),
+                                 box_block("b", (0.2, 0.3, 0.2), (0, 0, 0.2), density=RHO)])
+        assert decompose.convex_pieces(*_local_mesh(scene, "u")) is None
         found = _insertion(scene, "b")
-        assert not found.insertable and found.blocked_by == ("u2",)
+        np.testing.assert_allclose(found.direction, DOWN, atol=1e-12)
+        assert _insertion(scene, "b", given=np.array([0.0, 1.0, 0.0])).insertable
+        inverted = [(-0.3, 0.3), (-0.3, 0), (-0.1, 0), (-0.1, 0.2), (0.1, 0.2), (0.1, 0),
+                    (0.3, 0), (0.3, 0.3)]
+        over = _ground(box_block("post", (0.1, 0.3, 0.15), (0, 0, 0.075), support=True,
+                                 density=RHO),
+                       _prism("n", inverted, 0.3, [(0, 1, 2), (0, 2, 3), (0, 3, 7), (3, 4, 7),
+                                                    (4, 5, 6), (4, 6, 7)]))
+        assert _independent_sweep_free(over, ["ground", "post", "n"], "n", DOWN)
+        refused = _insertion(over, "n")
+        assert not refused.insertable and "post" in refused.blocked_by
     finally:
         decompose._pieces.cache_clear()
         insertion_module._PRESENT.clear()

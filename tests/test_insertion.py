@@ -11,6 +11,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+import shapely
 import trimesh
 from scipy.spatial import ConvexHull, Delaunay
 from scipy.spatial.transform import Rotation
@@ -779,3 +780,40 @@ def test_exported_meshes_with_rounding_noise_keep_their_true_shapes():
         assert decompose.convex_pieces(b.local_vertices, b.triangles) is not None, b.id
     found = block_insertion(assembly, [b.id for b in noisy.blocks], "t01", CheckOptions())
     assert found.insertable and abs(found.direction[1]) == pytest.approx(1.0)
+
+
+def _curved_cradle(facets=16):
+    """A support "cradle" (0.6 x 0.4 x 0.3) with a half-cylindrical groove of radius 0.2
+    along y, ``facets`` flat facets, and a half-round "bar" filling the groove: a non-convex
+    base whose faces are not axis-aligned."""
+    arc = [(0.2 * math.cos(math.pi * (1 + i / facets)), 0.3 + 0.2 * math.sin(
+        math.pi * (1 + i / facets))) for i in range(facets + 1)]
+    outline = [(-0.3, 0.0), (0.3, 0.0), (0.3, 0.3), *arc[::-1], (-0.3, 0.3)]
+    index = {p: i for i, p in enumerate(outline)}
+    caps = []
+    for t in shapely.constrained_delaunay_triangles(shapely.Polygon(outline)).geoms:
+        tri = [index[min(index, key=lambda q: (q[0] - x) ** 2 + (q[1] - z) ** 2)]
+               for x, z in t.exterior.coords[:3]]
+        (ax, az), (bx, bz), (cx, cz) = (outline[i] for i in tri)
+        caps.append(tuple(tri if (bx - ax) * (cz - az) - (bz - az) * (cx - ax) > 0
+                          else tri[::-1]))
+    return make_scene("curved", [_prism("cradle", outline, 0.4, caps, support=True),
+                                 _prism("bar", arc, 0.4)])
+
+
+def test_bar_in_a_curved_groove_down_and_along_it():
+    """A half-round bar in a 16-facet groove of a cradle: interfaces on every facet, so it
+    can come down or slide along the groove (+-y), nothing across; the cradle is cut into
+    one piece per facet's wedge, and the sampled sweep of the true shapes agrees on each
+    lattice direction our check accepts, and on the two across it refuses."""
+    scene = _curved_cradle()
+    posed = Assembly.from_scene(scene.subset(["cradle"])).blocks[0]
+    assert len(block_pieces(posed)) == 16
+    found = _insertion(scene, "bar")
+    np.testing.assert_allclose(found.direction, DOWN, atol=1e-12)
+    for d in ((0, 1, 0), (0, -1, 0), (0, 0.6, -0.8)):
+        assert _insertion(scene, "bar", given=np.array(d, dtype=float)).insertable, d
+        assert _independent_sweep_free(scene, ["cradle", "bar"], "bar", d)
+    for d in ((1, 0, -1), (-1, 0, -1)):
+        assert not _insertion(scene, "bar", given=np.array(d, dtype=float)).insertable
+        assert not _independent_sweep_free(scene, ["cradle", "bar"], "bar", d)

@@ -30,7 +30,7 @@ class PlanLimits:
     hold_force_max: float = 0.0     # N; <= 0: the options'
     hold_torque_max: float = 0.0    # N m; <= 0: the options'
     time_limit: float = 0.0         # s; <= 0: none
-    search_budget: int = 0          # states checked; <= 0: the default (planning.default_budget)
+    search_budget: int = 0          # states checked; <= 0: the default (planning.backup_budget)
 
     def search(self) -> PlanOptions:
         """The planner's search (ValueError naming a limit out of its range)."""

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,14 +24,16 @@ import trimesh
 from oracles import plane_blocks
 from rbe_ros import generators
 from rbe_ros.analysis.assembly import Assembly
+from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.analysis.planning import (BUDGET_EXHAUSTED, NO_PLAN, PLANNED, PlanProgress,
                                        plan_sequence)
-from rbe_ros.analysis.steps import sequence_steps
+from rbe_ros.analysis.steps import gripped, sequence_steps
 from rbe_ros.analysis.verdict import check
 from rbe_ros.cli import main
-from rbe_ros.io.scene_json import scene_to_dict
+from rbe_ros.io.scene_json import load_scene, scene_to_dict
 from rbe_ros.scene import box_block, make_scene
 
+DATA = Path(__file__).resolve().parent / "data"
 TILT = math.radians(40.0)
 MU = 0.6
 
@@ -143,9 +147,6 @@ def test_no_plan_exists_with_no_hold():
 
 
 def _no_insertion():
-    from dataclasses import replace
-
-    from rbe_ros.analysis.options import CheckOptions
     options = CheckOptions()
     return replace(options, insertion=replace(options.insertion, enabled=False))
 
@@ -217,16 +218,10 @@ def test_progress_counts_candidate_checks():
 
 @pytest.mark.long
 def test_the_capped_dome_ends_within_a_minute_naming_the_wrench():
-    """The 10 x 8 dome with robots of 1200 N / 200 N m (issue 31): the plan ends within
-    60 s, a plan within them or a failure that names the block, the wrench it needs and
-    the capacity."""
-    from pathlib import Path
-
-    from rbe_ros.io.scene_json import load_scene
-    dome = load_scene(Path("/work/shared/data/dome10x8.json"))
-    from dataclasses import replace
-
-    from rbe_ros.analysis.options import CheckOptions
+    """The 10 x 8 dome (issue 31's, tests/data/issue31) with robots of 1200 N / 200 N m:
+    the plan ends within 60 s, a plan within them or a failure that names the block, the
+    wrench it needs (the check of that step with unbounded robots) and the capacity."""
+    dome = load_scene(DATA / "issue31" / "dome10x8.json")
     options = replace(CheckOptions(), hold_force_max=1200.0, hold_torque_max=200.0)
     plan = plan_sequence(dome, 2, options)
     assert plan.time < 60.0
@@ -236,3 +231,14 @@ def test_the_capped_dome_ends_within_a_minute_naming_the_wrench():
         assert f["wrenches"] and all(w["force"] > 0 for w in f["wrenches"])
         assert f["block"] in plan.message and "1200 N" in plan.message
         assert f"|F| {f['wrenches'][0]['force']:.4g} N" in plan.message
+        # the wrench named is the plain check's of the step with unbounded robots, and the
+        # step does not stand with the robots bounded
+        full = Assembly.from_scene(dome)
+        present = [b.id for b in dome.blocks if b.support] + [*plan.order, f["block"]]
+        step = gripped(full, present, frozenset(f["held"]))
+        unbounded = check(step)
+        assert unbounded.stable
+        assert {w.block: round(float(np.linalg.norm(w.force)), 6)
+                for w in unbounded.hold_wrenches} == {
+            w["block"]: round(w["force"], 6) for w in f["wrenches"]}
+        assert not check(step, options).stable

@@ -94,6 +94,8 @@ STOPPED = "stopped after"
 BACKUP_BLOCK_STATES, MIN_BACKUP = 2000, 10
 #: s between two progress heartbeats while the search checks candidates.
 HEARTBEAT = 1.0
+#: The last steps of the first descent whose mean time estimates the time left.
+RECENT = 10
 #: A contact carries a block when its normal into the block points up by at least this
 #: cosine (87 deg from vertical).
 RESTS_ON = 0.05
@@ -149,8 +151,8 @@ class PlanProgress:
     block: str
     held: tuple[str, ...]        # blocks held at that step
     elapsed: float               # s since the search started
-    #: s left: from the mean time per block so far while the search goes down without
-    #: stalling; else what the budget (states left at the mean time per state so far) or
+    #: s left: from the mean time per block of the last steps while the search goes down
+    #: without stalling; else what the budget (states left at the mean time per state so far) or
     #: the time limit leaves, whichever is less; -1: unknown
     estimate: float
     checks: int = 0              # candidate checks so far (each hold search's included)
@@ -361,6 +363,7 @@ class _Planner:
         self.start = self.beat = time.perf_counter()
         self.descent = 0.0                      # s to the last step of the first descent
         self.backed = (0.0, 0)                  # (s, states) at the first dead end
+        self.recent: collections.deque = collections.deque(maxlen=RECENT)   # s of steps
 
     def poll(self) -> None:
         """Raise _Stopped when the time limit ran out or the caller asks to stop; a
@@ -655,6 +658,7 @@ class _Planner:
                 self._look_ahead(partial)
         if not self.backups:
             self.descent = time.perf_counter() - self.start
+            self.recent.append(self.descent)
         self._progress(True)
 
     def _backed_up(self, k: int) -> None:
@@ -687,7 +691,10 @@ class _Planner:
         :attr:`PlanProgress.estimate`."""
         found = []
         if k and not self.backups:
-            mean = self.descent / k             # s per block of the first descent
+            # s per block of the first descent, over its last steps (steps grow dearer)
+            times = self.recent
+            mean = ((times[-1] - times[0]) / (len(times) - 1) if len(times) > 1
+                    else self.descent / k)
             if elapsed - self.descent <= 2 * mean + HEARTBEAT:      # not stalled
                 found.append((mean * (self.n - k), "steps"))
         if math.isfinite(self.budget):

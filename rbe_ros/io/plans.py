@@ -4,6 +4,7 @@ capacities over the options, a time limit over ``should_stop``) and plans; it ne
 so that a goal that cannot be planned is a result, not a crash."""
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -93,7 +94,10 @@ def plan_state(read_scene: Callable[[], Scene], limits: PlanLimits,
         return plan_sequence(scene, search.max_held, plan_options(options, limits),
                              beam=search.beam, candidates=search.candidates,
                              keep_sequence=search.keep_sequence,
-                             search_budget=search.search_budget, progress=progress,
+                             search_budget=search.search_budget,
+                             # also the planner's own, for its progress to show what is left
+                             time_limit=limits.time_limit if limits.time_limit > 0
+                             else math.inf, progress=progress,
                              should_stop=stop, **extra)
     except SceneError as exc:
         return _failed(f"invalid input: {exc}")

@@ -36,13 +36,16 @@ remaining blocks can be placed depends on that set only, since any blocks may be
 step (K holds plus one placing robot): a state reached again by another order is skipped
 unchecked. Each state checked (a partial plan and the block it places) counts against the
 budget (``search_budget``; by default the first descent is free and :func:`backup_budget`
-states follow its first dead end); ``time_limit`` and ``should_stop`` end
-it too. The outcome (:attr:`Plan.outcome`): ``planned``; ``no_plan`` when the search is
-exhausted and every refusal is a proof (a candidate that cannot be inserted, or whose exact
+states follow its first dead end); ``time_limit`` and ``should_stop`` end it too.
+
+The outcome (:attr:`Plan.outcome`): ``planned``; ``no_plan`` when the search is exhausted
+and every refusal is a proof (a candidate that the insertion check refuses, or whose exact
 hold search up to K holds ran to its end without its check budget running out, and no
 ``candidates`` limit cut a step short): no order exists in which every block touches a
-placed one when placed; ``budget_exhausted`` (the budget, or an exhausted search with an
-unproven refusal); ``stopped``. A failed plan is the deepest partial plan the search made,
+placed one when placed, as the checks see it (a path is the insertion check's: its
+directions, and a part's convex hull where it has no exact decomposition);
+``budget_exhausted`` (the budget, or an exhausted search with an unproven refusal);
+``stopped``. A failed plan is the deepest partial plan the search made,
 with why no block could follow it: the best candidate, the holds it needs, and with hold
 capacities the wrench each robot would need against them.
 With ``beam`` > 1, each partial plan keeps the first ``beam`` feasible candidates; of all

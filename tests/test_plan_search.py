@@ -155,7 +155,12 @@ def test_a_budget_too_small_is_not_found_within_it(tmp_path, capsys):
     path = tmp_path / "pocket.json"
     path.write_text(json.dumps(scene_to_dict(pocket())))
     assert main(["plan", str(path), "--max-held", "1", "--search-budget", "1", "--json"]) == 1
-    out = json.loads(capsys.readouterr().out)
+    captured = capsys.readouterr()
+    out = json.loads(captured.out)
+    # the progress line of Y, placed first: the candidate checks and states so far
+    line = next(line for line in captured.err.splitlines() if line.startswith("plan: 1/2"))
+    assert ", held: none, " in line and " candidate checks, 1 states of 1, " in line
+    assert int(line.split(" candidate checks")[0].rsplit(" ", 1)[1]) >= 1
     assert out["outcome"] == BUDGET_EXHAUSTED and not out["feasible"]
     assert out["message"].startswith("no plan found within the budget (1 states checked")
     assert out["order"] == ["Y"] and out["failed_step"] == 1 and out["search_states"] == 1

@@ -33,7 +33,7 @@ class ProgressLines:
 
     def __init__(self, stream: IO[str], every: float = PROGRESS_EVERY):
         self.stream, self.every = stream, every
-        self.last = -float("inf")
+        self.last = time.monotonic()        # a heartbeat line only after ``every`` s
 
     def __call__(self, p: PlanProgress) -> None:
         now = time.monotonic()

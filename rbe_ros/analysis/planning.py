@@ -254,6 +254,7 @@ class _Failure:
     blocked: dict[str, str] = field(default_factory=dict)
     best: tuple[str, tuple[str, ...]] | None = None
     proven: bool = True
+    dead: int = 0           # candidates whose state the search found dead before
 
     def refused(self, block: str, found: TrialResult) -> None:
         if self.best is None or len(found.held) < len(self.best[1]):
@@ -544,6 +545,7 @@ class _Planner:
             tried += 1
             order = (*partial.order, b)
             if frozenset(order) in self.dead:
+                failure.dead += 1
                 continue
             if self.states >= self.budget:
                 raise _Budget
@@ -748,6 +750,9 @@ class _Planner:
                 note, need = "", {}
             why += note
             details = {"block": block, "held": list(held), **need}
+        elif failure.dead:
+            why = (f"; {failure.dead} candidate{'' if failure.dead == 1 else 's'} lead to "
+                   "partial plans found dead before")
         else:
             why = "; no unplaced block touches the placed ones" if not failure.blocked else ""
         why += "".join(f"; {b} cannot be inserted: {r}" for b, r in failure.blocked.items())

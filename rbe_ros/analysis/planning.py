@@ -469,9 +469,8 @@ class _Planner:
             return held, False
         self.poll()
         oracle = StabilityOracle(trial.assembly, trial.options, self.cache, self.checked)
-        result = minimal_holds(trial.assembly, trial.options,
-                               search=replace(trial.options.holds, max_size=k),
-                               prefer=(*previous, block), oracle=oracle, greedy=False)
+        result = minimal_holds(trial.assembly, trial.options, prefer=(*previous, block),
+                               oracle=oracle, largest=k)
         if result.stands:
             return result.blocks, False
         return held, result.none_within >= k

@@ -52,6 +52,7 @@ from typing import Protocol
 
 import numpy as np
 
+from ..cell import Cell
 from ..rbe.result import Report
 from ..scene import Hold, Scene, SceneError, make_scene
 from .asbuilt import declared
@@ -62,6 +63,7 @@ from .insertion import block_insertion
 from .options import CheckOptions
 from .pipeline import check_sequence, slim
 from .steps import gripped, supports_present
+from .timeline import CellCheck, Timeline, build_timeline
 from .verdict import UNEXPLAINED, check
 
 #: How the message of a plan stopped by ``should_stop`` begins (a time limit, a cancel).
@@ -124,6 +126,7 @@ class Plan:
     checks: int = 0                        # candidate checks spent by the search
     time: float = 0.0                      # s
     models: dict[str, int] = field(default_factory=dict)   # checks answered per model
+    timeline: Timeline | None = None       # planned for a cell: the robots' actions
 
     @property
     def max_held(self) -> int:
@@ -219,7 +222,7 @@ class _Trial:
 
 class _Planner:
     def __init__(self, scene: Scene, options: CheckOptions, plan: PlanOptions,
-                 progress, should_stop, on_report):
+                 progress, should_stop, on_report, cell: Cell | None = None):
         self.scene, self.options, self.plan = scene, options, plan
         self.progress, self.should_stop, self.on_report = progress, should_stop, on_report
         self.pool: LookAhead | None = None
@@ -245,6 +248,10 @@ class _Planner:
             self.contacts[a].append((b, it.area, -n_up >= RESTS_ON))
         self.cache: dict = {}
         self.insertions: dict = {}              # order -> insertion of its last block
+        # a cell's robots: who grips what, and the hand-over states (analysis/timeline.py)
+        self.cell_check = (CellCheck(cell, self.full, self.base, options, self.position)
+                           if cell is not None else None)
+        self.refused: dict[str, str] = {}       # block -> why the cell cannot place it
         self.checks = 0
         self.models: collections.Counter = collections.Counter()
         self.start = time.perf_counter()
@@ -323,6 +330,10 @@ class _Planner:
         trial = _Trial(self, partial, block)
         held = self._holds(trial, partial.held[-1] if partial.held else ())
         ok = len(held) <= self.plan.max_held and trial.stands(held)
+        if ok and self.cell_check is not None:
+            why = self.cell_check(partial.order, partial.held, block, held)
+            if why:
+                ok, self.refused[block] = False, why
         assembly, report = trial.result(held) if ok else (None, None)
         return held, ok, report, assembly
 
@@ -399,6 +410,7 @@ class _Planner:
         beam = [_Partial((), (), (0, 0, 0), (), StepChecker(self.options, explain=False))]
         for k in range(n):
             blocked: dict[str, str] = {}
+            self.refused.clear()
             self.insertions = {o: f for o, f in self.insertions.items() if len(o) > k}
             try:
                 children, best_rejected = self._children(beam, blocked)
@@ -414,6 +426,7 @@ class _Planner:
                        if best_rejected else
                        "; no unplaced block touches the placed ones" if not blocked else "")
                 why += "".join(f"; {b} cannot be inserted: {r}" for b, r in blocked.items())
+                why += "".join(f"; {r}" for r in self.refused.values())
                 return self._finish(beam[0], False, k, f"no block can be placed at step {k} "
                                     f"with at most {self.plan.max_held} held{why}")
             beam = sorted(children.values(), key=lambda p: (p.score, p.order))[:self.plan.beam]
@@ -537,6 +550,18 @@ class _Planner:
                     models=dict(self.models))
 
 
+def _with_timeline(plan: Plan, planner: _Planner, cell: Cell) -> Plan:
+    """``plan`` with its cell timeline, every state between actions checked; infeasible when
+    one falls (the message names the action, robot and block)."""
+    scene = plan.scene if plan.scene is not None else planner.base
+    timeline = build_timeline(cell, planner.full, planner.base, plan.order, plan.held,
+                              planner.options, scene.approach)
+    if plan.feasible and not timeline.feasible:
+        plan = replace(plan, feasible=False, message=f"timeline: {timeline.message}",
+                       failed_step=timeline.actions[-1].step if timeline.actions else 0)
+    return replace(plan, timeline=timeline)
+
+
 def _planned_under(options: CheckOptions) -> tuple[float, float] | None:
     """The pose uncertainty the plan was checked under, for the planned scene to keep (a scene
     file's, or the command line's, which wins over it)."""
@@ -551,8 +576,8 @@ def plan_sequence(scene: Scene, max_held: int = 2, options: CheckOptions = Check
                   progress: Callable[[PlanProgress], None] | None = None,
                   should_stop: Callable[[], bool] | None = None,
                   on_report: Callable[[Report], None] | None = None,
-                  look_ahead: Callable[[Assembly, CheckOptions], LookAhead] | None = None
-                  ) -> Plan:
+                  look_ahead: Callable[[Assembly, CheckOptions], LookAhead] | None = None,
+                  cell: Cell | None = None) -> Plan:
     """An insertion order of every free block of ``scene`` in which each step stands with at
     most ``max_held`` blocks held (see the module docstring), or where none was found.
 
@@ -562,12 +587,14 @@ def plan_sequence(scene: Scene, max_held: int = 2, options: CheckOptions = Check
     receives each step's full report as the plan makes it (greedy; a beam's after the
     search). ``look_ahead(assembly, options)``: workers for the full checks of the steps
     ahead (:mod:`rbe_ros.analysis.executors`), closed when the plan is made; the plan is
-    the same with and without."""
+    the same with and without. ``cell``: plan for its robots (at most as many busy as it
+    has, each grip within reach, the hand-over states standing) and make the timeline of
+    their actions, every state checked (:mod:`rbe_ros.analysis.timeline`)."""
     start = time.perf_counter()
     planner = _Planner(scene, declared(options, scene),
                        PlanOptions(max_held, beam, candidates, keep_sequence, full_candidates,
                                    time_limit),
-                       progress, should_stop, on_report)
+                       progress, should_stop, on_report, cell)
     if look_ahead is not None and not full_candidates:
         planner.pool = look_ahead(planner.full, planner.options)
     try:
@@ -575,6 +602,8 @@ def plan_sequence(scene: Scene, max_held: int = 2, options: CheckOptions = Check
     finally:
         if planner.pool is not None:
             planner.pool.close()
+    if cell is not None and result.order:
+        result = _with_timeline(result, planner, cell)
     result.time = time.perf_counter() - start
     return result
 

@@ -1,0 +1,218 @@
+"""Grips chosen, not assumed: where a robot of a cell takes a block, and what it carries.
+
+A grip is on a face of the block free of contacts with every other block of the finished
+assembly (so with the blocks present when it is taken and those placed while it is held),
+at the face's centroid (the tool centre point, TCP). The tool frame: z into the face (the
+face's outward normal reversed), x the face's in-plane direction closest to world up (the
+world x axis on a horizontal face), y = z x x. The gripper is a box of the tool's size
+behind the TCP (its far face on the face gripped, centred on the TCP), which must not touch
+another block of the finished assembly (python-fcl against their convex hulls, as the
+insertion check); the TCP is within the robot's reach of its base. Of the faces that pass,
+a robot takes the one facing its base most.
+
+What the robot carries: the block's need (force F at the TCP, torque M about it, from the
+check) and its tool's weight, m_t g at the box centre c: F_r = F - m_t g, M_r = M +
+(c - p) x (-m_t g), within the robot's payload. The check bounds the block's need by the
+payload less what the tool takes in the worst case (|F| <= payload - m_t |g|, |M| <=
+payload torque - m_t |g| |c - p|), so a wrench it accepts is within the payload.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import cached_property
+
+import fcl
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ..cell import Cell, CellError, Robot
+from ..geometry.insertion import _hull_object
+from ..rbe.model import Grip
+from .assembly import Assembly
+
+#: A face is in contact when an interface lies in its plane within this share of the
+#: block's size and their normals are within CONTACT_COS.
+CONTACT_DISTANCE = 1e-2
+CONTACT_COS = math.cos(math.radians(5.0))
+#: The gripper box stands off the face by this (m), so that touching its own face is no
+#: collision.
+STANDOFF = 1e-3
+#: How far (m) the TCP backs off along the face normal before it grips (the pre-grip frame).
+PRE_GRIP = 0.1
+
+
+@dataclass(frozen=True)
+class GripFrame:
+    """A grip of ``block``: the TCP ``point`` (world), the tool frame's axes (``rotation``,
+    columns x, y, z in world), the face's outward ``normal`` and index."""
+
+    block: str
+    face: int
+    point: np.ndarray
+    rotation: np.ndarray
+    normal: np.ndarray
+
+    @property
+    def quaternion(self) -> np.ndarray:
+        """The tool frame's orientation (x, y, z, w)."""
+        return Rotation.from_matrix(self.rotation).as_quat()
+
+    def shifted(self, offset) -> "GripFrame":
+        """This frame moved by ``offset`` (m, world)."""
+        return GripFrame(self.block, self.face, self.point + np.asarray(offset, dtype=float),
+                         self.rotation, self.normal)
+
+
+def tool_box_pose(robot: Robot, grip: GripFrame) -> tuple[np.ndarray, np.ndarray]:
+    """(centre, rotation) of ``robot``'s gripper box at ``grip``: behind the TCP, along the
+    face's outward normal."""
+    depth = robot.tool.box[2]
+    return grip.point + grip.normal * (0.5 * depth + STANDOFF), grip.rotation
+
+
+def robot_grip(grip: GripFrame, robot: Robot) -> Grip:
+    """The check's grip of ``grip`` held by ``robot``: the payload less the tool's worst
+    share (:mod:`rbe_ros.analysis.grips`)."""
+    weight = robot.tool.mass * 9.81
+    centre, _ = tool_box_pose(robot, grip)
+    arm = float(np.linalg.norm(centre - grip.point))
+    return Grip(grip.block, grip.point, max(robot.payload_force - weight, 0.0),
+                max(robot.payload_torque - weight * arm, 0.0))
+
+
+@dataclass(frozen=True)
+class RobotWrench:
+    """What a robot applies at its TCP: to the block alone (world axes) and with its tool's
+    weight (world and tool axes), and its use of the payload (the larger ratio)."""
+
+    force_world: np.ndarray      # on the block, N
+    torque_world: np.ndarray     # about the TCP, N m
+    force_robot: np.ndarray      # with the tool's weight, world axes
+    torque_robot: np.ndarray
+    force_tool: np.ndarray       # the same in tool axes
+    torque_tool: np.ndarray
+    utilisation: float
+
+
+def robot_wrench(robot: Robot, grip: GripFrame, force, torque, gravity) -> RobotWrench:
+    """``robot``'s wrench at ``grip`` when the block needs ``force`` and ``torque`` (about the
+    TCP, world), its tool's weight included."""
+    force, torque = np.asarray(force, dtype=float), np.asarray(torque, dtype=float)
+    carry = -robot.tool.mass * np.asarray(gravity, dtype=float)
+    centre, _ = tool_box_pose(robot, grip)
+    f_r = force + carry
+    m_r = torque + np.cross(centre - grip.point, carry)
+    rt = grip.rotation.T
+    use = max(_ratio(np.linalg.norm(f_r), robot.payload_force),
+              _ratio(np.linalg.norm(m_r), robot.payload_torque))
+    return RobotWrench(force, torque, f_r, m_r, rt @ f_r, rt @ m_r, use)
+
+
+def _ratio(value: float, cap: float) -> float:
+    return float(value / cap) if cap > 0 else (0.0 if value < 1e-9 else math.inf)
+
+
+class GripChooser:
+    """The grips of the blocks of an assembly (its finished state) for the robots of a cell,
+    each found once."""
+
+    def __init__(self, assembly: Assembly, cell: Cell):
+        self.assembly, self.cell = assembly, cell
+        self.index = {b.id: k for k, b in enumerate(assembly.blocks)}
+        self._touching: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}
+        for it in assembly.interfaces:
+            centre = it.points.mean(axis=0)
+            self._touching.setdefault(it.a, []).append((it.frame.n, centre))
+            self._touching.setdefault(it.b, []).append((-it.frame.n, centre))
+        self._faces: dict[str, list[GripFrame]] = {}
+
+    @cached_property
+    def _hulls(self) -> list[fcl.CollisionObject]:
+        return [_hull_object(np.ascontiguousarray(b.vertices, dtype=float).tobytes(), 0.0)
+                for b in self.assembly.blocks]
+
+    def faces(self, block: str) -> list[GripFrame]:
+        """The grips of ``block`` on its faces free of contacts (every robot's tool aside)."""
+        found = self._faces.get(block)
+        if found is None:
+            found = self._faces[block] = self._free_faces(block)
+        return found
+
+    def _free_faces(self, block: str) -> list[GripFrame]:
+        k = self.index[block]
+        b = self.assembly.blocks[k]
+        touching = self._touching.get(k, [])
+        up = -self.assembly.gravity / (np.linalg.norm(self.assembly.gravity) or 1.0)
+        out = []
+        for f, (n, origin, u, v, outline) in enumerate(zip(
+                b.face_normals, b.face_origins, b.face_us, b.face_vs, b.face_outlines)):
+            if any(float(n @ m) > CONTACT_COS
+                   and abs(float(n @ (c - origin))) < CONTACT_DISTANCE * b.size
+                   for m, c in touching):
+                continue
+            c2 = outline.centroid
+            point = origin + u * c2.x + v * c2.y
+            z = -n
+            x = up - (up @ z) * z
+            if np.linalg.norm(x) < 1e-6:
+                x = np.array([1.0, 0.0, 0.0]) - z[0] * z
+            x = x / np.linalg.norm(x)
+            out.append(GripFrame(block, f, point, np.column_stack((x, np.cross(z, x), z)),
+                                 np.asarray(n, dtype=float)))
+        return out
+
+    def collides(self, robot: Robot, grip: GripFrame) -> tuple[str, ...]:
+        """The blocks (other than the one gripped) ``robot``'s gripper box at ``grip`` touches."""
+        centre, rotation = tool_box_pose(robot, grip)
+        box = fcl.CollisionObject(fcl.Box(*robot.tool.box), fcl.Transform(rotation, centre))
+        hit = []
+        request, k = fcl.CollisionRequest(), self.index[grip.block]
+        for j, hull in enumerate(self._hulls):
+            if j != k and fcl.collide(box, hull, request, fcl.CollisionResult()):
+                hit.append(self.assembly.blocks[j].id)
+        return tuple(hit)
+
+    def choose(self, block: str, robot: Robot) -> tuple[GripFrame | None, str]:
+        """``robot``'s grip of ``block`` (the free face facing its base most, its tool free,
+        within reach), or None and why not."""
+        base = np.asarray(robot.base, dtype=float)
+        faces = self.faces(block)
+        if not faces:
+            return None, f"block {block} has no face free of contacts to grip"
+        why = []
+        for g in sorted(faces, key=lambda g: (-float(g.normal @ _unit(base - g.point)), g.face)):
+            distance = float(np.linalg.norm(g.point - base))
+            if distance > robot.reach:
+                why.append(f"face {g.face} {distance:.2f} m from {robot.name}'s base "
+                           f"(reach {robot.reach:g} m)")
+                continue
+            hit = self.collides(robot, g)
+            if hit:
+                why.append(f"face {g.face}: {robot.name}'s gripper hits {', '.join(hit[:3])}")
+                continue
+            return g, ""
+        return None, f"{robot.name} cannot grip block {block}: {'; '.join(why)}"
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    norm = float(np.linalg.norm(v))
+    return v / norm if norm > 0 else v
+
+
+def check_cell(cell: Cell, assembly: Assembly) -> None:
+    """What a cell's fields alone cannot tell (CellError naming the robot): a base inside a
+    block of ``assembly``, a tool heavier than its robot's payload."""
+    for r in cell.robots:
+        base = np.asarray(r.base, dtype=float)
+        for b in assembly.blocks:
+            if b.convex and np.all(b.face_normals @ base - b.face_offsets < -1e-9):
+                raise CellError(f"cell: robot {r.name!r}: 'base' {list(r.base)} is inside "
+                                f"block {b.id}")
+        if r.tool.mass * 9.81 > r.payload_force:
+            raise CellError(f"cell: robot {r.name!r}: 'payload_force' {r.payload_force:g} N "
+                            f"is less than its tool's weight ({r.tool.mass * 9.81:.4g} N)")
+
+
+__all__ = ["GripChooser", "GripFrame", "PRE_GRIP", "RobotWrench", "check_cell",
+           "robot_grip", "robot_wrench", "tool_box_pose"]

@@ -1,0 +1,282 @@
+"""A plan for a robot cell as a timeline of robot actions, every state between them checked.
+
+Actions: ``place(robot, block)`` (the robot brings the block along its approach and keeps
+its grip), then ``hold(robot, block)`` (it keeps holding) or ``release(robot, block)`` (it
+lets go at once); ``hold(robot, block)`` of a block placed earlier (a robot takes a placed
+block the next step needs held); ``release(robot, block)`` of a hold the plan no longer
+needs. A robot is busy with a block from its place (or hold) until its release, and never
+places while busy.
+
+Between the planner's steps k-1 and k (held blocks H[k-1], then H[k] with block b placed):
+the robots first take the placed blocks H[k] holds anew; b's placing robot is a free robot
+that can grip it (:mod:`rbe_ros.analysis.grips`: the nearest first); when none is free,
+holds of H[k-1] that H[k] drops are released first (oldest first) - the hand-over state,
+b still absent, which must stand; then b is placed, kept or released, and the other
+dropped holds released. Each state after an action is checked with the robots' grips and
+payloads (:func:`rbe_ros.analysis.verdict.check`), so no state between actions goes
+unchecked, and no state has more robots busy than the cell has.
+
+During the search (:class:`CellCheck`, a hook of the planner) a trial step is refused when
+no free robot can grip a block it needs or a hand-over state falls; the other states of a
+step hold a superset of a state the planner proved, and are checked when the timeline is
+built (:func:`build_timeline`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..cell import Cell, Robot
+from ..rbe.result import Report
+from ..scene import Scene
+from .assembly import Assembly
+from .grips import PRE_GRIP, GripChooser, GripFrame, RobotWrench, robot_grip, robot_wrench
+from .options import CheckOptions
+from .steps import supports_present
+from .verdict import check
+
+PLACE, HOLD, RELEASE = "place", "hold", "release"
+#: How far (m) a placed block's straight approach starts, when the plan gives no insertion
+#: distance.
+APPROACH = 0.1
+
+
+@dataclass(frozen=True)
+class Busy:
+    """A robot's hold of a block: its grip."""
+
+    robot: str
+    grip: GripFrame
+
+
+@dataclass(frozen=True)
+class Action:
+    """One action of the timeline, the state after it (``before``: the step's block not
+    yet placed; ``busy``: the blocks held then, with their robots' grips) and, once built,
+    its check and the acting robot's wrench."""
+
+    action: str
+    robot: str
+    block: str
+    step: int
+    before: bool
+    busy: tuple[tuple[str, Busy], ...]
+    grip: GripFrame                        # the acting robot's grip of the block
+    report: Report | None = None
+    wrench: RobotWrench | None = None
+    approach: np.ndarray | None = None     # place: the block's insertion direction
+
+    @property
+    def stable(self) -> bool:
+        return self.report is not None and self.report.stable
+
+    def frames(self) -> dict[str, GripFrame]:
+        """The TCP frames of the action: ``grip``; for a place ``pre_grip`` (backed off along
+        the face normal) and ``approach`` (where the block starts its straight approach)."""
+        grip = self.grip
+        out = {"grip": grip}
+        if self.action == PLACE:
+            out["pre_grip"] = grip.shifted(grip.normal * PRE_GRIP)
+            d = self.approach if self.approach is not None else np.zeros(3)
+            out["approach"] = grip.shifted(-np.asarray(d, dtype=float) * APPROACH)
+        return out
+
+
+@dataclass
+class Timeline:
+    """The actions of a plan for ``robots``; ``feasible`` False with ``message`` naming the
+    action, robot and block where it fails."""
+
+    robots: tuple[str, ...]
+    actions: list[Action] = field(default_factory=list)
+    feasible: bool = True
+    message: str = ""
+    no_ik: tuple[str, ...] = ()      # grips without an inverse kinematics solution
+
+    def busy_counts(self) -> list[int]:
+        return [len(a.busy) for a in self.actions]
+
+
+class _NoRobot(Exception):
+    pass
+
+
+class CellSteps:
+    """The robots' actions step by step (no checks): which robot places, holds and releases
+    what, for a cell and the finished assembly's grips."""
+
+    def __init__(self, cell: Cell, assembly: Assembly, position: dict[str, int]):
+        self.cell, self.chooser = cell, GripChooser(assembly, cell)
+        self.position = position
+        self.centroid = {b.id: b.centroid for b in assembly.blocks}
+
+    def _take(self, block: str, busy: dict[str, Busy]) -> tuple[Robot, GripFrame] | str:
+        """The nearest free robot that can grip ``block``, or why none can."""
+        taken = {h.robot for h in busy.values()}
+        why = []
+        robots = sorted(self.cell.robots, key=lambda r: float(np.linalg.norm(
+            np.asarray(r.base) - self.centroid[block])))
+        for r in robots:
+            if r.name in taken:
+                held = next(b for b, h in busy.items() if h.robot == r.name)
+                why.append(f"{r.name} is busy holding {held}")
+                continue
+            grip, reason = self.chooser.choose(block, r)
+            if grip is not None:
+                return r, grip
+            why.append(reason)
+        return "; ".join(why)
+
+    def step(self, k: int, block: str, busy: dict[str, Busy], held_after
+             ) -> tuple[list[Action], dict[str, Busy]]:
+        """The actions from the state after step k-1 (``busy``) to that after step k, placing
+        ``block`` (None: the release step) with ``held_after`` held; _NoRobot when a block
+        needed cannot be gripped by a free robot."""
+        busy = dict(busy)
+        keep = set(held_after)
+        drop = [b for b in busy if b not in keep]
+        acts: list[Action] = []
+
+        def act(kind, robot, b, before, grip):
+            acts.append(Action(kind, robot, b, k, before, tuple(busy.items()), grip))
+
+        def taken(b):
+            while True:
+                found = self._take(b, busy)
+                if not isinstance(found, str):
+                    return found
+                if not drop:
+                    raise _NoRobot(f"step {k}: no free robot can grip {b}: {found}")
+                d = drop.pop(0)            # the hand-over: a hold let go before b is taken
+                h = busy.pop(d)
+                act(RELEASE, h.robot, d, True, h.grip)
+
+        if block is not None:
+            for c in sorted(keep - set(busy) - {block}, key=self.position.__getitem__):
+                robot, grip = taken(c)
+                busy[c] = Busy(robot.name, grip)
+                act(HOLD, robot.name, c, True, grip)
+            robot, grip = taken(block)
+            busy[block] = Busy(robot.name, grip)
+            act(PLACE, robot.name, block, False, grip)
+            if block in keep:
+                act(HOLD, robot.name, block, False, grip)
+            else:
+                h = busy.pop(block)
+                act(RELEASE, h.robot, block, False, h.grip)
+        for d in drop:
+            h = busy.pop(d)
+            act(RELEASE, h.robot, d, False, h.grip)
+        return acts, busy
+
+
+class StateChecks:
+    """Checks of the states of a timeline: the blocks present, the held ones with their
+    robots' grips and payloads; each distinct state once."""
+
+    def __init__(self, cell: Cell, assembly: Assembly, scene: Scene, options: CheckOptions):
+        self.cell, self.assembly, self.scene, self.options = cell, assembly, scene, options
+        self.cache: dict = {}
+
+    def present(self, order, k: int, before: bool) -> tuple[str, ...]:
+        placed = order[:k] if before else order[:k + 1]
+        return supports_present(self.scene, k) + tuple(placed)
+
+    def __call__(self, present: tuple[str, ...], busy) -> Report:
+        key = (present, tuple(sorted((b, h.robot, h.grip.face) for b, h in busy)))
+        found = self.cache.get(key)
+        if found is None:
+            grips = tuple(robot_grip(h.grip, self.cell.robot(h.robot)) for _, h in busy)
+            sub = self.assembly.subset(present, [b for b, _ in busy], grips)
+            found = self.cache[key] = check(sub, self.options)
+        return found
+
+
+class CellCheck:
+    """The planner's hook for a cell: a trial step is refused (the reason returned) when a
+    block it needs held or placed has no free robot that can grip it, or a hand-over state
+    (holds let go before the block is placed) does not stand. The robots' state after each
+    partial plan is kept by its order."""
+
+    def __init__(self, cell: Cell, assembly: Assembly, scene: Scene, options: CheckOptions,
+                 position: dict[str, int]):
+        self.steps = CellSteps(cell, assembly, position)
+        self.states = StateChecks(cell, assembly, scene, options)
+        self.after: dict[tuple[str, ...], dict[str, Busy]] = {(): {}}
+
+    def _busy(self, order: tuple[str, ...], held) -> dict[str, Busy]:
+        found = self.after.get(order)
+        if found is None:           # a partial plan not seen step by step: replayed
+            busy = self._busy(order[:-1], held[:-1])
+            _, found = self.steps.step(len(order) - 1, order[-1], busy, held[-1])
+            self.after[order] = found
+        return found
+
+    def __call__(self, order: tuple[str, ...], held: tuple, block: str, new_held) -> str:
+        """Why the step placing ``block`` after ``order`` (held ``held`` by step) with
+        ``new_held`` held cannot be done by the cell ("" when it can)."""
+        busy = self._busy(order, held)
+        k = len(order)
+        try:
+            acts, after = self.steps.step(k, block, busy, new_held)
+        except _NoRobot as exc:
+            return str(exc)
+        full = (*order, block)
+        for a in acts:
+            if a.before and a.action == RELEASE:
+                report = self.states(self.states.present(full, k, True), a.busy)
+                if not report.stable:
+                    return (f"step {k}: the hand-over state after {a.robot} releases {a.block} "
+                            f"({block} not yet placed) is {report.status.name}: "
+                            f"{report.message}")
+        self.after[full] = after
+        return ""
+
+
+def build_timeline(cell: Cell, assembly: Assembly, scene: Scene, order, held,
+                   options: CheckOptions, approach=()) -> Timeline:
+    """The timeline of a plan (``order``, ``held`` by step, a release step last when
+    ``held`` is one longer) for ``cell``, every state after an action checked; the robots'
+    wrenches from the checks. ``assembly``: the finished assembly (the grips' faces);
+    ``scene``: the planned scene's supports; ``approach``: each step's insertion direction."""
+    position = {b.id: k for k, b in enumerate(assembly.blocks)}
+    steps = CellSteps(cell, assembly, position)
+    states = StateChecks(cell, assembly, scene, options)
+    order = tuple(order)
+    timeline = Timeline(cell.names)
+    busy: dict[str, Busy] = {}
+    for k, now in enumerate(held):
+        block = order[k] if k < len(order) else None
+        try:
+            acts, busy = steps.step(k, block, busy, now)
+        except _NoRobot as exc:
+            timeline.feasible, timeline.message = False, str(exc)
+            return timeline
+        for a in acts:
+            if block is None:
+                present = states.present(order, len(order), False)
+            else:
+                present = states.present(order, k, a.before)
+            report = states(present, a.busy)
+            wrench = None
+            busy_now = dict(a.busy)
+            if a.block in busy_now and report.hold_wrenches:
+                hw = next((w for w in report.hold_wrenches if w.block == a.block), None)
+                if hw is not None:
+                    wrench = robot_wrench(cell.robot(a.robot), busy_now[a.block].grip,
+                                          hw.force, hw.torque, assembly.gravity)
+            direction = None
+            if a.action == PLACE and k < len(approach) and approach[k] is not None:
+                direction = np.asarray(approach[k], dtype=float)
+            timeline.actions.append(replace(a, report=report, wrench=wrench,
+                                             approach=direction))
+            if not report.stable and timeline.feasible:
+                timeline.feasible = False
+                timeline.message = (f"step {k}: the state after {a.action}({a.robot}, "
+                                    f"{a.block}) is {report.status.name}: {report.message}")
+    return timeline
+
+
+__all__ = ["Action", "Busy", "CellCheck", "CellSteps", "HOLD", "PLACE", "RELEASE",
+           "StateChecks", "Timeline", "build_timeline"]

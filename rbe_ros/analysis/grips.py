@@ -27,9 +27,12 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..cell import Cell, CellError, Robot
+from ..geometry.block import pose_blocks
 from ..geometry.insertion import _hull_object
 from ..rbe.model import Grip
+from ..scene import Scene
 from .assembly import Assembly
+from .kinematics import load_arm, solve_ik
 
 #: A face is in contact when an interface lies in its plane within this share of the
 #: block's size and their normals are within CONTACT_COS.
@@ -126,6 +129,7 @@ class GripChooser:
             self._touching.setdefault(it.a, []).append((it.frame.n, centre))
             self._touching.setdefault(it.b, []).append((-it.frame.n, centre))
         self._faces: dict[str, list[GripFrame]] = {}
+        self._chosen: dict[tuple[str, str], tuple[GripFrame | None, str]] = {}
 
     @cached_property
     def _hulls(self) -> list[fcl.CollisionObject]:
@@ -175,7 +179,13 @@ class GripChooser:
 
     def choose(self, block: str, robot: Robot) -> tuple[GripFrame | None, str]:
         """``robot``'s grip of ``block`` (the free face facing its base most, its tool free,
-        within reach), or None and why not."""
+        within reach, with a URDF an inverse kinematics solution), or None and why not."""
+        key = (block, robot.name)
+        if key not in self._chosen:
+            self._chosen[key] = self._choose(block, robot)
+        return self._chosen[key]
+
+    def _choose(self, block: str, robot: Robot) -> tuple[GripFrame | None, str]:
         base = np.asarray(robot.base, dtype=float)
         faces = self.faces(block)
         if not faces:
@@ -191,6 +201,9 @@ class GripChooser:
             if hit:
                 why.append(f"face {g.face}: {robot.name}'s gripper hits {', '.join(hit[:3])}")
                 continue
+            if robot.urdf and solve_ik(robot, g.point, g.rotation) is None:
+                why.append(f"face {g.face}: no inverse kinematics solution")
+                continue
             return g, ""
         return None, f"{robot.name} cannot grip block {block}: {'; '.join(why)}"
 
@@ -200,19 +213,23 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return v / norm if norm > 0 else v
 
 
-def check_cell(cell: Cell, assembly: Assembly) -> None:
-    """What a cell's fields alone cannot tell (CellError naming the robot): a base inside a
-    block of ``assembly``, a tool heavier than its robot's payload."""
+def validate_cell(cell: Cell, scene: Scene) -> None:
+    """What a cell's fields alone cannot tell (CellError naming the robot and field): a base
+    inside a block of ``scene``, a tool heavier than its robot's payload, a URDF that does
+    not load (or lacks its tip link)."""
+    blocks = pose_blocks(scene.blocks)
     for r in cell.robots:
         base = np.asarray(r.base, dtype=float)
-        for b in assembly.blocks:
+        for b in blocks:
             if b.convex and np.all(b.face_normals @ base - b.face_offsets < -1e-9):
                 raise CellError(f"cell: robot {r.name!r}: 'base' {list(r.base)} is inside "
                                 f"block {b.id}")
         if r.tool.mass * 9.81 > r.payload_force:
             raise CellError(f"cell: robot {r.name!r}: 'payload_force' {r.payload_force:g} N "
                             f"is less than its tool's weight ({r.tool.mass * 9.81:.4g} N)")
+        if r.urdf:
+            load_arm(r)
 
 
-__all__ = ["GripChooser", "GripFrame", "PRE_GRIP", "RobotWrench", "check_cell",
-           "robot_grip", "robot_wrench", "tool_box_pose"]
+__all__ = ["GripChooser", "GripFrame", "PRE_GRIP", "RobotWrench",
+           "robot_grip", "robot_wrench", "tool_box_pose", "validate_cell"]

@@ -88,14 +88,19 @@ class Timeline:
     """The actions of a plan for ``robots``; ``feasible`` False with ``message`` naming the
     action, robot and block where it fails."""
 
-    robots: tuple[str, ...]
+    cell: Cell
     actions: list[Action] = field(default_factory=list)
     feasible: bool = True
     message: str = ""
-    no_ik: tuple[str, ...] = ()      # grips without an inverse kinematics solution
 
-    def busy_counts(self) -> list[int]:
-        return [len(a.busy) for a in self.actions]
+    @property
+    def robots(self) -> tuple[str, ...]:
+        return self.cell.names
+
+    def holder(self, block: str, step: int) -> Action | None:
+        """The action by which a robot took ``block`` last by ``step`` (place or hold)."""
+        return next((a for a in reversed(self.actions) if a.block == block
+                     and a.action in (PLACE, HOLD) and a.step <= step), None)
 
 
 class _NoRobot(Exception):
@@ -244,7 +249,7 @@ def build_timeline(cell: Cell, assembly: Assembly, scene: Scene, order, held,
     steps = CellSteps(cell, assembly, position)
     states = StateChecks(cell, assembly, scene, options)
     order = tuple(order)
-    timeline = Timeline(cell.names)
+    timeline = Timeline(cell)
     busy: dict[str, Busy] = {}
     for k, now in enumerate(held):
         block = order[k] if k < len(order) else None
@@ -278,5 +283,41 @@ def build_timeline(cell: Cell, assembly: Assembly, scene: Scene, order, held,
     return timeline
 
 
+def busy_robots(actions) -> list[int]:
+    """The robots busy in the state after each of ``actions`` (from a place or hold of a
+    block until its release)."""
+    busy: set[str] = set()
+    out = []
+    for a in actions:
+        (busy.discard if a.action == RELEASE else busy.add)(a.robot)
+        out.append(len(busy))
+    return out
+
+
+def recheck_timeline(cell: Cell, scene: Scene, actions, options: CheckOptions,
+                     assembly: Assembly | None = None) -> list[Report]:
+    """The check of the state after each of ``actions`` (an exported timeline: records with
+    ``action``, ``robot``, ``block``, ``step`` and ``grip``, a :class:`GripFrame`), the
+    states made from the actions alone: the blocks placed so far (and the supports present
+    at the action's step), the blocks a robot holds (from its place or hold until its
+    release) gripped where the action says, within that robot's payload."""
+    assembly = assembly or Assembly.from_scene(scene, options.contact)
+    states = StateChecks(cell, assembly, scene, options)
+    placed: list[str] = []
+    busy: dict[str, Busy] = {}
+    out = []
+    for a in actions:
+        if a.action == PLACE:
+            placed.append(a.block)
+        if a.action in (PLACE, HOLD):
+            busy[a.block] = Busy(a.robot, a.grip)
+        else:
+            busy.pop(a.block, None)
+        present = supports_present(scene, a.step) + tuple(placed)
+        out.append(states(present, tuple(busy.items())))
+    return out
+
+
 __all__ = ["Action", "Busy", "CellCheck", "CellSteps", "HOLD", "PLACE", "RELEASE",
-           "StateChecks", "Timeline", "build_timeline"]
+           "StateChecks", "Timeline", "build_timeline", "busy_robots",
+           "recheck_timeline"]

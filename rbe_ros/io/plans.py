@@ -6,16 +6,21 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from ..analysis.option_spec import BY_PARAM, from_outer
 from ..analysis.options import CheckOptions
+from ..analysis.grips import validate_cell
 from ..analysis.planning import Plan, PlanOptions, PlanProgress, plan_sequence
+from ..cell import Cell, CellError
 from ..scene import Scene, SceneError, validate_scene
+from .cell_file import parse_cell
 
 #: Hold capacities a request may set over the options: the node parameters of those names
 #: (outer values, N and N m; <= 0: the options' own).
 HOLD_CAPACITIES = ("hold_force_max", "hold_torque_max")
+#: How the message of a plan whose cell is refused begins (the node aborts such a goal).
+INVALID_CELL = "invalid input: cell:"
 
 
 @dataclass(frozen=True)
@@ -30,6 +35,7 @@ class PlanLimits:
     hold_force_max: float = 0.0     # N; <= 0: the options'
     hold_torque_max: float = 0.0    # N m; <= 0: the options'
     time_limit: float = 0.0         # s; <= 0: none
+    cell: str = ""                  # the robot cell, JSON or YAML text; "": none
 
     def search(self) -> PlanOptions:
         """The planner's search (ValueError naming a limit out of its range)."""
@@ -53,6 +59,16 @@ def plan_options(options: CheckOptions, limits: PlanLimits) -> CheckOptions:
     return options
 
 
+def robots_held(cell: Cell, max_held: int) -> int:
+    """The blocks a plan for ``cell`` may hold after a placement: ``max_held`` (0: as many
+    as leave one robot free to place, N - 1), never more (CellError)."""
+    free = len(cell.robots) - 1
+    if max_held > free:
+        raise CellError(f"cell: max_held {max_held} needs {max_held + 1} robots ({max_held} "
+                        f"holding, one placing); the cell has {len(cell.robots)}")
+    return max_held or free
+
+
 def _failed(message: str) -> Plan:
     """The plan of a request that could not be planned (nothing placed)."""
     return Plan(False, [], [], message, failed_step=0)
@@ -66,6 +82,8 @@ def plan_state(read_scene: Callable[[], Scene], limits: PlanLimits,
     limit out of range, a scene outside the options' validation limits, as a check would
     refuse it) is a plan that failed with "invalid input: ...", any other error "plan failed:
     ...".
+    A cell (``limits.cell``) that cannot be used is a plan that failed with
+    "invalid input: cell: ..." (:data:`INVALID_CELL`).
     ``should_stop`` and the time limit stop the search between candidate checks (the best
     partial plan, "stopped after K of N blocks"). ``extra``: further keywords of
     :func:`plan_sequence` (``on_report``, ``look_ahead``, ``full_candidates``)."""
@@ -83,7 +101,12 @@ def plan_state(read_scene: Callable[[], Scene], limits: PlanLimits,
         scene = read_scene()
         if options.limits is not None:
             validate_scene(scene, options.limits)
-        return plan_sequence(scene, search.max_held, plan_options(options, limits),
+        cell = None
+        if limits.cell.strip():
+            cell = parse_cell(limits.cell)
+            validate_cell(cell, scene)
+            search = replace(search, max_held=robots_held(cell, search.max_held))
+        return plan_sequence(scene, search.max_held, plan_options(options, limits), cell=cell,
                              beam=search.beam, candidates=search.candidates,
                              keep_sequence=search.keep_sequence, progress=progress,
                              should_stop=stop, **extra)
@@ -93,4 +116,5 @@ def plan_state(read_scene: Callable[[], Scene], limits: PlanLimits,
         return _failed(f"plan failed: {type(exc).__name__}: {exc}")
 
 
-__all__ = ["HOLD_CAPACITIES", "PlanLimits", "plan_options", "plan_state"]
+__all__ = ["HOLD_CAPACITIES", "INVALID_CELL", "PlanLimits", "plan_options", "plan_state",
+           "robots_held"]

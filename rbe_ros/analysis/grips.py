@@ -39,7 +39,8 @@ from .kinematics import load_arm, solve_ik
 CONTACT_DISTANCE = 1e-2
 CONTACT_COS = math.cos(math.radians(5.0))
 #: The gripper box stands off the face by this (m), so that touching its own face is no
-#: collision.
+#: collision; the other blocks are shrunk by it, so that a box touching one (a footing's top
+#: beside the face gripped) is none either.
 STANDOFF = 1e-3
 #: How far (m) the TCP backs off along the face normal before it grips (the pre-grip frame).
 PRE_GRIP = 0.1
@@ -133,7 +134,7 @@ class GripChooser:
 
     @cached_property
     def _hulls(self) -> list[fcl.CollisionObject]:
-        return [_hull_object(np.ascontiguousarray(b.vertices, dtype=float).tobytes(), 0.0)
+        return [_hull_object(np.ascontiguousarray(b.vertices, dtype=float).tobytes(), STANDOFF)
                 for b in self.assembly.blocks]
 
     def faces(self, block: str) -> list[GripFrame]:

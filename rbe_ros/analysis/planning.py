@@ -426,7 +426,7 @@ class _Planner:
                        if best_rejected else
                        "; no unplaced block touches the placed ones" if not blocked else "")
                 why += "".join(f"; {b} cannot be inserted: {r}" for b, r in blocked.items())
-                why += "".join(f"; {r}" for r in self.refused.values())
+                why += "".join(f"; {r}" for r in list(self.refused.values())[:1])
                 return self._finish(beam[0], False, k, f"no block can be placed at step {k} "
                                     f"with at most {self.plan.max_held} held{why}")
             beam = sorted(children.values(), key=lambda p: (p.score, p.order))[:self.plan.beam]
@@ -555,10 +555,14 @@ def _with_timeline(plan: Plan, planner: _Planner, cell: Cell) -> Plan:
     one falls (the message names the action, robot and block)."""
     scene = plan.scene if plan.scene is not None else planner.base
     timeline = build_timeline(cell, planner.full, planner.base, plan.order, plan.held,
-                              planner.options, scene.approach)
+                              planner.options, scene.approach, planner.cell_check.states)
     if plan.feasible and not timeline.feasible:
         plan = replace(plan, feasible=False, message=f"timeline: {timeline.message}",
                        failed_step=timeline.actions[-1].step if timeline.actions else 0)
+    elif not plan.feasible and not plan.message.startswith(STOPPED):
+        n = len(cell.robots)
+        plan = replace(plan, message=f"{plan.message} (a cell of {n} robot{'s' * (n > 1)}: "
+                       f"at most {n - 1} hold while one places)")
     return replace(plan, timeline=timeline)
 
 

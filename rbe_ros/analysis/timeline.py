@@ -17,9 +17,9 @@ payloads (:func:`rbe_ros.analysis.verdict.check`), so no state between actions g
 unchecked, and no state has more robots busy than the cell has.
 
 During the search (:class:`CellCheck`, a hook of the planner) a trial step is refused when
-no free robot can grip a block it needs or a hand-over state falls; the other states of a
-step hold a superset of a state the planner proved, and are checked when the timeline is
-built (:func:`build_timeline`).
+no free robot can grip a block it needs or the state after one of its actions falls (a
+hand-over state, a robot beyond its payload at its grip); the timeline
+(:func:`build_timeline`) reuses those checks.
 """
 from __future__ import annotations
 
@@ -220,7 +220,9 @@ class CellCheck:
 
     def __call__(self, order: tuple[str, ...], held: tuple, block: str, new_held) -> str:
         """Why the step placing ``block`` after ``order`` (held ``held`` by step) with
-        ``new_held`` held cannot be done by the cell ("" when it can)."""
+        ``new_held`` held cannot be done by the cell ("" when it can): no free robot can grip
+        a block it needs, or the state after one of its actions falls (with the robots'
+        grips and payloads: the hand-over state, or a robot's payload exceeded)."""
         busy = self._busy(order, held)
         k = len(order)
         try:
@@ -229,25 +231,37 @@ class CellCheck:
             return str(exc)
         full = (*order, block)
         for a in acts:
-            if a.before and a.action == RELEASE:
-                report = self.states(self.states.present(full, k, True), a.busy)
-                if not report.stable:
-                    return (f"step {k}: the hand-over state after {a.robot} releases {a.block} "
-                            f"({block} not yet placed) is {report.status.name}: "
-                            f"{report.message}")
+            report = self.states(self.states.present(full, k, a.before), a.busy)
+            if not report.stable:
+                return fell(a, report, block)
         self.after[full] = after
         return ""
 
 
+def fell(a: Action, report: Report, block: str) -> str:
+    """Why the state after action ``a`` of the step placing ``block`` falls: the action, and
+    for a payload exceeded the robots and blocks over it."""
+    where = (f"the hand-over state after {a.robot} releases {a.block} ({block} not yet "
+             f"placed)" if a.before and a.action == RELEASE
+             else f"the state after {a.action}({a.robot}, {a.block})")
+    holders = dict(a.busy)
+    over = [f"{holders[w.block].robot} holding {w.block}" for w in report.hold_wrenches
+            if w.utilisation > 1.0 and w.block in holders]
+    who = f" ({', '.join(over)} beyond its payload)" if over else ""
+    return f"step {a.step}: {where} is {report.status.name}{who}: {report.message}"
+
+
 def build_timeline(cell: Cell, assembly: Assembly, scene: Scene, order, held,
-                   options: CheckOptions, approach=()) -> Timeline:
+                   options: CheckOptions, approach=(), states: StateChecks | None = None
+                   ) -> Timeline:
     """The timeline of a plan (``order``, ``held`` by step, a release step last when
     ``held`` is one longer) for ``cell``, every state after an action checked; the robots'
     wrenches from the checks. ``assembly``: the finished assembly (the grips' faces);
-    ``scene``: the planned scene's supports; ``approach``: each step's insertion direction."""
+    ``scene``: the planned scene's supports; ``approach``: each step's insertion direction;
+    ``states``: the checks the planner's :class:`CellCheck` made (reused)."""
     position = {b.id: k for k, b in enumerate(assembly.blocks)}
     steps = CellSteps(cell, assembly, position)
-    states = StateChecks(cell, assembly, scene, options)
+    states = states or StateChecks(cell, assembly, scene, options)
     order = tuple(order)
     timeline = Timeline(cell)
     busy: dict[str, Busy] = {}
@@ -277,9 +291,7 @@ def build_timeline(cell: Cell, assembly: Assembly, scene: Scene, order, held,
             timeline.actions.append(replace(a, report=report, wrench=wrench,
                                              approach=direction))
             if not report.stable and timeline.feasible:
-                timeline.feasible = False
-                timeline.message = (f"step {k}: the state after {a.action}({a.robot}, "
-                                    f"{a.block}) is {report.status.name}: {report.message}")
+                timeline.feasible, timeline.message = False, fell(a, report, block or "")
     return timeline
 
 

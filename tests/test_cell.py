@@ -19,7 +19,7 @@ from scipy.spatial.transform import Rotation
 from rbe_ros import generators
 from rbe_ros.analysis.assembly import Assembly
 from rbe_ros.analysis.grips import GripChooser, robot_wrench
-from rbe_ros.analysis.kinematics import load_arm
+from rbe_ros.analysis.kinematics import load_arm, solve_ik
 from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.analysis.planning import plan_sequence
 from rbe_ros.analysis.timeline import Busy, StateChecks
@@ -281,7 +281,6 @@ def test_ur10_grips_of_the_arch_have_inverse_kinematics(tmp_path, capsys):
     result = json.loads(capsys.readouterr().out)
     assert result["feasible"], result["message"]
     parsed = parse_cell(json.dumps(cell))
-    from rbe_ros.analysis.kinematics import solve_ik
     for a in result["timeline"]:
         if a["action"] == "release":
             continue

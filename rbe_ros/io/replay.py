@@ -646,7 +646,7 @@ def _compare_hold_wrenches(c: _Comparer, a: list, b: list, tolerances: Tolerance
 
 
 #: Plan result fields compared exactly (the reports are compared as reports).
-_PLAN_EXACT = ("feasible", "message", "order", "holds", "failed_step", "robots")
+_PLAN_EXACT = ("feasible", "message", "order", "holds", "failed_step")
 #: Fields of a cell timeline's actions compared exactly (not its poses and wrenches: the
 #: grips follow from these, and the wrenches are forces, compared in the reports).
 _ACTION_EXACT = ("action", "robot", "block", "step", "stable", "status")
@@ -661,6 +661,8 @@ def compare_plan(recorded: dict, replayed: dict, *, run: int = 0,
     c = _Comparer(run, -1, "", 1.0, tolerances)
     for name in _PLAN_EXACT:
         c.exact("plan result", name, recorded.get(name), replayed.get(name))
+    # a result recorded before cells has neither: none
+    c.exact("plan result", "robots", recorded.get("robots", []), replayed.get("robots", []))
     c.exact("plan result", "timeline",
             [[x.get(k) for k in _ACTION_EXACT] for x in recorded.get("timeline", [])],
             [[x.get(k) for k in _ACTION_EXACT] for x in replayed.get("timeline", [])])

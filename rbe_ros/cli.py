@@ -610,6 +610,10 @@ def _run_view(args) -> int:
         steps = args.sequence or bool(scene.sequence)
         state = state_to_dict(replace(scene, sequence=order if steps else ()), "world")
         runs = checked_runs([(scene.name, state)], options)
+        data, _ = read_json(source)
+        if isinstance(data, dict) and "timeline" in data:     # a plan for a cell (plan -o)
+            cell, _ = read_timeline(data)
+            runs = [replace(runs[0], cell=cell, timeline=data["timeline"])]
         title = scene.name
     if not runs:
         raise ValueError(f"{source}: no states to show")

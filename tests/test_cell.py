@@ -26,6 +26,7 @@ from rbe_ros.analysis.timeline import Busy, StateChecks
 from rbe_ros.cell import Cell, CellError, Robot, Tool, cell_from_dict
 from rbe_ros.cli import main
 from rbe_ros.io.cell_file import parse_cell
+from rbe_ros.io.markers import PULL, PUSH, cell_markers
 from rbe_ros.io.scene_json import scene_to_dict
 from rbe_ros.scene import box_block, make_scene
 
@@ -346,3 +347,47 @@ def test_cell_fields_and_robot_count():
     assert "needs |F| 1601 N (capacity 1480 N)" in plan.message
     assert max(busy_per_state([{"action": a.action, "robot": a.robot, "block": a.block}
                                for a in plan.timeline.actions])) <= 2
+
+
+def test_markers_and_view_of_the_arch_plan(arch_plan, capsys):
+    """The state after r3 places v02 (step 4): three robot bases, the gripper boxes of the
+    three busy robots behind their grips, r3's force on v02 as an arrow from the grip (its
+    colour: push when the force points into the face), the hover text naming robot, block,
+    force and torque; the HTML view's per-robot table and arrows."""
+    tmp, scene_path, cell_path, out = arch_plan
+    if not out.exists():
+        main(["plan", scene_path, "--cell", cell_path, "-o", str(out)])
+    data = json.loads(out.read_text())
+    timeline, cell = data["timeline"], cell_from_dict(data["cell"])
+    index = next(k for k, a in enumerate(timeline) if a["action"] == "place"
+                 and a["block"] == "v02")
+    markers = cell_markers(cell, timeline, index, timeline[index]["grip"]["header"], 0.5)
+    kinds = [(m["ns"], m["type"]) for m in markers]
+    assert kinds.count(("robots", 3)) == 3 and kinds.count(("grippers", 1)) == 3
+    act = timeline[index]
+    point, rot = pose_of(act["grip"])
+    box = next(m for m in markers if m["ns"] == "grippers" and m["id"] == 2)      # r3
+    centre = np.array([box["pose"]["position"][k] for k in "xyz"])
+    assert centre == pytest.approx(point - rot[:, 2] * (0.15 / 2 + 1e-3))
+    arrow = next(m for m in markers if m["ns"] == "robot_wrenches" and m["type"] == 0)
+    force = np.array([act["wrench_world"]["force"][k] for k in "xyz"])
+    tail, tip = arrow["points"]
+    assert tail == pytest.approx(point) and np.cross(tip - tail, force) == pytest.approx(
+        np.zeros(3), abs=1e-6)
+    push = force @ rot[:, 2] >= 0
+    assert tuple(arrow["color"][k] for k in "rgba") == (PUSH if push else PULL)
+    text = next(m["text"] for m in markers if m["ns"] == "robot_wrenches" and m["type"] == 9)
+    assert text.startswith(f"r3 place v02: |F| {np.linalg.norm(force):.0f} N on the block")
+    # the page: the per-robot table and the robots' arrows at step 4
+    capsys.readouterr()
+    page = tmp / "view.html"
+    assert main(["view", str(out), "-o", str(page)]) == 0
+    view = json.loads(page.read_text().split('type="application/json">')[1]
+                      .split("</script>")[0].replace("<\\/", "</"))
+    table = view["robot_tables"][0]
+    assert table["robots"] == ["r1", "r2", "r3"]
+    assert table["rows"][4] == [4, "release v01", "-", "place v02; hold v02"]
+    step4 = view["steps"][4]
+    # place and hold of v02 are one state: one arrow
+    assert [a["name"].split(":")[0] for a in step4["robot_arrows"]] == ["r3 place v02"]
+    assert {ln["name"] for ln in step4["lines"]} >= {"base of r1", "gripper of r3"}

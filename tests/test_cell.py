@@ -281,20 +281,30 @@ def test_ur10_grips_of_the_arch_have_inverse_kinematics(tmp_path, capsys):
           "--json"])
     result = json.loads(capsys.readouterr().out)
     assert result["feasible"], result["message"]
-    parsed = parse_cell(json.dumps(cell))
-    for a in result["timeline"]:
-        if a["action"] == "release":
-            continue
-        robot = parsed.robot(a["robot"])
+    assert assert_joint_solutions(parse_cell(json.dumps(cell)), result["timeline"]) == 11
+
+
+def assert_joint_solutions(cell, timeline) -> int:
+    """Every grip of ``timeline`` (not a release) has a joint solution of its robot's URDF:
+    pinocchio's forward kinematics of the tip, turned and moved to the robot's base, plus
+    the TCP offset, is the grip pose. Returns the grips checked."""
+    grips = [a for a in timeline if a["action"] != "release"]
+    for a in grips:
+        robot = cell.robot(a["robot"])
         point, rot = pose_of(a["grip"])
         q = solve_ik(robot, point, rot)
         model, tip = load_arm(robot)
         data = model.createData()
         pin.framesForwardKinematics(model, data, q)
-        tcp = data.oMf[tip].translation + np.asarray(robot.base) \
-            + data.oMf[tip].rotation @ np.asarray(robot.tool.tcp)
+        yaw = robot.base_yaw
+        base = np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0],
+                         [0, 0, 1]])
+        flange = base @ data.oMf[tip].rotation
+        tcp = base @ data.oMf[tip].translation + np.asarray(robot.base) \
+            + flange @ np.asarray(robot.tool.tcp)
         assert tcp == pytest.approx(point, abs=1e-3)
-        assert data.oMf[tip].rotation == pytest.approx(rot, abs=1e-3)
+        assert flange == pytest.approx(rot, abs=1e-3)
+    return len(grips)
 
 
 BAD = [
@@ -391,3 +401,20 @@ def test_markers_and_view_of_the_arch_plan(arch_plan, capsys):
     # place and hold of v02 are one state: one arrow
     assert [a["name"].split(":")[0] for a in step4["robot_arrows"]] == ["r3 place v02"]
     assert {ln["name"] for ln in step4["lines"]} >= {"base of r1", "gripper of r3"}
+
+
+def test_plan_output_keeps_the_hold_capacities(tmp_path, capsys):
+    """Without a cell, ``plan -o`` writes the capacities the plan was checked under into
+    each hold, and ``check --sequence`` of the file checks with them (the arch's largest hold,
+    694 N at step 4, within 800 N)."""
+    scene_path = write(tmp_path, "arch.json", scene_to_dict(generators.semicircular_arch(7)))
+    out = tmp_path / "planned.json"
+    assert main(["plan", scene_path, "--max-held", "2", "--hold-force-max", "800",
+                 "--hold-torque-max", "300", "-o", str(out)]) == 0
+    holds = json.loads(out.read_text())["holds"]
+    assert holds and all(h["max_force"] == 800 and h["max_torque"] == 300 for h in holds)
+    capsys.readouterr()
+    assert main(["check", str(out), "--sequence", "--json", "--strict"]) == 0
+    reports = json.loads(capsys.readouterr().out)["reports"]
+    assert max(w["utilisation"] for r in reports for w in r["hold_wrenches"]) \
+        == pytest.approx(694 / 800, abs=0.01)

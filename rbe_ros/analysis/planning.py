@@ -63,7 +63,7 @@ from .insertion import block_insertion
 from .options import CheckOptions
 from .pipeline import check_sequence, slim
 from .steps import gripped, supports_present
-from .timeline import CellCheck, Timeline, build_timeline
+from .timeline import CellCheck, Timeline, build_timeline, scene_with_grips
 from .verdict import UNEXPLAINED, check
 
 #: How the message of a plan stopped by ``should_stop`` begins (a time limit, a cancel).
@@ -563,7 +563,8 @@ def _with_timeline(plan: Plan, planner: _Planner, cell: Cell) -> Plan:
         n = len(cell.robots)
         plan = replace(plan, message=f"{plan.message} (a cell of {n} robot{'s' * (n > 1)}: "
                        f"at most {n - 1} hold while one places)")
-    return replace(plan, timeline=timeline)
+    return replace(plan, timeline=timeline,
+                   scene=scene_with_grips(plan.scene, timeline) if plan.scene else None)
 
 
 def _planned_under(options: CheckOptions) -> tuple[float, float] | None:

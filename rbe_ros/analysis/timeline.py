@@ -26,6 +26,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from ..cell import Cell, Robot
 from ..rbe.result import Report
@@ -295,6 +296,23 @@ def build_timeline(cell: Cell, assembly: Assembly, scene: Scene, order, held,
     return timeline
 
 
+def scene_with_grips(scene: Scene, timeline: Timeline) -> Scene:
+    """``scene`` (a plan's) with each hold of a free block at its robot's grip (block
+    frame) and within its robot's payload less its tool's share, as the timeline holds it."""
+    holds = []
+    for h in scene.holds:
+        taken = timeline.holder(h.block, h.from_step)
+        if taken is not None and not scene.block(h.block).support:
+            grip = robot_grip(taken.grip, timeline.cell.robot(taken.robot))
+            block = scene.block(h.block)
+            local = Rotation.from_quat(block.orientation).inv().apply(
+                taken.grip.point - block.position)
+            h = replace(h, grip=tuple(float(x) for x in local), max_force=grip.max_force,
+                        max_torque=grip.max_torque)
+        holds.append(h)
+    return replace(scene, holds=tuple(holds))
+
+
 def busy_robots(actions) -> list[int]:
     """The robots busy in the state after each of ``actions`` (from a place or hold of a
     block until its release)."""
@@ -332,4 +350,4 @@ def recheck_timeline(cell: Cell, scene: Scene, actions, options: CheckOptions,
 
 __all__ = ["Action", "Busy", "CellCheck", "CellSteps", "HOLD", "PLACE", "RELEASE",
            "StateChecks", "Timeline", "build_timeline", "busy_robots",
-           "recheck_timeline"]
+           "recheck_timeline", "scene_with_grips"]

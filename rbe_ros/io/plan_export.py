@@ -2,7 +2,8 @@
 
 The planned scene keeps the capacities it was planned under: each hold's ``max_force`` and
 ``max_torque`` (the options' hold capacities; for a cell, its robot's payload less its
-tool's share) and, for a cell, the grip (block frame) its robot takes. Planned for a cell,
+tool's share, and the grip its robot takes: :func:`rbe_ros.analysis.timeline.
+scene_with_grips`). Planned for a cell,
 the file also holds the cell (``"cell"``, URDF paths resolved) and the timeline
 (``"timeline"``: rbe_msgs/RobotAction dicts, :func:`rbe_ros.io.messages.timeline_to_dicts`),
 so that the timeline is re-checked from the file alone (:func:`read_timeline`).
@@ -16,7 +17,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ..analysis.grips import GripFrame, robot_grip
+from ..analysis.grips import GripFrame
 from ..analysis.options import CheckOptions
 from ..analysis.planning import Plan
 from ..cell import Cell, CellError, cell_from_dict, cell_to_dict
@@ -26,26 +27,17 @@ from .scene_json import scene_to_dict
 
 
 def planned_scene(plan: Plan, options: CheckOptions) -> Scene | None:
-    """``plan``'s scene with the capacities (and, for a cell, the grips) of its holds."""
-    scene, timeline = plan.scene, plan.timeline
+    """``plan``'s scene, each hold with the capacities it was planned under (its own: a
+    cell's robot; else the options')."""
+    scene = plan.scene
     if scene is None:
         return None
-    holds = []
-    for h in scene.holds:
-        force = options.hold_force_max if h.max_force is None else h.max_force
-        torque = options.hold_torque_max if h.max_torque is None else h.max_torque
-        grip = h.grip
-        taken = timeline.holder(h.block, h.from_step) if timeline is not None else None
-        if taken is not None:
-            capped = robot_grip(taken.grip, timeline.cell.robot(taken.robot))
-            force, torque = capped.max_force, capped.max_torque
-            block = scene.block(h.block)
-            local = Rotation.from_quat(block.orientation).inv().apply(
-                taken.grip.point - block.position)
-            grip = tuple(float(x) for x in local)
-        holds.append(replace(h, grip=grip, max_force=_finite(force),
-                             max_torque=_finite(torque)))
-    return replace(scene, holds=tuple(holds))
+    return replace(scene, holds=tuple(
+        replace(h, max_force=_finite(options.hold_force_max if h.max_force is None
+                                     else h.max_force),
+                max_torque=_finite(options.hold_torque_max if h.max_torque is None
+                                   else h.max_torque))
+        for h in scene.holds))
 
 
 def _finite(value) -> float | None:

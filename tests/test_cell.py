@@ -174,7 +174,8 @@ def test_the_arch_for_three_robots_timeline_rechecked(arch_plan, capsys):
 def test_exported_frames_as_compas_fab_targets(arch_plan, capsys):
     """compas Frames and compas_fab FrameTargets built from the export: the grip frame's
     origin on the grip face, its z axis into the block, pre-grip backed off 0.1 m along the
-    face normal, the approach start 0.1 m against the insertion direction (down: above)."""
+    face normal, the approach start against the insertion direction (down: above) over the
+    insertion check's distance (twice the block's longest bounding-box edge)."""
     tmp, scene_path, cell_path, out = arch_plan
     if not out.exists():
         main(["plan", scene_path, "--cell", cell_path, "-o", str(out)])
@@ -194,7 +195,8 @@ def test_exported_frames_as_compas_fab_targets(arch_plan, capsys):
         back = np.array(frames["pre_grip"].point) - np.array(grip.point)
         assert back == pytest.approx(-0.1 * z, abs=1e-9)
         start = np.array(frames["approach"].point) - np.array(grip.point)
-        assert start == pytest.approx([0.0, 0.0, 0.1], abs=1e-9)
+        distance = 2 * bodies[a["block"]].extents.max()
+        assert start == pytest.approx([0.0, 0.0, distance], abs=1e-9)
 
 
 def test_a_held_block_robot_wrench_closed_form():

@@ -32,15 +32,13 @@ from ..cell import Cell, Robot
 from ..rbe.result import Report
 from ..scene import Scene
 from .assembly import Assembly
+from .insertion import approach_distance
 from .grips import PRE_GRIP, GripChooser, GripFrame, RobotWrench, robot_grip, robot_wrench
 from .options import CheckOptions
 from .steps import supports_present
 from .verdict import check
 
 PLACE, HOLD, RELEASE = "place", "hold", "release"
-#: How far (m) a placed block's straight approach starts, when the plan gives no insertion
-#: distance.
-APPROACH = 0.1
 
 
 @dataclass(frozen=True)
@@ -66,7 +64,9 @@ class Action:
     grip: GripFrame                        # the acting robot's grip of the block
     report: Report | None = None
     wrench: RobotWrench | None = None
-    approach: np.ndarray | None = None     # place: the block's insertion direction
+    #: place: from the placed pose to where the block starts its straight approach (m: the
+    #: insertion direction reversed, over the insertion check's approach distance)
+    approach: np.ndarray | None = None
 
     @property
     def stable(self) -> bool:
@@ -79,8 +79,8 @@ class Action:
         out = {"grip": grip}
         if self.action == PLACE:
             out["pre_grip"] = grip.shifted(grip.normal * PRE_GRIP)
-            d = self.approach if self.approach is not None else np.zeros(3)
-            out["approach"] = grip.shifted(-np.asarray(d, dtype=float) * APPROACH)
+            out["approach"] = grip.shifted(np.zeros(3) if self.approach is None
+                                           else self.approach)
         return out
 
 
@@ -288,7 +288,8 @@ def build_timeline(cell: Cell, assembly: Assembly, scene: Scene, order, held,
                                           hw.force, hw.torque, assembly.gravity)
             direction = None
             if a.action == PLACE and k < len(approach) and approach[k] is not None:
-                direction = np.asarray(approach[k], dtype=float)
+                direction = -np.asarray(approach[k], dtype=float) * approach_distance(
+                    assembly, position[a.block], options)
             timeline.actions.append(replace(a, report=report, wrench=wrench,
                                              approach=direction))
             if not report.stable and timeline.feasible:

@@ -22,7 +22,7 @@ from rbe_ros.analysis.grips import GripChooser, robot_wrench
 from rbe_ros.analysis.kinematics import load_arm, solve_ik
 from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.analysis.planning import plan_sequence
-from rbe_ros.analysis.timeline import Busy, StateChecks
+from rbe_ros.analysis.timeline import Busy, CellCheck, CellSteps, StateChecks
 from rbe_ros.cell import Cell, CellError, Robot, Tool, cell_from_dict
 from rbe_ros.cli import main
 from rbe_ros.io.cell_file import parse_cell
@@ -420,3 +420,38 @@ def test_plan_output_keeps_the_hold_capacities(tmp_path, capsys):
     reports = json.loads(capsys.readouterr().out)["reports"]
     assert max(w["utilisation"] for r in reports for w in r["hold_wrenches"]) \
         == pytest.approx(694 / 800, abs=0.01)
+
+
+def test_a_hand_over_releases_before_the_placement_and_is_checked():
+    """Two robots hold v01 and v05 after step 3 of the arch's K = 2 plan; to place v02 one
+    must let go first: r1 releases v01 (the hold step 4 drops) before it places v02. That
+    hand-over state (v02 absent, v05 held alone) falls, and the planner's hook says so; with
+    a third robot there is no hand-over."""
+    arch = generators.semicircular_arch(7)
+    assembly = Assembly.from_scene(arch)
+    position = {b.id: k for k, b in enumerate(assembly.blocks)}
+    order = ("v00", "v06", "v01", "v05")
+    held = ((), (), ("v01",), ("v01", "v05"))
+    two = cell_from_dict({"robots": ARCH_CELL["robots"][:2]})
+    steps = CellSteps(two, assembly, position)
+    busy = {}
+    for k, (block, now) in enumerate(zip(order, held)):
+        _, busy = steps.step(k, block, busy, now)
+    assert {b: h.robot for b, h in busy.items()} == {"v01": "r1", "v05": "r2"}
+    acts, after = steps.step(4, "v02", busy, ("v02", "v05"))
+    assert [(a.action, a.robot, a.block, a.before) for a in acts] == [
+        ("release", "r1", "v01", True), ("place", "r1", "v02", False),
+        ("hold", "r1", "v02", False)]
+    assert [[b for b, _ in a.busy] for a in acts] == [["v05"], ["v05", "v02"],
+                                                      ["v05", "v02"]]
+    hook = CellCheck(two, assembly, arch, CheckOptions(), position)
+    why = hook(order, held, "v02", ("v02", "v05"))
+    assert why.startswith("step 4: the hand-over state after r1 releases v01 (v02 not yet "
+                          "placed) is ")
+    # the same state checked here: v00..v05 present, v05 held alone
+    alone = StateChecks(two, assembly, arch, CheckOptions())(
+        ("support_right", "support_left", *order), (("v05", busy["v05"]),))
+    assert not alone.stable and alone.status.name in why
+    three = cell_from_dict(ARCH_CELL)
+    assert CellCheck(three, assembly, arch, CheckOptions(), position)(
+        order, held, "v02", ("v02", "v05")) == ""

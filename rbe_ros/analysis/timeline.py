@@ -86,8 +86,8 @@ class Action:
 
 @dataclass
 class Timeline:
-    """The actions of a plan for ``robots``; ``feasible`` False with ``message`` naming the
-    action, robot and block where it fails."""
+    """The actions of a plan for ``cell``'s robots; ``feasible`` False with ``message``
+    naming the action, robot and block where it fails."""
 
     cell: Cell
     actions: list[Action] = field(default_factory=list)
@@ -105,7 +105,8 @@ class Timeline:
 
 
 class _NoRobot(Exception):
-    pass
+    """No free robot can grip a block a step needs (the message names it and why each
+    robot cannot)."""
 
 
 class CellSteps:

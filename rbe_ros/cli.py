@@ -37,10 +37,10 @@ from .analysis.virtual import ANALYSES, virtual_assembly
 from .cell import cell_to_dict
 from .generators import GENERATORS
 from .io.figures import draw_report
-from .io.cell_file import read_cell
+from .io.cell_file import parse_cell, read_cell
 from .io.messages import (header_dict, json_safe, report_json, report_to_dict, state_to_dict,
                           timeline_to_dicts)
-from .io.replay import (REPORT_TOPIC, STATE_TOPIC, Run, RunReader, bag_options,
+from .io.replay import (PLAN, REPORT_TOPIC, STATE_TOPIC, Run, RunReader, bag_options,
                         default_output, offline_reports, read_runs, replay_bag, step_stamps,
                         write_runs)
 from .io.plan_export import plan_export, read_timeline
@@ -597,11 +597,20 @@ def _run_plan(args) -> int:
     return 0 if plan.feasible else 1
 
 
+def _view_run(k: int, run: Run) -> ViewRun:
+    """The view of a bag's run: a plan for a cell with its robots and timeline."""
+    view = ViewRun(f"run {k}", *run.checked())
+    timeline = run.reports[0].get("timeline") if run.kind == PLAN and run.reports else None
+    if timeline and str(run.state.get("cell", "")).strip():
+        view = replace(view, cell=parse_cell(run.state["cell"]), timeline=timeline)
+    return view
+
+
 def _run_view(args) -> int:
     source = Path(args.scene)
     if source.suffix == ".mcap" or (source / "metadata.yaml").is_file():
         options = bag_options(source)
-        runs = [ViewRun(f"run {k}", *run.checked()) for k, run in enumerate(read_runs(source))]
+        runs = [_view_run(k, run) for k, run in enumerate(read_runs(source))]
         title = source.name
     else:
         options = _options(args)

@@ -110,3 +110,10 @@ def test_the_bag_replays_the_cell_plans(rbe, capsys):
     capsys.readouterr()
     assert main(["replay", str(rbe.bag), "--compare", "-o", str(rbe.tmp / "replayed")]) == 0
     assert "all recorded reports reproduced" in capsys.readouterr().out
+    # the bag's view: the cell plans with their robots' table
+    page = rbe.tmp / "view.html"
+    assert main(["view", str(rbe.bag), "-o", str(page)]) == 0
+    view = json.loads(page.read_text().split('type="application/json">')[1]
+                      .split("</script>")[0].replace("<\\/", "</"))
+    assert len(view["robot_tables"]) == 3           # the goals planned (two aborted)
+    assert view["robot_tables"][0]["rows"][4] == [4, "release v01", "-", "place v02; hold v02"]

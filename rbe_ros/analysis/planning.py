@@ -607,7 +607,7 @@ def plan_sequence(scene: Scene, max_held: int = 2, options: CheckOptions = Check
     finally:
         if planner.pool is not None:
             planner.pool.close()
-    if cell is not None and result.order:
+    if cell is not None:
         result = _with_timeline(result, planner, cell)
     result.time = time.perf_counter() - start
     return result

@@ -425,8 +425,11 @@ class _Planner:
                        + self._capacity_note(best, best_rejected[0])
                        if best_rejected else
                        "; no unplaced block touches the placed ones" if not blocked else "")
+                cell_why = self.refused.get(best_rejected[0]) if best_rejected else None
+                if cell_why:            # it stands with its holds; the cell cannot do it
+                    why = (f"; the best candidate, {best_rejected[0]}, held "
+                           f"{', '.join(best_rejected[1]) or 'nothing'}: {cell_why}")
                 why += "".join(f"; {b} cannot be inserted: {r}" for b, r in blocked.items())
-                why += "".join(f"; {r}" for r in list(self.refused.values())[:1])
                 return self._finish(beam[0], False, k, f"no block can be placed at step {k} "
                                     f"with at most {self.plan.max_held} held{why}")
             beam = sorted(children.values(), key=lambda p: (p.score, p.order))[:self.plan.beam]

@@ -39,6 +39,11 @@ every trial whole instead (to compare with).
 
 The finished assembly must stand with nothing held; if the last step holds blocks, a release
 step follows (its report: the finished assembly's check).
+
+For a robot cell (``cell``), a candidate that stands must also be one its robots can do
+(:class:`rbe_ros.analysis.timeline.CellCheck`: a free robot that can grip each block the step
+takes, every state between its actions standing with the robots' grips and payloads), and
+the plan carries the timeline of their actions.
 """
 from __future__ import annotations
 

@@ -99,20 +99,23 @@ def on_face(mesh: trimesh.Trimesh, point, normal) -> bool:
 
 
 def assert_grips_free(scene, cell: dict, timeline) -> int:
-    """Every grip (place and hold) on a face of its block free of the other blocks, and its
-    robot's gripper box clear of them, by trimesh: points just off the face around the grip
-    and a grid through the box are inside no other block. Returns the grips checked."""
+    """Every grip (place and hold) on a face of its block free of the blocks present while
+    it is held (the supports, and every block placed before its release), and its robot's
+    gripper box clear of them, by trimesh: points just off the face around the grip and a
+    grid through the box are inside none of them. Returns the grips checked."""
     bodies = meshes(scene)
+    supports = [b.id for b in scene.blocks if b.support]
     tools = {r["name"]: r["tool"] for r in cell["robots"]}
     checked = 0
-    for a in timeline:
+    for i, a in enumerate(timeline):
         if a["action"] == "release":
             continue
+        end = next((j for j in range(i + 1, len(timeline)) if timeline[j]["action"] == "release"
+                    and timeline[j]["block"] == a["block"]), len(timeline))
+        present = supports + [b["block"] for b in timeline[:end + 1] if b["action"] == "place"]
         point, rot = pose_of(a["grip"])
         normal = -rot[:, 2]                       # the tool's z points into the face
-        own = bodies[a["block"]]
-        assert on_face(own, point, normal)
-        others = [m for k, m in bodies.items() if k != a["block"]]
+        assert on_face(bodies[a["block"]], point, normal)
         u, v = rot[:, 0], rot[:, 1]
         near = np.array([point + 2e-3 * normal + s * u + t * v
                          for s in (-0.02, 0, 0.02) for t in (-0.02, 0, 0.02)])
@@ -121,9 +124,11 @@ def assert_grips_free(scene, cell: dict, timeline) -> int:
         grid = np.array([[x, y, z] for x in axes for y in axes for z in axes]) * size
         centre = point + normal * (size[2] / 2 + 1e-3)
         box = centre + grid @ rot.T
-        for m in others:
-            assert not inside(m, near).any(), f"grip of {a['block']} touches a block"
-            assert not inside(m, box).any(), f"gripper at {a['block']} hits a block"
+        for k in present:
+            if k == a["block"]:
+                continue
+            assert not inside(bodies[k], near).any(), f"grip of {a['block']} touches {k}"
+            assert not inside(bodies[k], box).any(), f"gripper at {a['block']} hits {k}"
         checked += 1
     return checked
 
@@ -435,10 +440,11 @@ def test_a_hand_over_releases_before_the_placement_and_is_checked():
     two = cell_from_dict({"robots": ARCH_CELL["robots"][:2]})
     steps = CellSteps(two, assembly, position)
     busy = {}
+    supports = ("support_right", "support_left")
     for k, (block, now) in enumerate(zip(order, held)):
-        _, busy = steps.step(k, block, busy, now)
+        _, busy = steps.step(k, block, busy, now, supports + order[:k])
     assert {b: h.robot for b, h in busy.items()} == {"v01": "r1", "v05": "r2"}
-    acts, after = steps.step(4, "v02", busy, ("v02", "v05"))
+    acts, after = steps.step(4, "v02", busy, ("v02", "v05"), supports + order)
     assert [(a.action, a.robot, a.block, a.before) for a in acts] == [
         ("release", "r1", "v01", True), ("place", "r1", "v02", False),
         ("hold", "r1", "v02", False)]
@@ -455,3 +461,44 @@ def test_a_hand_over_releases_before_the_placement_and_is_checked():
     three = cell_from_dict(ARCH_CELL)
     assert CellCheck(three, assembly, arch, CheckOptions(), position)(
         order, held, "v02", ("v02", "v05")) == ""
+
+
+def test_a_top_grip_is_free_while_held_and_blocks_the_course_above(tmp_path, capsys):
+    """Bricks 0.1 m high and a gripper 0.3 m wide: beside a brick the gripper hits the
+    footing or its neighbours, so each brick is taken by its top face, free while the brick
+    is held (released at once: the course above comes later); a brick of the course above
+    lands on that face, so it may not be placed while a robot still grips the one below."""
+    wall = generators.running_bond_wall(2, 4)
+    tool = {"box": [0.3, 0.3, 0.1], "tcp": [0, 0, 0.1], "mass": 1.0}
+    cell = {"robots": [{"name": "top", "base": [0.8, -0.6, 1.2], "reach": 2.0,
+                        "payload_force": 500, "payload_torque": 100, "tool": tool}]}
+    capsys.readouterr()
+    assert main(["plan", write(tmp_path, "wall.json", scene_to_dict(wall)), "--cell",
+                 write(tmp_path, "c.json", cell), "--json"]) == 0
+    timeline = json.loads(capsys.readouterr().out)["timeline"]
+    places = [a for a in timeline if a["action"] == "place"]
+    assert len(places) == 9
+    assert all(pose_of(a["grip"])[1][:, 2] == pytest.approx([0, 0, -1]) for a in places)
+    assert assert_grips_free(wall, cell, timeline) == 9
+    # the finished wall has no free top face on the first course: only present blocks count
+    assembly = Assembly.from_scene(wall)
+    chooser = GripChooser(assembly, cell_from_dict(cell))
+    robot = chooser.cell.robots[0]
+    grip, why = chooser.choose("course00_brick01", robot, frozenset({"footing",
+                                                                    "course00_brick00"}))
+    assert grip is not None and grip.normal == pytest.approx([0, 0, 1])
+    assert chooser.choose("course00_brick01", robot)[0] is None
+    assert chooser.in_the_way("course01_brick01", robot, grip)
+    assert not chooser.in_the_way("course00_brick03", robot, grip)
+    # with a second robot to place it: kept, the hold is in the way; dropped, it is let go
+    # first (a hand-over state)
+    two = cell_from_dict({"robots": [cell["robots"][0], {**cell["robots"][0], "name": "b"}]})
+    steps = CellSteps(two, assembly, {b.id: k for k, b in enumerate(assembly.blocks)})
+    present = ("footing", *wall.sequence[:4])
+    busy = {"course00_brick01": Busy("top", grip)}
+    with pytest.raises(Exception, match="course01_brick01 would land on top's grip of "
+                                        "course00_brick01, which the step holds"):
+        steps.step(5, "course01_brick01", busy, ("course00_brick01",), present)
+    acts, _ = steps.step(5, "course01_brick01", busy, (), present)
+    assert [(a.action, a.block, a.before) for a in acts][:2] == [
+        ("release", "course00_brick01", True), ("place", "course01_brick01", False)]

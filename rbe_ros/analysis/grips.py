@@ -1,14 +1,15 @@
 """Grips chosen, not assumed: where a robot of a cell takes a block, and what it carries.
 
-A grip is on a face of the block free of contacts with every other block of the finished
-assembly (so with the blocks present when it is taken and those placed while it is held),
-at the face's centroid (the tool centre point, TCP). The tool frame: z into the face (the
-face's outward normal reversed), x the face's in-plane direction closest to world up (the
-world x axis on a horizontal face), y = z x x. The gripper is a box of the tool's size
-behind the TCP (its far face on the face gripped, centred on the TCP), which must not touch
-another block of the finished assembly (python-fcl against their convex hulls, as the
-insertion check); the TCP is within the robot's reach of its base. Of the faces that pass,
-a robot takes the one facing its base most.
+A grip is on a face of the block free of contacts with the blocks present when it is taken
+(faces free in the finished assembly first: no later block lands on them; a block placed
+while another is held must not land on its grip face or hit its gripper,
+:meth:`GripChooser.in_the_way`), at the face's centroid (the tool centre point, TCP). The
+tool frame: z into the face (the face's outward normal reversed), x the face's in-plane
+direction closest to world up (the world x axis on a horizontal face), y = z x x. The
+gripper is a box of the tool's size behind the TCP (its far face on the face gripped,
+centred on the TCP), which must not touch a block present (python-fcl against their convex
+hulls, as the insertion check); the TCP is within the robot's reach of its base. Of the
+faces that pass, a robot takes the one facing its base most.
 
 What the robot carries: the block's need (force F at the TCP, torque M about it, from the
 check) and its tool's weight, m_t g at the box centre c: F_r = F - m_t g, M_r = M +
@@ -118,33 +119,52 @@ def _ratio(value: float, cap: float) -> float:
 
 
 class GripChooser:
-    """The grips of the blocks of an assembly (its finished state) for the robots of a cell,
-    each found once."""
+    """The grips of the blocks of an assembly (its finished state) for the robots of a cell:
+    each face with the blocks it touches there, found once; each choice by the blocks near
+    the block that are present."""
 
     def __init__(self, assembly: Assembly, cell: Cell):
         self.assembly, self.cell = assembly, cell
         self.index = {b.id: k for k, b in enumerate(assembly.blocks)}
-        self._touching: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}
+        self._touching: dict[int, list[tuple[np.ndarray, np.ndarray, str]]] = {}
         for it in assembly.interfaces:
             centre = it.points.mean(axis=0)
-            self._touching.setdefault(it.a, []).append((it.frame.n, centre))
-            self._touching.setdefault(it.b, []).append((-it.frame.n, centre))
-        self._faces: dict[str, list[GripFrame]] = {}
-        self._chosen: dict[tuple[str, str], tuple[GripFrame | None, str]] = {}
+            a, b = assembly.blocks[it.a].id, assembly.blocks[it.b].id
+            self._touching.setdefault(it.a, []).append((it.frame.n, centre, b))
+            self._touching.setdefault(it.b, []).append((-it.frame.n, centre, a))
+        self._faces: dict[str, list[tuple[GripFrame, frozenset[str]]]] = {}
+        self._chosen: dict[tuple, tuple[GripFrame | None, str]] = {}
+        # a gripper box reaches at most its diagonal beyond the block's bounding box
+        self._reach = max((float(np.linalg.norm(r.tool.box)) for r in cell.robots),
+                          default=0.0) + 2 * STANDOFF
 
     @cached_property
     def _hulls(self) -> list[fcl.CollisionObject]:
         return [_hull_object(np.ascontiguousarray(b.vertices, dtype=float).tobytes(), STANDOFF)
                 for b in self.assembly.blocks]
 
-    def faces(self, block: str) -> list[GripFrame]:
-        """The grips of ``block`` on its faces free of contacts (every robot's tool aside)."""
+    @cached_property
+    def _boxes(self) -> np.ndarray:
+        return np.array([b.aabb for b in self.assembly.blocks])
+
+    def near(self, block: str) -> frozenset[str]:
+        """The other blocks a gripper at ``block`` could touch (bounding boxes apart by less
+        than a gripper box's diagonal)."""
+        box = self._boxes[self.index[block]]
+        gap = np.maximum(0.0, np.maximum(self._boxes[:, 0] - box[1], box[0] - self._boxes[:, 1]))
+        close = np.linalg.norm(gap, axis=1) <= self._reach
+        return frozenset(b.id for b, c in zip(self.assembly.blocks, close)
+                         if c and b.id != block)
+
+    def faces(self, block: str) -> list[tuple[GripFrame, frozenset[str]]]:
+        """The grips of ``block`` on each of its faces, with the blocks touching that face in
+        the finished assembly."""
         found = self._faces.get(block)
         if found is None:
-            found = self._faces[block] = self._free_faces(block)
+            found = self._faces[block] = self._all_faces(block)
         return found
 
-    def _free_faces(self, block: str) -> list[GripFrame]:
+    def _all_faces(self, block: str) -> list[tuple[GripFrame, frozenset[str]]]:
         k = self.index[block]
         b = self.assembly.blocks[k]
         touching = self._touching.get(k, [])
@@ -152,10 +172,8 @@ class GripChooser:
         out = []
         for f, (n, origin, u, v, outline) in enumerate(zip(
                 b.face_normals, b.face_origins, b.face_us, b.face_vs, b.face_outlines)):
-            if any(float(n @ m) > CONTACT_COS
-                   and abs(float(n @ (c - origin))) < CONTACT_DISTANCE * b.size
-                   for m, c in touching):
-                continue
+            on = frozenset(other for m, c, other in touching if float(n @ m) > CONTACT_COS
+                           and abs(float(n @ (c - origin))) < CONTACT_DISTANCE * b.size)
             c2 = outline.centroid
             point = origin + u * c2.x + v * c2.y
             z = -n
@@ -163,42 +181,58 @@ class GripChooser:
             if np.linalg.norm(x) < 1e-6:
                 x = np.array([1.0, 0.0, 0.0]) - z[0] * z
             x = x / np.linalg.norm(x)
-            out.append(GripFrame(block, f, point, np.column_stack((x, np.cross(z, x), z)),
-                                 np.asarray(n, dtype=float)))
+            out.append((GripFrame(block, f, point, np.column_stack((x, np.cross(z, x), z)),
+                                  np.asarray(n, dtype=float)), on))
         return out
 
-    def collides(self, robot: Robot, grip: GripFrame) -> tuple[str, ...]:
-        """The blocks (other than the one gripped) ``robot``'s gripper box at ``grip`` touches."""
+    def _box(self, robot: Robot, grip: GripFrame) -> fcl.CollisionObject:
         centre, rotation = tool_box_pose(robot, grip)
-        box = fcl.CollisionObject(fcl.Box(*robot.tool.box), fcl.Transform(rotation, centre))
-        hit = []
-        request, k = fcl.CollisionRequest(), self.index[grip.block]
-        for j, hull in enumerate(self._hulls):
-            if j != k and fcl.collide(box, hull, request, fcl.CollisionResult()):
-                hit.append(self.assembly.blocks[j].id)
-        return tuple(hit)
+        return fcl.CollisionObject(fcl.Box(*robot.tool.box), fcl.Transform(rotation, centre))
 
-    def choose(self, block: str, robot: Robot) -> tuple[GripFrame | None, str]:
-        """``robot``'s grip of ``block`` (the free face facing its base most, its tool free,
-        within reach, with a URDF an inverse kinematics solution), or None and why not."""
-        key = (block, robot.name)
+    def collides(self, robot: Robot, grip: GripFrame, present=None) -> tuple[str, ...]:
+        """The blocks of ``present`` (None: every other block) ``robot``'s gripper box at
+        ``grip`` touches."""
+        box, request = self._box(robot, grip), fcl.CollisionRequest()
+        others = self.near(grip.block) if present is None else self.near(grip.block) & present
+        return tuple(sorted(b for b in others if fcl.collide(
+            box, self._hulls[self.index[b]], request, fcl.CollisionResult())))
+
+    def in_the_way(self, block: str, robot: Robot, grip: GripFrame) -> bool:
+        """Whether placing ``block`` lands on the face ``robot`` grips at ``grip`` or hits
+        its gripper box."""
+        on = next(o for g, o in self.faces(grip.block) if g.face == grip.face) \
+            if grip.face >= 0 else frozenset()
+        return block in on or bool(self.collides(robot, grip, frozenset((block,))))
+
+    def choose(self, block: str, robot: Robot, present=None) -> tuple[GripFrame | None, str]:
+        """``robot``'s grip of ``block`` with the blocks ``present`` (None: the finished
+        assembly): on a face none of them touches, faces free in the finished assembly first
+        (no later block lands on them), then the one facing the robot's base most; its
+        gripper clear of them, within reach, with a URDF an inverse kinematics solution. None
+        and why not when there is none."""
+        near = self.near(block)
+        here = near if present is None else near & frozenset(present)
+        key = (block, robot.name, here)
         if key not in self._chosen:
-            self._chosen[key] = self._choose(block, robot)
+            self._chosen[key] = self._choose(block, robot, here)
         return self._chosen[key]
 
-    def _choose(self, block: str, robot: Robot) -> tuple[GripFrame | None, str]:
+    def _choose(self, block: str, robot: Robot, here: frozenset[str]
+                ) -> tuple[GripFrame | None, str]:
         base = np.asarray(robot.base, dtype=float)
-        faces = self.faces(block)
+        faces = [(g, on) for g, on in self.faces(block) if not on & here]
         if not faces:
             return None, f"block {block} has no face free of contacts to grip"
         why = []
-        for g in sorted(faces, key=lambda g: (-float(g.normal @ _unit(base - g.point)), g.face)):
+        for g, on in sorted(faces, key=lambda f: (bool(f[1]),
+                                                  -float(f[0].normal @ _unit(base - f[0].point)),
+                                                  f[0].face)):
             distance = float(np.linalg.norm(g.point - base))
             if distance > robot.reach:
                 why.append(f"face {g.face} {distance:.2f} m from {robot.name}'s base "
                            f"(reach {robot.reach:g} m)")
                 continue
-            hit = self.collides(robot, g)
+            hit = self.collides(robot, g, here)
             if hit:
                 why.append(f"face {g.face}: {robot.name}'s gripper hits {', '.join(hit[:3])}")
                 continue

@@ -118,8 +118,10 @@ class CellSteps:
         self.position = position
         self.centroid = {b.id: b.centroid for b in assembly.blocks}
 
-    def _take(self, block: str, busy: dict[str, Busy]) -> tuple[Robot, GripFrame] | str:
-        """The nearest free robot that can grip ``block``, or why none can."""
+    def _take(self, block: str, busy: dict[str, Busy], present
+              ) -> tuple[Robot, GripFrame] | str:
+        """The nearest free robot that can grip ``block`` among the blocks ``present``, or
+        why none can."""
         taken = {h.robot for h in busy.values()}
         why = []
         robots = sorted(self.cell.robots, key=lambda r: float(np.linalg.norm(
@@ -129,17 +131,18 @@ class CellSteps:
                 held = next(b for b, h in busy.items() if h.robot == r.name)
                 why.append(f"{r.name} is busy holding {held}")
                 continue
-            grip, reason = self.chooser.choose(block, r)
+            grip, reason = self.chooser.choose(block, r, present)
             if grip is not None:
                 return r, grip
             why.append(reason)
         return "; ".join(why)
 
-    def step(self, k: int, block: str, busy: dict[str, Busy], held_after
+    def step(self, k: int, block: str, busy: dict[str, Busy], held_after, present=()
              ) -> tuple[list[Action], dict[str, Busy]]:
-        """The actions from the state after step k-1 (``busy``) to that after step k, placing
-        ``block`` (None: the release step) with ``held_after`` held; _NoRobot when a block
-        needed cannot be gripped by a free robot."""
+        """The actions from the state after step k-1 (``busy``, the blocks ``present``) to
+        that after step k, placing ``block`` (None: the release step) with ``held_after``
+        held; _NoRobot when a block needed cannot be gripped by a free robot, or the block
+        would land on a hold's grip that must stay."""
         busy = dict(busy)
         keep = set(held_after)
         drop = [b for b in busy if b not in keep]
@@ -150,7 +153,7 @@ class CellSteps:
 
         def taken(b):
             while True:
-                found = self._take(b, busy)
+                found = self._take(b, busy, present)
                 if not isinstance(found, str):
                     return found
                 if not drop:
@@ -165,6 +168,14 @@ class CellSteps:
                 busy[c] = Busy(robot.name, grip)
                 act(HOLD, robot.name, c, True, grip)
             robot, grip = taken(block)
+            for c, h in list(busy.items()):
+                if self.chooser.in_the_way(block, self.cell.robot(h.robot), h.grip):
+                    if c not in drop:
+                        raise _NoRobot(f"step {k}: {block} would land on {h.robot}'s grip of "
+                                       f"{c}, which the step holds")
+                    drop.remove(c)         # let go first: a hand-over state
+                    busy.pop(c)
+                    act(RELEASE, h.robot, c, True, h.grip)
             busy[block] = Busy(robot.name, grip)
             act(PLACE, robot.name, block, False, grip)
             if block in keep:
@@ -216,7 +227,9 @@ class CellCheck:
         found = self.after.get(order)
         if found is None:           # a partial plan not seen step by step: replayed
             busy = self._busy(order[:-1], held[:-1])
-            _, found = self.steps.step(len(order) - 1, order[-1], busy, held[-1])
+            k = len(order) - 1
+            _, found = self.steps.step(k, order[-1], busy, held[-1],
+                                       self.states.present(order, k, True))
             self.after[order] = found
         return found
 
@@ -227,11 +240,12 @@ class CellCheck:
         grips and payloads: the hand-over state, or a robot's payload exceeded)."""
         busy = self._busy(order, held)
         k = len(order)
+        full = (*order, block)
         try:
-            acts, after = self.steps.step(k, block, busy, new_held)
+            acts, after = self.steps.step(k, block, busy, new_held,
+                                          self.states.present(full, k, True))
         except _NoRobot as exc:
             return str(exc)
-        full = (*order, block)
         for a in acts:
             report = self.states(self.states.present(full, k, a.before), a.busy)
             if not report.stable:
@@ -270,7 +284,7 @@ def build_timeline(cell: Cell, assembly: Assembly, scene: Scene, order, held,
     for k, now in enumerate(held):
         block = order[k] if k < len(order) else None
         try:
-            acts, busy = steps.step(k, block, busy, now)
+            acts, busy = steps.step(k, block, busy, now, states.present(order, k, True))
         except _NoRobot as exc:
             timeline.feasible, timeline.message = False, str(exc)
             return timeline

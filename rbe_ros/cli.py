@@ -592,6 +592,12 @@ def _run_plan(args) -> int:
         print(f"order: {', '.join(plan.order)}")
         if plan.reports:
             print(format_table(plan.reports))
+        if plan.timeline is not None:
+            actions = plan.timeline.actions
+            falls = sum(not a.stable for a in actions)
+            print(f"timeline: {len(actions)} actions of {', '.join(plan.timeline.robots)}, "
+                  f"at most {max(busy_robots(actions), default=0)} busy, "
+                  + (f"{falls} states fall" if falls else "every state stands"))
         if args.output and plan.scene is not None:
             print(f"planned scene written to {args.output}")
     return 0 if plan.feasible else 1

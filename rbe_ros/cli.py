@@ -22,6 +22,7 @@ from dataclasses import replace
 from .analysis.asbuilt import declared
 from .analysis.assembly import Assembly
 from .analysis.friction import minimum_friction
+from .analysis.grips import validate_cell
 from .analysis.option_spec import BY_PATH, OPTIONS, from_outer
 from .analysis.options import CheckOptions
 from .analysis.planning import BACKUP_BLOCK_STATES, MIN_BACKUP
@@ -30,22 +31,27 @@ from .analysis.executors import CheckPool, ProcessPool, ray_checks, ray_cluster
 from .analysis.perturb import PoseNoise
 from .analysis.robust import RobustJob, estimate, sample_scene, serial
 from .analysis.tilt import DIRECTIONS, tilt_capacity
+from .analysis.timeline import busy_robots, recheck_timeline
 from .analysis.validate import validated_assembly
 from .analysis.verdict import check
 from .analysis.virtual import ANALYSES, virtual_assembly
+from .cell import cell_to_dict
 from .generators import GENERATORS
 from .io import lmgc90
 from .io.figures import draw_report
-from .io.messages import header_dict, json_safe, report_json, report_to_dict, state_to_dict
-from .io.replay import (REPORT_TOPIC, STATE_TOPIC, Run, RunReader, bag_options,
+from .io.cell_file import parse_cell, read_cell
+from .io.messages import (header_dict, json_safe, report_json, report_to_dict, state_to_dict,
+                          timeline_to_dicts)
+from .io.replay import (PLAN, REPORT_TOPIC, STATE_TOPIC, Run, RunReader, bag_options,
                         default_output, offline_reports, read_runs, replay_bag, step_stamps,
                         write_runs)
+from .io.plan_export import plan_export, read_timeline
 from .io.plan_output import ProgressLines, ReportLines, step_summary
 from .io.table import format_table
 from .io.view import ViewRun, checked_runs, write_html
-from .io.scene_json import load_scene, scene_to_dict
+from .io.scene_json import load_scene, read_json, scene_to_dict
 from .io.inputs import load_design
-from .io.plans import PlanLimits, plan_state
+from .io.plans import PlanLimits, plan_state, robots_held
 from .io.poses import load_poses, scene_at_poses
 from .io.stored_interfaces import compare_interfaces
 from .scene import Scene, SceneError
@@ -183,6 +189,9 @@ def build_parser() -> argparse.ArgumentParser:
                        help="--bag without the markers of the reports (a lean log)")
     check.add_argument("--strict", action="store_true",
                        help="exit 1 when an assembly or step is not stable")
+    check.add_argument("--timeline", action="store_true",
+                       help="re-check every state of the timeline of a plan written by "
+                            "plan --cell CELL -o FILE (the states made from its actions)")
     _solver_arguments(check, "check")
     check.set_defaults(run=_run_check)
 
@@ -232,7 +241,10 @@ def build_parser() -> argparse.ArgumentParser:
     plan = sub.add_parser("plan", help="find an insertion order in which every step stands "
                           "with at most K held blocks")
     plan.add_argument("scene")
-    plan.add_argument("--max-held", type=int, required=True, metavar="K",
+    plan.add_argument("--cell", metavar="CELL",
+                      help="plan for the robots of a cell file (JSON or YAML; see README): a "
+                           "timeline of their actions, every state between them checked")
+    plan.add_argument("--max-held", type=int, metavar="K",
                       help="blocks that may be held (by robots or scaffolds) at any step")
     plan.add_argument("--beam", type=int, default=1, metavar="W",
                       help="partial plans kept per step (default 1: greedy)")
@@ -315,6 +327,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _run_check(args) -> int:
+    if args.timeline:
+        return _run_check_timeline(args)
     scene, stored = _scene(args)
     options = declared(_options(args), scene)      # recorded in the bag as checked
     if options.second_opinion != "none":
@@ -508,12 +522,50 @@ def _record(path: Path, scene: Scene, reports, options: CheckOptions, sequence: 
     write_runs(path, [run], [run.reports], options, markers=markers)
 
 
+def _run_check_timeline(args) -> int:
+    """``check --timeline``: every state of an exported timeline re-checked."""
+    if args.sequence or args.bag:
+        raise ValueError("--timeline checks the states of the file's timeline: no --sequence "
+                         "or --bag")
+    scene, _ = _scene(args)
+    data, _ = read_json(args.scene)
+    cell, actions = read_timeline(data)
+    options = declared(_options(args), scene)
+    reports = recheck_timeline(cell, scene, actions, options)
+    rows = [{"action": a.action, "robot": a.robot, "block": a.block, "step": a.step,
+             "busy": busy, "stable": r.stable, "status": r.status.name, "recorded": a.stable,
+             "message": r.message} for a, r, busy in zip(actions, reports, busy_robots(actions))]
+    stable = all(r.stable for r in reports)
+    if args.json:
+        print(json.dumps({"scene": scene.name, "robots": list(cell.names), "stable": stable,
+                          "states": len(rows), "timeline": rows}, indent=1))
+    else:
+        for row in rows:
+            print(f"{row['step']:4d} {row['action']:8s} {row['robot']:10s} {row['block']:20s} "
+                  f"busy {row['busy']}  {row['status']}"
+                  + ("" if row["stable"] else f": {row['message']}"))
+        print(f"timeline: {len(rows)} states, {'every one stable' if stable else 'NOT all stable'}")
+    return 1 if args.strict and not stable else 0
+
+
+def _cell_limits(args, scene: Scene) -> tuple[str, int]:
+    """The cell text and the held blocks of ``plan`` (errors of the command line: exit 2)."""
+    if args.cell is None:
+        if args.max_held is None:
+            raise ValueError("plan needs --max-held K or --cell CELL")
+        return "", args.max_held
+    cell = read_cell(args.cell)
+    validate_cell(cell, scene)
+    return json.dumps(cell_to_dict(cell)), robots_held(cell, args.max_held or 0)
+
+
 def _run_plan(args) -> int:
     options = _options(args)
     scene, stored = _scene(args)
     if stored is not None:
         raise ValueError("plan detects the interfaces of every partial assembly (not "
                          "--interfaces stored)")
+    cell, args.max_held = _cell_limits(args, scene)
     if not args.json:
         print(f"planning {scene.name}: {sum(not b.support for b in scene.blocks)} blocks to "
               f"place, at most {args.max_held} held", file=sys.stderr)
@@ -531,7 +583,7 @@ def _run_plan(args) -> int:
     limit = options.solve.time_limit
     limits = PlanLimits(args.max_held, args.beam, args.candidates, args.keep_sequence,
                         time_limit=limit if math.isfinite(limit) else 0.0,
-                        search_budget=args.search_budget)
+                        search_budget=args.search_budget, cell=cell)
     limits.search()                 # a limit out of range: an error of the command line
     options = replace(options, solve=replace(options.solve, time_limit=math.inf))
     reports = ReportLines(args.reports) if args.reports else None
@@ -548,7 +600,7 @@ def _run_plan(args) -> int:
     if args.output and plan.scene is not None:
         out_path = Path(args.output)
         out_path.parent.mkdir(parents=True, exist_ok=True)
-        out_path.write_text(json.dumps(scene_to_dict(plan.scene)))
+        out_path.write_text(json.dumps(json_safe(plan_export(plan, options))))
     if args.json:
         out = {"scene": scene.name, "feasible": plan.feasible, "outcome": plan.outcome,
                "max_held": args.max_held,
@@ -558,6 +610,9 @@ def _run_plan(args) -> int:
                "holds": scene_to_dict(plan.scene).get("holds", []) if plan.scene else [],
                "search_checks": plan.checks, "models": plan.models, "time": plan.time,
                "steps": [step_summary(r) for r in plan.reports]}
+        if plan.timeline is not None:
+            out["robots"] = list(plan.timeline.robots)
+            out["timeline"] = json_safe(timeline_to_dicts(plan.timeline, header_dict("world", 0)))
         print(json.dumps(out, indent=1))
     else:
         verdict = "feasible" if plan.feasible else f"NOT feasible (step {plan.failed_step})"
@@ -565,16 +620,31 @@ def _run_plan(args) -> int:
         print(f"order: {', '.join(plan.order)}")
         if plan.reports:
             print(format_table(plan.reports))
+        if plan.timeline is not None:
+            actions = plan.timeline.actions
+            falls = sum(not a.stable for a in actions)
+            print(f"timeline: {len(actions)} actions of {', '.join(plan.timeline.robots)}, "
+                  f"at most {max(busy_robots(actions), default=0)} busy, "
+                  + (f"{falls} states fall" if falls else "every state stands"))
         if args.output and plan.scene is not None:
             print(f"planned scene written to {args.output}")
     return 0 if plan.feasible else 1
+
+
+def _view_run(k: int, run: Run) -> ViewRun:
+    """The view of a bag's run: a plan for a cell with its robots and timeline."""
+    view = ViewRun(f"run {k}", *run.checked())
+    timeline = run.reports[0].get("timeline") if run.kind == PLAN and run.reports else None
+    if timeline and str(run.state.get("cell", "")).strip():
+        view = replace(view, cell=parse_cell(run.state["cell"]), timeline=timeline)
+    return view
 
 
 def _run_view(args) -> int:
     source = Path(args.scene)
     if source.suffix == ".mcap" or (source / "metadata.yaml").is_file():
         options = bag_options(source)
-        runs = [ViewRun(f"run {k}", *run.checked()) for k, run in enumerate(read_runs(source))]
+        runs = [_view_run(k, run) for k, run in enumerate(read_runs(source))]
         title = source.name
     else:
         options = _options(args)
@@ -583,6 +653,10 @@ def _run_view(args) -> int:
         steps = args.sequence or bool(scene.sequence)
         state = state_to_dict(replace(scene, sequence=order if steps else ()), "world")
         runs = checked_runs([(scene.name, state)], options)
+        data, _ = read_json(source)
+        if isinstance(data, dict) and "timeline" in data:     # a plan for a cell (plan -o)
+            cell, _ = read_timeline(data)
+            runs = [replace(runs[0], cell=cell, timeline=data["timeline"])]
         title = scene.name
     if not runs:
         raise ValueError(f"{source}: no states to show")

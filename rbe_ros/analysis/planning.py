@@ -63,6 +63,11 @@ every trial whole instead (to compare with).
 
 The finished assembly must stand with nothing held; if the last step holds blocks, a release
 step follows (its report: the finished assembly's check).
+
+For a robot cell (``cell``), a candidate that stands must also be one its robots can do
+(:class:`rbe_ros.analysis.timeline.CellCheck`: a free robot that can grip each block the step
+takes, every state between its actions standing with the robots' grips and payloads), and
+the plan carries the timeline of their actions.
 """
 from __future__ import annotations
 
@@ -77,6 +82,7 @@ from typing import Protocol
 
 import numpy as np
 
+from ..cell import Cell
 from ..rbe.result import Report
 from ..scene import Hold, Scene, SceneError, make_scene
 from .asbuilt import declared
@@ -87,6 +93,7 @@ from .insertion import block_insertion
 from .options import CheckOptions
 from .pipeline import check_sequence, slim
 from .steps import gripped, supports_present
+from .timeline import CellCheck, Timeline, build_timeline, scene_with_grips
 from .verdict import UNEXPLAINED, check
 
 #: How the message of a plan stopped by ``should_stop`` begins (a time limit, a cancel).
@@ -205,6 +212,7 @@ class Plan:
     #: needs ("held"), and when a robot's capacity is what fails, the wrench it needs and
     #: the capacity ("force", "torque", N and N m; "force_max", "torque_max")
     failure: dict = field(default_factory=dict)
+    timeline: Timeline | None = None       # planned for a cell: the robots' actions
 
     @property
     def max_held(self) -> int:
@@ -243,6 +251,7 @@ class TrialResult:
     report: Report | None = None
     assembly: Assembly | None = None
     proven: bool = True
+    refusal: str = ""       # why the cell's robots cannot do a step that stands
 
 
 @dataclass
@@ -255,11 +264,14 @@ class _Failure:
     best: tuple[str, tuple[str, ...]] | None = None
     proven: bool = True
     dead: int = 0           # candidates whose state the search found dead before
+    cell: dict[str, str] = field(default_factory=dict)     # block -> why the robots cannot
 
     def refused(self, block: str, found: TrialResult) -> None:
         if self.best is None or len(found.held) < len(self.best[1]):
             self.best = (block, found.held)
         self.proven = self.proven and found.proven
+        if found.refusal:
+            self.cell[block] = found.refusal
 
 
 @dataclass
@@ -335,7 +347,7 @@ class _Trial:
 
 class _Planner:
     def __init__(self, scene: Scene, options: CheckOptions, plan: PlanOptions,
-                 progress, should_stop, on_report):
+                 progress, should_stop, on_report, cell: Cell | None = None):
         self.scene, self.options, self.plan = scene, options, plan
         self.progress, self.should_stop, self.on_report = progress, should_stop, on_report
         self.pool: LookAhead | None = None
@@ -361,6 +373,9 @@ class _Planner:
             self.contacts[a].append((b, it.area, -n_up >= RESTS_ON))
         self.cache: dict = {}
         self.insertions: dict = {}              # order -> insertion of its last block
+        # a cell's robots: who grips what, and the hand-over states (analysis/timeline.py)
+        self.cell_check = (CellCheck(cell, self.full, self.base, options, self.position)
+                           if cell is not None else None)
         self.checks = 0
         self.models: collections.Counter = collections.Counter()
         self.dead: set[frozenset] = set()       # the memo: sets of blocks with no completion
@@ -455,9 +470,15 @@ class _Planner:
         (:class:`TrialResult`): the one feasibility test of a candidate step."""
         trial = _Trial(self, partial, block)
         held, proven = self._holds(trial, partial.held[-1] if partial.held else ())
-        if len(held) <= self.plan.max_held and trial.stands(held):
-            return TrialResult(held, True, *trial.result(held)[::-1])
-        return TrialResult(held, False, proven=proven)
+        if len(held) > self.plan.max_held or not trial.stands(held):
+            return TrialResult(held, False, proven=proven)
+        why = (self.cell_check(partial.order, partial.held, block, held)
+               if self.cell_check is not None else "")
+        if why:
+            # it stands with its holds, the cell cannot do it; a robot's state depends on the
+            # order, not only on the set placed: no proof
+            return TrialResult(held, False, proven=False, refusal=why)
+        return TrialResult(held, True, *trial.result(held)[::-1])
 
     def _holds(self, trial: _Trial, previous) -> tuple[tuple[str, ...], bool]:
         """The holds of ``trial``'s step as a robot would keep them (the module docstring):
@@ -606,7 +627,10 @@ class _Planner:
                 child = next(children, None)
                 if child is None:           # dead: every child tried
                     path.pop()
-                    self.dead.add(frozenset(partial.order))
+                    if self.cell_check is None or failure.proven:
+                        # a cell's robots depend on the order too: a refusal of theirs
+                        # does not make the set of blocks dead
+                        self.dead.add(frozenset(partial.order))
                     proven = proven and failure.proven
                     if path:
                         self._backed_up(len(path[-1][0].order))
@@ -743,10 +767,15 @@ class _Planner:
             block, held = failure.best
             why = (f"; the best candidate, {block}, needs {len(held)} held "
                    f"block{'' if len(held) == 1 else 's'} ({', '.join(held)})")
-            try:
-                note, need = self._need(partial, block)
-            except _Stopped:
+            if block in failure.cell:   # it stands with its holds; the cell cannot do it
+                why = (f"; the best candidate, {block}, held {', '.join(held) or 'nothing'}: "
+                       f"{failure.cell[block]}")
                 note, need = "", {}
+            else:
+                try:
+                    note, need = self._need(partial, block)
+                except _Stopped:
+                    note, need = "", {}
             why += note
             details = {"block": block, "held": list(held), **need}
         elif failure.dead:
@@ -835,6 +864,23 @@ class _Planner:
                     backups=self.backups, failure=failure or {})
 
 
+def _with_timeline(plan: Plan, planner: _Planner, cell: Cell) -> Plan:
+    """``plan`` with its cell timeline, every state between actions checked; infeasible when
+    one falls (the message names the action, robot and block)."""
+    scene = plan.scene if plan.scene is not None else planner.base
+    timeline = build_timeline(cell, planner.full, planner.base, plan.order, plan.held,
+                              planner.options, scene.approach, planner.cell_check.states)
+    if plan.feasible and not timeline.feasible:
+        plan = replace(plan, feasible=False, message=f"timeline: {timeline.message}",
+                       failed_step=timeline.actions[-1].step if timeline.actions else 0)
+    elif not plan.feasible and not plan.message.startswith(STOPPED):
+        n = len(cell.robots)
+        plan = replace(plan, message=f"{plan.message} (a cell of {n} robot{'s' * (n > 1)}: "
+                       f"at most {n - 1} hold while one places)")
+    return replace(plan, timeline=timeline,
+                   scene=scene_with_grips(plan.scene, timeline) if plan.scene else None)
+
+
 def _planned_under(options: CheckOptions) -> tuple[float, float] | None:
     """The pose uncertainty the plan was checked under, for the planned scene to keep (a scene
     file's, or the command line's, which wins over it)."""
@@ -850,8 +896,8 @@ def plan_sequence(scene: Scene, max_held: int = 2, options: CheckOptions = Check
                   progress: Callable[[PlanProgress], None] | None = None,
                   should_stop: Callable[[], bool] | None = None,
                   on_report: Callable[[Report], None] | None = None,
-                  look_ahead: Callable[[Assembly, CheckOptions], LookAhead] | None = None
-                  ) -> Plan:
+                  look_ahead: Callable[[Assembly, CheckOptions], LookAhead] | None = None,
+                  cell: Cell | None = None) -> Plan:
     """An insertion order of every free block of ``scene`` in which each step stands with at
     most ``max_held`` blocks held (see the module docstring), or where none was found.
 
@@ -865,12 +911,14 @@ def plan_sequence(scene: Scene, max_held: int = 2, options: CheckOptions = Check
     the search backed up over, and a beam's, after the search). ``look_ahead(assembly,
     options)``: workers for the full checks of the steps ahead
     (:mod:`rbe_ros.analysis.executors`), closed when the plan is made; the plan is the same
-    with and without."""
+    with and without. ``cell``: plan for its robots (at most as many busy as it has, each grip
+    within reach, the hand-over states standing) and make the timeline of their actions,
+    every state checked (:mod:`rbe_ros.analysis.timeline`)."""
     start = time.perf_counter()
     planner = _Planner(scene, declared(options, scene),
                        PlanOptions(max_held, beam, candidates, keep_sequence, full_candidates,
                                    time_limit, search_budget),
-                       progress, should_stop, on_report)
+                       progress, should_stop, on_report, cell)
     if look_ahead is not None and not full_candidates:
         planner.pool = look_ahead(planner.full, planner.options)
     try:
@@ -878,6 +926,8 @@ def plan_sequence(scene: Scene, max_held: int = 2, options: CheckOptions = Check
     finally:
         if planner.pool is not None:
             planner.pool.close()
+    if cell is not None:
+        result = _with_timeline(result, planner, cell)
     result.time = time.perf_counter() - start
     return result
 

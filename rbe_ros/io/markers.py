@@ -28,6 +28,12 @@ Namespaces (after a DELETEALL, so the markers of an earlier report vanish):
   hold's index in the report), amber, red when it exceeds the capacity (utilisation > 1);
 * ``text``: a TEXT_VIEW_FACING above the assembly: step, block, verdict and the reason.
 
+A cell's timeline (:func:`cell_markers`, the state after one action): ``robots``, a CYLINDER
+at each robot's base and its name (``robot_names``); ``grippers``, a CUBE of each busy
+robot's gripper box at its grip; ``robot_wrenches``, the acting robot's force on its block
+as an ARROW from the grip (orange when it pushes into the face, violet when it pulls) and a
+TEXT_VIEW_FACING with robot, block, force and torque.
+
 Nothing here imports rclpy.
 """
 from __future__ import annotations
@@ -39,15 +45,17 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from ..analysis.grips import GripFrame, tool_box_pose
 from ..analysis.options import CheckOptions
 from ..analysis.steps import final_state, sequence_step, step_count
 from ..analysis.validate import validated_assembly
+from ..cell import Cell, Robot
 from ..rbe.result import Report, Status
 from ..scene import BOX_FACES, Scene, SceneError, box_vertices
 from .messages import SOLID_PRIMITIVE_BOX, report_from_dict, scene_from_state_dict
 
 #: Marker types and actions (visualization_msgs/Marker constants).
-ARROW, LINE_LIST, TRIANGLE_LIST, TEXT_VIEW_FACING = 0, 5, 11, 9
+ARROW, CUBE, CYLINDER, LINE_LIST, TRIANGLE_LIST, TEXT_VIEW_FACING = 0, 1, 3, 5, 11, 9
 ADD, DELETEALL = 0, 3
 #: Topic of the markers in bags, the name the node publishes them under.
 MARKER_TOPIC = "/rbe_node/markers"
@@ -186,14 +194,14 @@ def fault_roles(meshes: Meshes, fault: Sequence[str]) -> dict[str, str]:
 
 def _marker(header: Mapping, ns: str, marker_id: int, kind: int, colour, *,
             points=None, colors=None, scale=(1.0, 1.0, 1.0), position=(0.0, 0.0, 0.0),
-            text: str = "", action: int = ADD) -> dict:
+            text: str = "", action: int = ADD, orientation=(0.0, 0.0, 0.0, 1.0)) -> dict:
     """A complete visualization_msgs/Marker dict."""
     empty_header = {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": ""}
     return {
         "header": header, "ns": ns, "id": int(marker_id), "type": int(kind),
         "action": int(action),
         "pose": {"position": dict(zip("xyz", map(float, position))),
-                 "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}},
+                 "orientation": dict(zip("xyzw", map(float, orientation)))},
         "scale": dict(zip("xyz", map(float, scale))),
         "color": dict(zip("rgba", map(float, colour))),
         "lifetime": {"sec": 0, "nanosec": 0}, "frame_locked": False,
@@ -357,6 +365,80 @@ def hold_markers(report: Report, header: Mapping, length: float) -> list[dict]:
     return out
 
 
+#: Colours of a cell's markers: robot bases, gripper boxes, a robot's force pushing into
+#: the face it grips and pulling from it.
+ROBOT, GRIPPER = (0.3, 0.3, 0.35, 1.0), (0.2, 0.6, 0.9, 0.6)
+PUSH, PULL = (1.0, 0.5, 0.0, 1.0), (0.6, 0.2, 0.9, 1.0)
+
+
+def wrench_text(action: Mapping) -> str:
+    """Hover text of a timeline action (a RobotAction dict): robot, block, force, torque."""
+    f, m = (np.array([action[k][q][c] for c in "xyz"]) for k, q in
+            (("wrench_world", "force"), ("wrench_tool", "torque")))
+    return (f"{action['robot']} {action['action']} {action['block']}: |F| "
+            f"{np.linalg.norm(f):.0f} N on the block ({'push' if pushes(action) else 'pull'}), "
+            f"|M| {np.linalg.norm(m):.0f} N m at the tool (its weight included)")
+
+
+def pushes(action: Mapping) -> bool:
+    """Whether the robot's force on the block points into the face it grips (the tool's z)."""
+    q = action["grip"]["pose"]["orientation"]
+    z = Rotation.from_quat([q[c] for c in "xyzw"]).as_matrix()[:, 2]
+    force = np.array([action["wrench_world"]["force"][c] for c in "xyz"])
+    return bool(force @ z >= 0.0)
+
+
+def gripper_box(action: Mapping, robot: Robot) -> tuple[np.ndarray, np.ndarray]:
+    """(centre, quaternion x, y, z, w) of ``robot``'s gripper box at the action's grip."""
+    pose = action["grip"]["pose"]
+    point = np.array([pose["position"][c] for c in "xyz"])
+    quat = np.array([pose["orientation"][c] for c in "xyzw"])
+    rotation = Rotation.from_quat(quat).as_matrix()
+    centre, _ = tool_box_pose(robot, GripFrame(action["block"], -1, point, rotation,
+                                               -rotation[:, 2]))
+    return centre, quat
+
+
+def cell_markers(cell: Cell, timeline: Sequence[Mapping], index: int, header: Mapping,
+                 length: float) -> list[dict]:
+    """The markers of the state after action ``index`` of ``timeline`` (RobotAction dicts):
+    robot bases, the busy robots' gripper boxes, the acting robot's force (the largest of
+    the timeline ``length`` m long) and its hover text (see the module docstring)."""
+    out = []
+    for k, r in enumerate(cell.robots):
+        base = np.asarray(r.base, dtype=float)
+        out.append(_marker(header, "robots", k, CYLINDER, ROBOT, position=base + [0, 0, 0.25],
+                           scale=(0.3, 0.3, 0.5)))
+        out.append(_marker(header, "robot_names", k, TEXT_VIEW_FACING, TEXT,
+                           position=base + [0, 0, 0.7], scale=(0.2, 0.2, 0.2), text=r.name))
+    busy: dict[str, Mapping] = {}
+    for a in timeline[:index + 1]:
+        if a["action"] == "release":
+            busy.pop(a["robot"], None)
+        else:
+            busy[a["robot"]] = a
+    for k, (name, a) in enumerate(sorted(busy.items())):
+        robot = cell.robot(name)
+        centre, quat = gripper_box(a, robot)
+        out.append(_marker(header, "grippers", k, CUBE, GRIPPER, position=centre,
+                           orientation=quat, scale=robot.tool.box))
+    act = timeline[index]
+    largest = max((np.linalg.norm([a["wrench_world"]["force"][c] for c in "xyz"])
+                   for a in timeline), default=0.0)
+    if act["action"] != "release" and largest > 0:
+        pose = act["grip"]["pose"]["position"]
+        start = np.array([pose[c] for c in "xyz"])
+        force = np.array([act["wrench_world"]["force"][c] for c in "xyz"])
+        out.append(_marker(header, "robot_wrenches", 0, ARROW,
+                           PUSH if pushes(act) else PULL,
+                           points=np.stack([start, start + length / largest * force]),
+                           scale=(0.04 * length, 0.08 * length, 0.12 * length)))
+        out.append(_marker(header, "robot_wrenches", 1, TEXT_VIEW_FACING, TEXT,
+                           position=start + [0, 0, 0.3], scale=(0.12, 0.12, 0.12),
+                           text=wrench_text(act)))
+    return out
+
+
 def step_markers(scene: Scene, report: Report, header: Mapping, **kw) -> dict:
     """The markers of a report on a valid ``scene`` (its step's blocks, see
     :func:`step_roles`)."""
@@ -394,6 +476,6 @@ def run_markers(state: Mapping, reports: Sequence[Mapping],
 
 
 __all__ = ["BLOCK_MARKER_LIMIT", "MARKER_TOPIC", "MARKER_TYPE", "Meshes", "ROLES",
-           "ROLE_COLOURS", "fault_roles", "line_markers", "report_markers", "run_markers",
-           "run_roles", "scene_meshes", "state_meshes", "step_markers", "step_roles",
-           "text_of"]
+           "ROLE_COLOURS", "cell_markers", "fault_roles", "gripper_box", "line_markers",
+           "pushes", "report_markers", "run_markers", "run_roles", "scene_meshes",
+           "state_meshes", "step_markers", "step_roles", "text_of", "wrench_text"]

@@ -19,6 +19,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from ..analysis.planning import Plan, PlanProgress
+from ..analysis.timeline import Timeline
 from ..rbe.result import NOT_COMPUTED, HoldWrench, InterfaceResult, NearContact, Report, Status
 from ..scene import (BOX_FACES, Hold, Scene, SceneError, blame, box_vertices, make_block,
                      make_scene)
@@ -421,7 +422,7 @@ def plan_goal_to_dict(state: dict, limits: PlanLimits) -> dict:
             "beam": int(limits.beam), "hold_force_max": float(limits.hold_force_max),
             "hold_torque_max": float(limits.hold_torque_max),
             "time_limit": float(limits.time_limit),
-            "search_budget": int(limits.search_budget)}
+            "search_budget": int(limits.search_budget), "cell": str(limits.cell)}
 
 
 def plan_goal_from_dict(d: Mapping) -> tuple[dict, PlanLimits]:
@@ -433,7 +434,7 @@ def plan_goal_from_dict(d: Mapping) -> tuple[dict, PlanLimits]:
         hold_force_max=float(d.get("hold_force_max", 0.0)),
         hold_torque_max=float(d.get("hold_torque_max", 0.0)),
         time_limit=float(d.get("time_limit", 0.0)),
-        search_budget=int(d.get("search_budget", 0)))
+        search_budget=int(d.get("search_budget", 0)), cell=str(d.get("cell", "") or ""))
 
 
 def plan_result_to_dict(plan: Plan, header: dict) -> dict:
@@ -446,7 +447,45 @@ def plan_result_to_dict(plan: Plan, header: dict) -> dict:
             "order": [str(b) for b in plan.order],
             "holds": state.get("holds", []),
             "reports": [report_to_dict(r, header) for r in plan.reports],
-            "failed_step": int(plan.failed_step), "plan": state}
+            "failed_step": int(plan.failed_step), "plan": state,
+            "timeline": timeline_to_dicts(plan.timeline, header),
+            "robots": list(plan.timeline.robots) if plan.timeline is not None else []}
+
+
+def _pose_stamped(header: dict, frame=None) -> dict:
+    """A geometry_msgs/PoseStamped dict of a grip frame (None: the identity)."""
+    point, quat = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)) if frame is None \
+        else (frame.point, frame.quaternion)
+    return {"header": header, "pose": {"position": _vec(point),
+                                       "orientation": _vec(quat, _XYZW)}}
+
+
+def _wrench(force=None, torque=None) -> dict:
+    """A geometry_msgs/Wrench dict (None: zero)."""
+    return {"force": _vec(np.zeros(3) if force is None else force),
+            "torque": _vec(np.zeros(3) if torque is None else torque)}
+
+
+def timeline_to_dicts(timeline: Timeline | None, header: dict) -> list[dict]:
+    """rbe_msgs/RobotAction dicts of a plan's timeline (empty without one): each action's
+    TCP frames as PoseStamped (pre-grip and approach for a place only), the acting robot's
+    wrench on the block (world axes) and with its tool's weight (tool axes), the check of
+    the state after it."""
+    out = []
+    for a in timeline.actions if timeline is not None else ():
+        frames, w = a.frames(), a.wrench
+        report = a.report
+        out.append({
+            "action": a.action, "robot": a.robot, "block": a.block, "step": int(a.step),
+            "grip": _pose_stamped(header, frames["grip"]),
+            "pre_grip": _pose_stamped(header, frames.get("pre_grip")),
+            "approach": _pose_stamped(header, frames.get("approach")),
+            "wrench_world": _wrench(*(() if w is None else (w.force_world, w.torque_world))),
+            "wrench_tool": _wrench(*(() if w is None else (w.force_tool, w.torque_tool))),
+            "stable": bool(report is not None and report.stable),
+            "status": int(report.status) if report is not None else int(Status.INVALID_INPUT),
+            "message": report.message if report is not None else "not checked"})
+    return out
 
 
 def plan_feedback_to_dict(progress: PlanProgress) -> dict:
@@ -461,4 +500,4 @@ __all__ = ["SOLID_PRIMITIVE_BOX", "header_dict", "header_stamp_ns", "json_safe",
            "plan_feedback_to_dict", "plan_goal_from_dict", "plan_goal_to_dict",
            "plan_result_to_dict", "poses_from_dict", "poses_to_dict", "report_from_dict",
            "report_header", "report_json", "report_to_dict", "scene_from_state_dict",
-           "state_to_dict"]
+           "state_to_dict", "timeline_to_dicts"]

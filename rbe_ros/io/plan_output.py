@@ -17,13 +17,19 @@ PROGRESS_EVERY = 2.0
 
 
 def step_summary(report: Report) -> dict:
-    """One step of a plan: status, holds, margin, worst friction ratio, time, model."""
+    """One step of a plan: status, holds and their wrenches (force N and torque N m about
+    the grip, world axes), margin, worst friction ratio, time, model."""
     return json_safe({"step": report.step_index, "block": report.block_placed,
                       "status": report.status.name, "stable": report.stable,
                       "held_blocks": list(report.held_blocks), "margin_g": report.margin_g,
                       "worst_friction_ratio": report.worst_friction_ratio,
                       "max_tension": report.max_tension, "time": report.solve_time,
-                      "model": report.model})
+                      "model": report.model,
+                      "hold_wrenches": [{"block": w.block, "force": w.force.tolist(),
+                                         "torque": w.torque.tolist(),
+                                         "grip_point": w.grip_point.tolist(),
+                                         "utilisation": w.utilisation}
+                                        for w in report.hold_wrenches]})
 
 
 class ProgressLines:

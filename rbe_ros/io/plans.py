@@ -7,16 +7,21 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from ..analysis.option_spec import BY_PARAM, from_outer
 from ..analysis.options import CheckOptions
+from ..analysis.grips import validate_cell
 from ..analysis.planning import Plan, PlanOptions, PlanProgress, plan_sequence
+from ..cell import Cell, CellError
 from ..scene import Scene, SceneError, validate_scene
+from .cell_file import parse_cell
 
 #: Hold capacities a request may set over the options: the node parameters of those names
 #: (outer values, N and N m; <= 0: the options' own).
 HOLD_CAPACITIES = ("hold_force_max", "hold_torque_max")
+#: How the message of a plan whose cell is refused begins (the node aborts such a goal).
+INVALID_CELL = "invalid input: cell:"
 
 
 @dataclass(frozen=True)
@@ -32,6 +37,7 @@ class PlanLimits:
     hold_torque_max: float = 0.0    # N m; <= 0: the options'
     time_limit: float = 0.0         # s; <= 0: none
     search_budget: int = 0          # states checked; <= 0: the default (planning.backup_budget)
+    cell: str = ""                  # the robot cell, JSON or YAML text; "": none
 
     def search(self) -> PlanOptions:
         """The planner's search (ValueError naming a limit out of its range)."""
@@ -56,6 +62,16 @@ def plan_options(options: CheckOptions, limits: PlanLimits) -> CheckOptions:
     return options
 
 
+def robots_held(cell: Cell, max_held: int) -> int:
+    """The blocks a plan for ``cell`` may hold after a placement: ``max_held`` (0: as many
+    as leave one robot free to place, N - 1), never more (CellError)."""
+    free = len(cell.robots) - 1
+    if max_held > free:
+        raise CellError(f"cell: max_held {max_held} needs {max_held + 1} robots ({max_held} "
+                        f"holding, one placing); the cell has {len(cell.robots)}")
+    return max_held or free
+
+
 #: The outcome of a request that could not be planned: bad input, or an error of the planner
 #: (beside :data:`rbe_ros.analysis.planning.OUTCOMES`).
 INVALID, ERROR = "invalid", "error"
@@ -74,6 +90,8 @@ def plan_state(read_scene: Callable[[], Scene], limits: PlanLimits,
     limit out of range, a scene outside the options' validation limits, as a check would
     refuse it) is a plan that failed with "invalid input: ...", any other error "plan failed:
     ...".
+    A cell (``limits.cell``) that cannot be used is a plan that failed with
+    "invalid input: cell: ..." (:data:`INVALID_CELL`).
     ``should_stop`` and the time limit stop the search between candidate checks (the best
     partial plan, "stopped after K of N blocks"). ``extra``: further keywords of
     :func:`plan_sequence` (``on_report``, ``look_ahead``, ``full_candidates``)."""
@@ -91,7 +109,12 @@ def plan_state(read_scene: Callable[[], Scene], limits: PlanLimits,
         scene = read_scene()
         if options.limits is not None:
             validate_scene(scene, options.limits)
-        return plan_sequence(scene, search.max_held, plan_options(options, limits),
+        cell = None
+        if limits.cell.strip():
+            cell = parse_cell(limits.cell)
+            validate_cell(cell, scene)
+            search = replace(search, max_held=robots_held(cell, search.max_held))
+        return plan_sequence(scene, search.max_held, plan_options(options, limits), cell=cell,
                              beam=search.beam, candidates=search.candidates,
                              keep_sequence=search.keep_sequence,
                              search_budget=search.search_budget,
@@ -105,4 +128,5 @@ def plan_state(read_scene: Callable[[], Scene], limits: PlanLimits,
         return _failed(f"plan failed: {type(exc).__name__}: {exc}", ERROR)
 
 
-__all__ = ["ERROR", "HOLD_CAPACITIES", "INVALID", "PlanLimits", "plan_options", "plan_state"]
+__all__ = ["ERROR", "HOLD_CAPACITIES", "INVALID", "INVALID_CELL", "PlanLimits", "plan_options",
+           "plan_state", "robots_held"]

@@ -647,17 +647,25 @@ def _compare_hold_wrenches(c: _Comparer, a: list, b: list, tolerances: Tolerance
 
 #: Plan result fields compared exactly (the reports are compared as reports).
 _PLAN_EXACT = ("feasible", "message", "order", "holds", "failed_step")
+#: Fields of a cell timeline's actions compared exactly (not its poses and wrenches: the
+#: grips follow from these, and the wrenches are forces, compared in the reports).
+_ACTION_EXACT = ("action", "robot", "block", "step", "stable", "status")
 
 
 def compare_plan(recorded: dict, replayed: dict, *, run: int = 0,
                  tolerances: Tolerances = Tolerances()) -> list[Difference]:
     """The differences between two PlanSequence result dicts: the plan (feasibility,
-    message, order, holds, failed step; the planned assembly's header, sequence, holds and
-    blocks) exactly, each step's report as :func:`compare_report` does (free weight: the
-    planned assembly's at that step)."""
+    message, order, holds, failed step, a cell's robots and its timeline's actions; the
+    planned assembly's header, sequence, holds and blocks) exactly, each step's report as
+    :func:`compare_report` does (free weight: the planned assembly's at that step)."""
     c = _Comparer(run, -1, "", 1.0, tolerances)
     for name in _PLAN_EXACT:
         c.exact("plan result", name, recorded.get(name), replayed.get(name))
+    # a result recorded before cells has neither: none
+    c.exact("plan result", "robots", recorded.get("robots", []), replayed.get("robots", []))
+    c.exact("plan result", "timeline",
+            [[x.get(k) for k in _ACTION_EXACT] for x in recorded.get("timeline", [])],
+            [[x.get(k) for k in _ACTION_EXACT] for x in replayed.get("timeline", [])])
     a, b = recorded.get("plan", {}), replayed.get("plan", {})
     for name in ("header", "sequence", "holds"):
         c.exact("planned assembly", name, a.get(name), b.get(name))

@@ -14,16 +14,18 @@ from __future__ import annotations
 import html
 import json
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from plotly.offline import get_plotlyjs
+from scipy.spatial.transform import Rotation
 
 from ..analysis.options import CheckOptions
+from ..cell import Cell
 from ..rbe.result import Status
-from .markers import (ROLE_COLOURS, ROLES, approach_markers, hold_markers, line_markers,
-                      run_roles)
+from .markers import (ARROW, CUBE, CYLINDER, ROLE_COLOURS, ROLES, approach_markers,
+                      cell_markers, hold_markers, line_markers, run_roles, wrench_text)
 from .messages import report_from_dict
 from .replay import Run, options_to_json, replay_run
 from .table import approach_text, largest_hold_force
@@ -39,6 +41,8 @@ class ViewRun:
     label: str
     state: dict
     reports: list[dict]
+    cell: Cell | None = None           # a plan for a cell: its robots
+    timeline: list[dict] = field(default_factory=list)   # and its RobotAction dicts
 
 
 def checked_runs(states: Sequence[tuple[str, dict]], options: CheckOptions) -> list[ViewRun]:
@@ -86,6 +90,59 @@ def _arrow(meshes, report, d: dict) -> dict | None:
     return None
 
 
+#: The 12 edges of a box by corner index (corners: the signs of x, y, z as bits).
+_BOX_EDGES = [(a, b) for a in range(8) for b in range(a + 1, 8) if bin(a ^ b).count("1") == 1]
+
+
+def _robot_lines(run: ViewRun, step: int, size: float) -> tuple[list[dict], list[dict]]:
+    """(lines, arrows) of the robots at ``step`` of a cell's plan (the state after each of
+    its actions, :func:`rbe_ros.io.markers.cell_markers`): robot bases, gripper boxes, the
+    robots' forces with their hover text (robot, block, force, torque)."""
+    lines, arrows, seen = [], [], set()
+    for index, action in enumerate(run.timeline):
+        if action["step"] != step:
+            continue
+        for m in cell_markers(run.cell, run.timeline, index, action["grip"]["header"],
+                              0.3 * size):
+            key = (m["ns"], m["id"], m["text"], json.dumps(m["pose"]))
+            if key in seen:
+                continue
+            seen.add(key)
+            colour = _rgba(tuple(m["color"][k] for k in "rgba"))
+            centre = np.array([m["pose"]["position"][k] for k in "xyz"])
+            if m["type"] == CUBE:
+                half = np.array([m["scale"][k] for k in "xyz"]) / 2
+                rot = Rotation.from_quat([m["pose"]["orientation"][k] for k in "xyzw"])
+                corners = centre + rot.apply([[(-1) ** (1 - (c >> i & 1)) * half[i]
+                                               for i in range(3)] for c in range(8)])
+                points = [corners[i] for edge in _BOX_EDGES for i in edge]
+                name = f"gripper of {action['robot']}"
+            elif m["type"] == CYLINDER:
+                points = [centre - [0, 0, 0.25], centre + [0, 0, 0.25]]
+                name = f"base of {run.cell.robots[m['id']].name}"
+            elif m["type"] == ARROW:
+                tail, tip = np.asarray(m["points"], dtype=float)
+                arrows.append({"tail": tail.tolist(), "tip": tip.tolist(), "colour": colour,
+                               "name": wrench_text(action)})
+                continue
+            else:
+                continue
+            x, y, z = _segments(np.asarray(points, dtype=float))
+            lines.append({"name": name, "colour": colour, "width": 6, "x": x, "y": y, "z": z})
+    return lines, arrows
+
+
+def robot_table(run: ViewRun) -> dict:
+    """Per step of a cell's plan, what each robot does (its actions, in order)."""
+    names = list(run.cell.names) if run.cell is not None else []
+    rows: dict[int, dict[str, list[str]]] = {}
+    for a in run.timeline:
+        rows.setdefault(a["step"], {n: [] for n in names})[a["robot"]].append(
+            f"{a['action']} {a['block']}")
+    return {"robots": names, "rows": [[k, *("; ".join(v[n]) or "-" for n in names)]
+                                      for k, v in sorted(rows.items())]}
+
+
 def view_data(runs: Sequence[ViewRun], options: CheckOptions, title: str) -> dict:
     """The page's data: per run the block meshes, per report its row, block roles and lines."""
     out_runs, steps = [], []
@@ -100,7 +157,8 @@ def view_data(runs: Sequence[ViewRun], options: CheckOptions, title: str) -> dic
         size = (float(np.ptp(meshes.triangles.reshape(-1, 3), axis=0).max())
                 if len(meshes.triangles) else 1.0)
         for d, report, role in zip(run.reports, reports, roles):
-            lines = []
+            lines, robot_arrows = ((_robot_lines(run, report.step_index, size))
+                                   if run.timeline else ([], []))
             for m in (line_markers(report, d["header"])
                       + hold_markers(report, d["header"], 0.3 * size)):
                 x, y, z = _segments(m["points"])
@@ -116,13 +174,16 @@ def view_data(runs: Sequence[ViewRun], options: CheckOptions, title: str) -> dic
                 "max_hold": largest_hold_force(report) if report.hold_wrenches else None,
                 "message": report.message,
                 "approach": approach_text(report), "arrow": _arrow(meshes, report, d),
+                "robot_arrows": robot_arrows,
                 "roles": {bid: ROLES.index(role) for bid, role in role.items()},
                 "lines": lines})
     return {"title": title, "runs": out_runs, "steps": steps,
             "roles": [{"name": n, "colour": _rgba(ROLE_COLOURS[n][:3] + (1.0,)),
                        "opacity": ROLE_COLOURS[n][3]} for n in ROLES],
             "options": json.loads(options_to_json(options)),
-            "statuses": {s.name: s.value for s in Status}}
+            "statuses": {s.name: s.value for s in Status},
+            "robot_tables": [dict(robot_table(run), label=run.label) for run in runs
+                             if run.timeline]}
 
 
 #: Line widths in the page by marker namespace (others 3): forces and the robots' holds.
@@ -171,6 +232,7 @@ tr { cursor: pointer; }
 <th>max tension N</th><th>worst |V|/N</th><th>model</th><th>margin g</th><th>max hold N</th>
 <th>approach</th><th>reason</th>
 </tr></thead><tbody></tbody></table>
+<div id="robots"></div>
 <h3>Check options</h3><table id="options"><tbody></tbody></table>
 <script id="data" type="application/json">@DATA@</script>
 <script>@SCRIPT@</script>
@@ -220,17 +282,21 @@ function lineTraces(step) {
     showlegend: false}));
 }
 
-function arrowTraces(step) {
-  const a = step.arrow;
-  if (!a) return [];
+function arrowTrace(a, name) {
   const d = a.tip.map((v, k) => v - a.tail[k]);
-  return [{type: "scatter3d", mode: "lines", name: "insertion", hoverinfo: "name",
+  return [{type: "scatter3d", mode: "lines", name: name, hoverinfo: "name",
            x: [a.tail[0], a.tip[0]], y: [a.tail[1], a.tip[1]], z: [a.tail[2], a.tip[2]],
            line: {color: a.colour, width: 8}, showlegend: false},
-          {type: "cone", name: "insertion", x: [a.tip[0]], y: [a.tip[1]], z: [a.tip[2]],
+          {type: "cone", name: name, x: [a.tip[0]], y: [a.tip[1]], z: [a.tip[2]],
            u: [d[0]], v: [d[1]], w: [d[2]], anchor: "tip", sizemode: "absolute",
            sizeref: 0.2 * Math.hypot(d[0], d[1], d[2]), showscale: false,
            colorscale: [[0, a.colour], [1, a.colour]], hoverinfo: "name"}];
+}
+
+function arrowTraces(step) {
+  const out = step.arrow ? arrowTrace(step.arrow, "insertion") : [];
+  for (const a of step.robot_arrows) out.push(...arrowTrace(a, a.name));
+  return out;
 }
 
 function show(index) {
@@ -282,6 +348,21 @@ function build() {
       options.appendChild(tr);
     }
   })(DATA.options, "");
+  for (const t of DATA.robot_tables) {
+    const h = document.createElement("h3");
+    h.textContent = "Robots: " + t.label;
+    const table = document.createElement("table");
+    const head = document.createElement("tr");
+    ["step"].concat(t.robots).forEach(n => { const th = document.createElement("th");
+      th.textContent = n; head.appendChild(th); });
+    table.appendChild(head);
+    for (const row of t.rows) {
+      const tr = document.createElement("tr");
+      row.forEach(v => cell(tr, String(v)));
+      table.appendChild(tr);
+    }
+    document.getElementById("robots").append(h, table);
+  }
   const legend = document.getElementById("legend");
   DATA.roles.forEach(r => {
     const box = document.createElement("span");
@@ -298,4 +379,4 @@ build();
 """
 
 
-__all__ = ["ViewRun", "checked_runs", "view_data", "write_html"]
+__all__ = ["ViewRun", "checked_runs", "robot_table", "view_data", "write_html"]

@@ -83,11 +83,13 @@ from ..io.foxglove_scene import SceneServer
 from ..io.markers import MARKER_TYPE, run_markers, step_markers
 from ..io.messages import (plan_feedback_to_dict, plan_goal_from_dict, plan_result_to_dict,
                            poses_to_dict, report_header, report_to_dict, state_to_dict)
-from ..io.plans import plan_state
+from ..io.cell_file import read_cell
+from ..io.plans import INVALID_CELL, plan_state
 from ..io.poses import AsBuilt
 from ..io.replay import (DESIGN, OPTIONS_KEY, PLAN_GOAL_TYPE, PLAN_RESULT_TYPE, POSES,
                          SETTINGS_TYPE, asbuilt_check, merge_message, options_to_json)
 from ..rbe.result import Report, Status
+from ..cell import CellError, cell_to_dict
 from ..scene import Scene, SceneError
 from .convert import dict_to_message, message_to_dict, scene_from_msg
 from .diagnostics import PERIOD_S as DIAGNOSTICS_PERIOD_S
@@ -151,6 +153,8 @@ PARAMETERS = {
     "design_file": _string("", "design (a scene JSON or a COMPAS Assembly JSON, *.gz too) "
                            "whose blocks ~/poses places, as if sent on ~/design at start; "
                            "empty: none until one comes on ~/design", read_only=True),
+    "cell_file": _string("", "robot cell (JSON or YAML, rbe-ros plan --cell) of every ~/plan "
+                         "goal whose cell is empty; empty: K holds plus one placing robot"),
     "mcap_path": _string("", "directory of a rosbag2 MCAP bag recording every received state "
                          "and every report; empty: no recording. An existing directory gets "
                          "a timestamp suffix", read_only=True),
@@ -828,6 +832,17 @@ class RbeChecks:
     def _plan_goal(self, goal_handle) -> PlanSequence.Result:
         self._plan_newest = goal_handle
         goal = goal_handle.request
+        path = self.get_parameter("cell_file").value
+        if not goal.cell.strip() and path:
+            # the goal is recorded with the cell it is planned for, so that its replay is too
+            try:
+                goal.cell = json.dumps(cell_to_dict(read_cell(path)))
+            except CellError as exc:
+                self._record(self.plan_goal_topic, goal)
+                self.get_logger().error(f"plan goal aborted: cell_file {path!r}: {exc}")
+                goal_handle.abort()
+                return PlanSequence.Result(message=f"invalid input: {exc} (cell_file)",
+                                           failed_step=0)
         self._record(self.plan_goal_topic, goal)
         header = report_header(message_to_dict(goal.assembly.header),
                                self.get_parameter("frame_id").value)
@@ -853,7 +868,9 @@ class RbeChecks:
         self.get_logger().info(f"plan of {header['frame_id']} ({len(goal.assembly.blocks)} "
                                f"blocks, at most {limits.max_held} held) in "
                                f"{time.monotonic() - start:.1f} s: {plan.message}")
-        if not plan.message.startswith(STOPPED) or not stopped():
+        if plan.message.startswith(INVALID_CELL):
+            goal_handle.abort()         # a cell the plan cannot use: the reason in the result
+        elif not plan.message.startswith(STOPPED) or not stopped():
             goal_handle.succeed()       # planned, infeasible, invalid, or its time limit
         elif goal_handle.is_cancel_requested:
             goal_handle.canceled()

@@ -1,0 +1,116 @@
+"""The 70-block dome of the robot-cell issue (/work/shared/data/dome10x8.json, 10 slices x
+8 courses, radius 3 m) planned for the cells of examples/cells/: three robots give a plan
+whose every state between actions ``rbe-ros check --timeline`` re-checks stable, never more
+than three robots busy (counted from the actions), every grip on a face free of the other
+blocks and every gripper box clear of them (trimesh), every robot within its payload with
+its gripper's weight; two robots cannot close the fifth course (one robot holds while the
+other places, and course5_slice00 and _01 both need holding); UR10s name the first block
+none can grip. Long: each plan takes 10-40 s."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from rbe_ros.analysis.assembly import Assembly
+from rbe_ros.analysis.planning import plan_sequence
+from rbe_ros.analysis.steps import gripped
+from rbe_ros.analysis.verdict import check
+from rbe_ros.cli import main
+from rbe_ros.io.cell_file import parse_cell
+from rbe_ros.io.scene_json import load_scene
+from rbe_ros.rbe.result import Status
+
+from test_cell import assert_grips_free, assert_joint_solutions, busy_per_state
+
+pytestmark = pytest.mark.long
+
+DOME = Path("/work/shared/data/dome10x8.json")
+CELLS = Path(__file__).resolve().parents[1] / "examples" / "cells"
+G = 9.81
+
+
+def norm(v) -> float:
+    return float(np.linalg.norm([v["x"], v["y"], v["z"]]))
+
+
+def test_the_dome_for_three_robots(tmp_path, capsys):
+    cell_path = CELLS / "dome_3robots.yaml"
+    out = tmp_path / "plan.json"
+    capsys.readouterr()
+    assert main(["plan", str(DOME), "--cell", str(cell_path), "--json", "-o", str(out)]) == 0
+    result = json.loads(capsys.readouterr().out)
+    timeline = result["timeline"]
+    assert result["feasible"] and len(result["order"]) == 70
+    busy = busy_per_state(timeline)
+    assert max(busy) == 3 and busy[-1] == 0
+    # the states the K = 2 plan never checked: after course5_slice01 is released at step 42
+    # (two robots hold, the third places course5_slice02) the state stands
+    assert all(a["stable"] for a in timeline)
+    # every robot within its payload, its 20 kg gripper's weight included
+    cell = yaml.safe_load(cell_path.read_text())
+    robots = {r["name"]: r for r in cell["robots"]}
+    worst = 0.0
+    for a in timeline:
+        if a["action"] == "release":
+            continue
+        r = robots[a["robot"]]
+        force, torque = norm(a["wrench_tool"]["force"]), norm(a["wrench_tool"]["torque"])
+        assert force <= r["payload_force"] and torque <= r["payload_torque"]
+        # the tool frame's force is the block's need plus the gripper's weight carried
+        need = np.array([a["wrench_world"]["force"][k] for k in "xyz"])
+        carried = need + np.array([0.0, 0.0, r["tool"]["mass"] * G])
+        assert force == pytest.approx(float(np.linalg.norm(carried)), rel=1e-9, abs=1e-9)
+        worst = max(worst, force / r["payload_force"])
+    assert 0.5 < worst < 1.0
+    # every state re-checked from the export alone
+    capsys.readouterr()
+    assert main(["check", str(out), "--timeline", "--json", "--strict"]) == 0
+    check = json.loads(capsys.readouterr().out)
+    assert check["stable"] and check["states"] == len(timeline)
+    assert [s["busy"] for s in check["timeline"]] == busy
+    scene = load_scene(DOME)
+    assert assert_grips_free(scene, cell, timeline) == sum(
+        a["action"] != "release" for a in timeline)
+
+
+def test_the_dome_for_two_robots_fails_naming_the_step(capsys):
+    """The K = 2 plan (three robots) holds two blocks after steps 41 and 65; two robots must
+    let one go before the next placement, and either hand-over state falls
+    (FRICTION_EXCEEDED, a robot's grip on the other); the cell of two fails at step 41."""
+    scene = load_scene(DOME)
+    plan = plan_sequence(scene, 2)
+    full = Assembly.from_scene(scene)
+    supports = tuple(b.id for b in scene.blocks if b.support)
+    for k in (41, 65):
+        assert len(plan.held[k]) == 2 and len(plan.held[k + 1]) == 2
+        present = supports + tuple(plan.order[:k + 1])
+        for keep in plan.held[k]:
+            assert check(gripped(full, present, [keep])).status == Status.FRICTION_EXCEEDED
+    capsys.readouterr()
+    assert main(["plan", str(DOME), "--cell", str(CELLS / "dome_2robots.yaml"),
+                 "--json"]) == 1
+    result = json.loads(capsys.readouterr().out)
+    assert not result["feasible"] and result["failed_step"] == 41
+    assert "needs 2 held blocks (course5_slice00, course5_slice01)" in result["message"]
+    assert result["message"].endswith("(a cell of 2 robots: at most 1 hold while one places)")
+    assert max(busy_per_state(result["timeline"])) == 2
+
+
+def test_the_dome_with_ur10s_names_the_block_none_can_grip(capsys):
+    """Every grip of the plan has a UR10 joint solution (checked here by forward
+    kinematics); the plan stops at the first block no UR10 reaches and names it, and why
+    for each robot."""
+    cell_path = CELLS / "dome_ur10.yaml"
+    capsys.readouterr()
+    assert main(["plan", str(DOME), "--cell", str(cell_path), "--json"]) == 1
+    result = json.loads(capsys.readouterr().out)
+    message = result["message"]
+    block = message.split("no free robot can grip ")[1].split(":")[0]
+    assert block not in result["order"]
+    assert all(f"{r} cannot grip block {block}" in message for r in ("ur1", "ur2", "ur3"))
+    cell = parse_cell(cell_path.read_text(), cell_path.parent)
+    assert assert_joint_solutions(cell, result["timeline"]) >= 1

@@ -180,7 +180,8 @@ def test_exported_frames_as_compas_fab_targets(arch_plan, capsys):
     """compas Frames and compas_fab FrameTargets built from the export: the grip frame's
     origin on the grip face, its z axis into the block, pre-grip backed off 0.1 m along the
     face normal, the approach start against the insertion direction (down: above) over the
-    insertion check's distance (twice the block's longest bounding-box edge)."""
+    insertion check's distance (from where the block is clear of the bounding boxes of the
+    blocks placed before it: its bottom up to their top)."""
     tmp, scene_path, cell_path, out = arch_plan
     if not out.exists():
         main(["plan", scene_path, "--cell", cell_path, "-o", str(out)])
@@ -200,7 +201,9 @@ def test_exported_frames_as_compas_fab_targets(arch_plan, capsys):
         back = np.array(frames["pre_grip"].point) - np.array(grip.point)
         assert back == pytest.approx(-0.1 * z, abs=1e-9)
         start = np.array(frames["approach"].point) - np.array(grip.point)
-        distance = 2 * bodies[a["block"]].extents.max()
+        before = data["sequence"][:data["sequence"].index(a["block"])]
+        top = max((bodies[b].bounds[1][2] for b in before), default=-np.inf)
+        distance = max(0.0, top - bodies[a["block"]].bounds[0][2])
         assert start == pytest.approx([0.0, 0.0, distance], abs=1e-9)
 
 

@@ -29,7 +29,7 @@ from scipy.spatial.transform import Rotation
 
 from ..cell import Cell, CellError, Robot
 from ..geometry.block import pose_blocks
-from ..geometry.insertion import _hull_object
+from ..geometry.insertion import present_pieces
 from ..rbe.model import Grip
 from ..scene import Scene
 from .assembly import Assembly
@@ -139,8 +139,10 @@ class GripChooser:
                           default=0.0) + 2 * STANDOFF
 
     @cached_property
-    def _hulls(self) -> list[fcl.CollisionObject]:
-        return [_hull_object(np.ascontiguousarray(b.vertices, dtype=float).tobytes(), STANDOFF)
+    def _solids(self) -> list[list[fcl.CollisionObject]]:
+        """Each block as the insertion check sees a present block (its convex pieces, exact
+        for a non-convex block), shrunk by the standoff."""
+        return [[piece for piece, _ in present_pieces(b, STANDOFF)]
                 for b in self.assembly.blocks]
 
     @cached_property
@@ -194,8 +196,9 @@ class GripChooser:
         ``grip`` touches."""
         box, request = self._box(robot, grip), fcl.CollisionRequest()
         others = self.near(grip.block) if present is None else self.near(grip.block) & present
-        return tuple(sorted(b for b in others if fcl.collide(
-            box, self._hulls[self.index[b]], request, fcl.CollisionResult())))
+        return tuple(sorted(b for b in others if any(
+            fcl.collide(box, piece, request, fcl.CollisionResult())
+            for piece in self._solids[self.index[b]])))
 
     def in_the_way(self, block: str, robot: Robot, grip: GripFrame) -> bool:
         """Whether placing ``block`` lands on the face ``robot`` grips at ``grip`` or hits

@@ -90,10 +90,10 @@ def approach_distance(options: CheckOptions) -> float | None:
     return options.insertion.approach_distance or None
 
 
-def block_insertion(assembly: Assembly, present: Sequence[str], block: str,
-                    options: CheckOptions, given=None) -> Insertion:
-    """How ``block`` reaches its pose in ``assembly`` (the whole scene's) past the blocks
-    ``present`` (it among them or not); ``given``: a direction to check instead of choosing."""
+def _path(assembly: Assembly, present: Sequence[str], block: str, options: CheckOptions
+          ) -> tuple[int, np.ndarray, PathCheck]:
+    """(index of ``block``, mask of the blocks present but it, the path check of ``block``
+    past them)."""
     index = _index(assembly)
     k = index.ids[block]
     mask = np.zeros(len(assembly.blocks), dtype=bool)
@@ -103,10 +103,24 @@ def block_insertion(assembly: Assembly, present: Sequence[str], block: str,
     moving = assembly.blocks[k]
     limits = options.limits or ValidationLimits()
     allow = block_allowances(assembly, options.contact)
-    path = PathCheck(moving, [assembly.blocks[j] for j in others],
-                     approach_distance(options),
-                     CLEARANCE * limits.penetration_tol * moving.size + allow[k],
-                     index.boxes[others], allow[others])
+    return k, mask, PathCheck(moving, [assembly.blocks[j] for j in others],
+                              approach_distance(options),
+                              CLEARANCE * limits.penetration_tol * moving.size + allow[k],
+                              index.boxes[others], allow[others])
+
+
+def approach_length(assembly: Assembly, present: Sequence[str], block: str,
+                    options: CheckOptions, direction) -> float:
+    """m ``block`` travels along unit ``direction`` into its pose past ``present``, as its
+    insertion check sweeps it (where a robot's straight approach starts)."""
+    return _path(assembly, present, block, options)[2].length(np.asarray(direction, float))
+
+
+def block_insertion(assembly: Assembly, present: Sequence[str], block: str,
+                    options: CheckOptions, given=None) -> Insertion:
+    """How ``block`` reaches its pose in ``assembly`` (the whole scene's) past the blocks
+    ``present`` (it among them or not); ``given``: a direction to check instead of choosing."""
+    k, mask, path = _path(assembly, present, block, options)
     angle = contact_angle_deg(options.contact.angle_tol_deg, options.contact.pose_uncertainty_deg)
     return insertion(interface_normals(assembly, k, mask), path,
                      np.asarray(assembly.gravity, dtype=float), given, np.radians(angle),

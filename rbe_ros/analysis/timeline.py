@@ -32,7 +32,7 @@ from ..cell import Cell, Robot
 from ..rbe.result import Report
 from ..scene import Scene
 from .assembly import Assembly
-from .insertion import approach_distance
+from .insertion import approach_length
 from .grips import PRE_GRIP, GripChooser, GripFrame, RobotWrench, robot_grip, robot_wrench
 from .options import CheckOptions
 from .steps import supports_present
@@ -303,8 +303,9 @@ def build_timeline(cell: Cell, assembly: Assembly, scene: Scene, order, held,
                                           hw.force, hw.torque, assembly.gravity)
             direction = None
             if a.action == PLACE and k < len(approach) and approach[k] is not None:
-                direction = -np.asarray(approach[k], dtype=float) * approach_distance(
-                    assembly, position[a.block], options)
+                unit = np.asarray(approach[k], dtype=float)
+                direction = -unit * approach_length(
+                    assembly, states.present(order, k, True), a.block, options, unit)
             timeline.actions.append(replace(a, report=report, wrench=wrench,
                                              approach=direction))
             if not report.stable and timeline.feasible:

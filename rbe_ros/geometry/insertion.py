@@ -18,7 +18,7 @@ end vertices, so one discrete collision test of that body per present convex bod
 path (python-fcl's GJK, after a bounding-box broad phase). A non-convex block, moving or
 present, is its exact convex pieces (:mod:`rbe_ros.geometry.decompose`), so its path is exact
 too; without a decomposition a present block is its triangle mesh (exact, see
-:func:`_present_pieces`) and a moving one, or a present one shrunk by a declared pose
+:func:`present_pieces`) and a moving one, or a present one shrunk by a declared pose
 uncertainty, its convex hull (conservative: a path accepted is free).
 The path runs from where the block is clear of every present block's bounding box to its
 pose, or over a given distance. The moving block's pieces have their faces moved in by a
@@ -194,7 +194,7 @@ _LOCK = threading.Lock()
 _PRESENT: OrderedDict = OrderedDict()     # (mesh key, allowance) -> [(fcl object, aabb)]
 
 
-def _present_pieces(block: PosedBlock, allowance: float) -> list:
+def present_pieces(block: PosedBlock, allowance: float) -> list:
     """fcl objects and bounding boxes of ``block``'s convex pieces, each shrunk by
     ``allowance`` (m) if > 0 (kept for the last 4096 blocks asked: a present block is tested
     against many moving blocks). A non-convex block without a decomposition is its triangle
@@ -303,7 +303,7 @@ class PathCheck:
                 continue
             body = fcl.CollisionObject(_convex(swept))
             for k in near:
-                for other, box in _present_pieces(self.present[k], float(self.allowances[k])):
+                for other, box in present_pieces(self.present[k], float(self.allowances[k])):
                     if (np.all(box[0] <= high) and np.all(box[1] >= low)
                             and fcl.collide(body, other, request, fcl.CollisionResult())):
                         hit[k] = True

@@ -95,7 +95,7 @@ def _verdict(assembly: Assembly, options: CheckOptions) -> Report:
             report = _report(unbounded, needed, options)
             if not report.stable:
                 return report
-            placement = placed(model, options.deciding)
+            placement = placed(model, options.deciding, solution=needed)
             if placement.beyond is not None:
                 return _exceeded(_report(unbounded, placement.beyond, options), model.grips)
             return _placement_report(unbounded, report, placement, options)

@@ -46,8 +46,11 @@ from .solver import Solution, SolveOptions, solve
 #: in units of the free weight W): the step's forces are those of the motion to about
 #: 1 / INERTIA_WEIGHT of W.
 INERTIA_WEIGHT = 1e6
-#: The step left no motion when no free block keeps a net force above this share of W.
-STILL = 1e-3
+#: A step that leaves no free block a net force above this share of its weight (a moment
+#: above it times its weight and size) may have left no motion: the RBE problem with the
+#: step's caps decides (the kinetic term's weight against the check's objective and the
+#: robots' wrenches leaves about 1e-3 of a held block's weight unbalanced).
+STILL = 1e-2
 #: The caps no longer change when none moves by more than this share of W.
 CONVERGED = 1e-4
 #: Normal resultants below this share of the lighter free block's weight at an interface
@@ -91,8 +94,9 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
            solution: Solution | None = None) -> Placement:
     """The test on ``model`` under ``load`` (scaled p; default its dead load) with the
     friction of ``options`` (a check's deciding problem). ``solution``: a field of the RBE
-    problem already solved; where it keeps a step's caps it is the field that stands, without
-    that step's solves (a wall on level ground needs no friction: no solve at all)."""
+    problem already solved (of ``model`` or of it without the grips' capacities); where it
+    keeps a step's caps it is the field that stands, without that step's solves (a wall on
+    level ground needs no friction: no solve at all), or beyond the capacities."""
     if not math.isfinite(options.mu):
         field = solve(model, options, load=load)
         return Placement(field if field.solved else None)
@@ -111,18 +115,15 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
         bound = caps * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
         if solution is not None and solution.solved and _within(model, solution, bound,
                                                                  options.cone):
-            return Placement(solution, steps=count - 1)
+            return (Placement(solution, steps=count - 1) if _held(model, solution)
+                    else Placement(None, steps=count - 1, beyond=solution))
         motion = solve(rigid, options, load=load, friction_cap=bound, inertia=metric)
         if not motion.solved:
             break
         if _still(model, motion):
-            field = solve(model, options, load=load, friction_cap=bound)
-            if field.solved:
-                return Placement(field, steps=count)
-            if rigid.grips != model.grips:
-                beyond = solve(rigid, options, load=load, friction_cap=bound)
-                if beyond.solved:
-                    return Placement(None, steps=count, beyond=beyond)
+            settled = _settled(model, rigid, options, load, caps, floor)
+            if settled is not None:
+                return replace(settled, steps=count)
         # the least forces that leave the motion found: its normal forces, none by squeeze
         forces = solve(rigid, options, load=load - _scaled(model, motion.unbalanced),
                        friction_cap=bound, inertia=metric)
@@ -133,6 +134,41 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
             break
         caps = normal
     return _moved(model, motion, count)
+
+
+def _settled(model: EquilibriumModel, rigid: EquilibriumModel, options: SolveOptions, load,
+             caps: np.ndarray, floor: np.ndarray) -> Placement | None:
+    """The field that stands once a step leaves no motion: the least one within the caps
+    (None if there is none). With grips, again with caps from its own normal forces until
+    they settle: a robot's wrench is a load, and the normal forces it makes give friction
+    (else a robot that holds its block still would carry all of it without friction).
+    Beyond the grips' capacities (``beyond``) unless a field within the caps keeps them."""
+    field = None
+    for _ in range(MAX_STEPS):
+        bound = caps * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
+        found = solve(rigid, options, load=load, friction_cap=bound)
+        if not found.solved:
+            break
+        field = found
+        normal = options.mu * _above_noise(_sums(model, field.forces[0]), floor)
+        if not model.grips or np.abs(normal - caps).max(initial=0.0) \
+                <= CONVERGED * model.force_scale:
+            break
+        caps = normal
+    if field is None:
+        return None
+    if _held(model, field):
+        return Placement(field)
+    capped = solve(model, options, load=load, friction_cap=bound)
+    return Placement(capped) if capped.solved else Placement(None, beyond=field)
+
+
+def _held(model: EquilibriumModel, solution: Solution) -> bool:
+    """Whether the grips' wrenches in ``solution`` are within their capacities."""
+    return all(np.linalg.norm(w[:3]) <= g.max_force * (1.0 + CONE_TOL) + SHARE_TOL *
+               model.force_scale and np.linalg.norm(w[3:]) <= g.max_torque * (1.0 + CONE_TOL)
+               + SHARE_TOL * model.force_scale * model.length_scale
+               for g, w in zip(model.grips, solution.wrenches))
 
 
 def _unless_none(capacity: float) -> float:

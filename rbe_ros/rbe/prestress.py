@@ -96,7 +96,10 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
     friction of ``options`` (a check's deciding problem). ``solution``: a field of the RBE
     problem already solved (of ``model`` or of it without the grips' capacities); where it
     keeps a step's caps it is the field that stands, without that step's solves (a wall on
-    level ground needs no friction: no solve at all), or beyond the capacities."""
+    level ground needs no friction: no solve at all), or beyond the capacities. The first
+    step's caps, none, it keeps to the noise floor: friction below 1% of the lighter
+    block's weight is the solver's rounding there (a running-bond wall's QP field: 1e-3 of
+    a brick's weight)."""
     if not math.isfinite(options.mu):
         field = solve(model, options, load=load)
         return Placement(field if field.solved else None)
@@ -113,11 +116,13 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
     motion = None
     for count in range(1, MAX_STEPS + 1):
         bound = caps * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
-        if solution is not None and solution.solved and _within(model, solution, bound,
-                                                                 options.cone):
+        if solution is not None and solution.solved and _within(
+                model, solution, bound if caps.any() else bound + floor, options.cone):
             return (Placement(solution, steps=count - 1) if _held(model, solution)
                     else Placement(None, steps=count - 1, beyond=solution))
-        motion = solve(rigid, options, load=load, friction_cap=bound, inertia=metric)
+        frictionless = not caps.any()       # the first step: no variables of friction
+        motion = solve(rigid, options, load=load, friction_cap=bound, inertia=metric,
+                       frictionless=frictionless)
         if not motion.solved:
             break
         if _still(model, motion):
@@ -126,7 +131,7 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
                 return replace(settled, steps=count)
         # the least forces that leave the motion found: its normal forces, none by squeeze
         forces = solve(rigid, options, load=load - _scaled(model, motion.unbalanced),
-                       friction_cap=bound, inertia=metric)
+                       friction_cap=bound, inertia=metric, frictionless=frictionless)
         if not forces.solved:
             break
         normal = options.mu * _above_noise(_sums(model, forces.forces[0]), floor)
@@ -207,22 +212,36 @@ def _scaled(model: EquilibriumModel, wrenches: np.ndarray) -> np.ndarray:
 
 def inertia_metric(model: EquilibriumModel) -> sp.csc_matrix:
     """INERTIA_WEIGHT x the inverse of the free blocks' mass matrix on the scaled
-    equilibrium rows (force / W, moment / (W L)), relative to the mean free mass. A block's
-    inertia about its centroid is that of its vertices as point masses, over 3 (exact for a
-    parallelepiped, whose vertices' second moment is 3 times the solid's)."""
+    equilibrium rows (force / W, moment / (W L)), relative to the mean free mass: block
+    diagonal, as an upper triangle (what the solver reads). A block's inertia about its
+    centroid is that of its vertices as point masses, over 3 (exact for a parallelepiped,
+    whose vertices' second moment is 3 times the solid's)."""
     blocks = [model.blocks[j] for j in model.free]
     if not blocks:
         return sp.csc_matrix((0, 0))
-    mean = float(np.mean([b.mass for b in blocks])) or 1.0
-    parts = []
-    for b in blocks:
-        m = b.mass or mean
-        d = b.vertices - b.centroid
-        second = d.T @ d / len(d)
-        inertia = m / 3.0 * (np.trace(second) * np.eye(3) - second)
-        inertia += 1e-9 * m * b.size ** 2 * np.eye(3)       # a flat or linear block
-        parts += [mean / m * np.eye(3), mean * model.length_scale ** 2 * np.linalg.inv(inertia)]
-    return (INERTIA_WEIGHT * sp.block_diag(parts)).tocsc()
+    mass = np.array([b.mass for b in blocks], dtype=float)
+    mean = float(mass.mean()) or 1.0
+    mass = np.where(mass > 0, mass, mean)
+    second = np.array([(b.vertices - b.centroid).T @ (b.vertices - b.centroid) / len(b.vertices)
+                       for b in blocks])
+    size = np.array([b.size for b in blocks])
+    eye = np.eye(3)
+    inertia = (mass / 3.0)[:, None, None] * (np.trace(second, axis1=1, axis2=2)[:, None, None]
+                                             * eye - second)
+    inertia += (1e-9 * mass * size ** 2)[:, None, None] * eye     # a flat or linear block
+    rotation = mean * model.length_scale ** 2 * np.linalg.inv(inertia)
+    m = len(blocks)
+    # per block 6 columns: 3 of the force (one diagonal entry each), 3 of the moment (the
+    # upper triangle of the 3 x 3 block: 1, 2, 3 entries)
+    first = 6 * np.arange(m)
+    rows = [first + k for k in range(3)] + [first + 3, first + 3, first + 4, first + 3,
+                                            first + 4, first + 5]
+    data = [mean / mass] * 3 + [rotation[:, 0, 0], rotation[:, 0, 1], rotation[:, 1, 1],
+                                rotation[:, 0, 2], rotation[:, 1, 2], rotation[:, 2, 2]]
+    counts = np.array([1, 1, 1, 1, 2, 3])
+    indptr = np.concatenate(([0], np.cumsum(np.tile(counts, m))))
+    return sp.csc_matrix((INERTIA_WEIGHT * np.column_stack(data).ravel(),
+                          np.column_stack(rows).ravel(), indptr), shape=(6 * m, 6 * m))
 
 
 def _still(model: EquilibriumModel, step: Solution) -> bool:
@@ -240,7 +259,8 @@ def accelerations(model: EquilibriumModel, step: Solution) -> tuple[np.ndarray, 
     """Per free block (rows of model.free) its acceleration (m/s^2) and angular
     acceleration (rad/s^2) from the step's net wrenches."""
     e = step.unbalanced.reshape(-1, 6)
-    metric = inertia_metric(model) / INERTIA_WEIGHT
+    upper = inertia_metric(model) / INERTIA_WEIGHT
+    metric = upper + sp.triu(upper, 1).T
     scaled = np.column_stack((e[:, :3] / model.force_scale,
                               e[:, 3:] / (model.force_scale * model.length_scale)))
     rate = (metric @ scaled.ravel()).reshape(-1, 6)

@@ -190,14 +190,15 @@ def _spent_since(start: float) -> float:
 def solve(model: EquilibriumModel, options: SolveOptions = SolveOptions(), *,
           load: np.ndarray | None = None, live_load: np.ndarray | None = None,
           friction_cap: np.ndarray | None = None,
-          inertia: sp.spmatrix | None = None) -> Solution:
+          inertia: sp.spmatrix | None = None, frictionless: bool = False) -> Solution:
     """Solve the RBE problem of ``model`` under ``load`` (scaled p; default: dead load).
     ``friction_cap`` (N per interface, inf: none) bounds the resultant of each interface's
     friction forces in the cone's norm, as well as the vertex cones (Tresca bounds of the
     placement test, rbe/prestress.py). ``inertia`` (a positive definite (6 m, 6 m) matrix
     on the scaled equilibrium rows) turns equilibrium into the step from rest: the rows'
     imbalance e = A x + p is free, at the cost 1/2 e^T inertia e added to the objective
-    (the kinetic energy of the motion it starts, rbe/prestress.py).
+    (the kinetic energy of the motion it starts, rbe/prestress.py). ``frictionless``: no
+    friction variables at all (fn >= 0 only; a third of the variables and no cones).
     Within a check's time budget (:mod:`rbe_ros.deadline`) the solver gets what is left of it,
     and a solve that runs out of it raises CheckTimeout."""
     checkpoint()
@@ -209,8 +210,10 @@ def solve(model: EquilibriumModel, options: SolveOptions = SolveOptions(), *,
     # cost with the same net force and cone, so it is left out (and with it the 1e6 penalty
     # weight, which only slows the solver down).
     tension = options.allow_tension and not multiplier and options.friction == "plus"
+    if frictionless:            # fn >= 0 rows, no cones (as with no friction limit)
+        options, friction_cap = replace(options, mu=math.inf), None
     v = _Variables(nv, tension, lp, multiplier, model.hold_columns.shape[1],
-                   0 if inertia is None else model.a_eq.shape[0])
+                   0 if inertia is None else model.a_eq.shape[0], not frictionless)
     cap = None if friction_cap is None else np.asarray(friction_cap, float) / model.force_scale
     a, b, cones = _constraints(model, options, v, p, live_load, (1.0, MAX_MULTIPLIER), cap)
     p_diag, q = _objective(options, v, lp, multiplier)
@@ -440,6 +443,10 @@ def _equilibrium_columns(model: EquilibriumModel, v: _Variables, column) -> sp.c
         indptr = np.concatenate((indptr[:nv + 1], indptr[2 * nv + 1:] - (hi - lo)))
         indices = np.concatenate((indices[:lo], indices[hi:]))
         data = np.concatenate((data[:lo], data[hi:]))
+    if v.base[2] < 0:       # frictionless: drop the fu, fv columns (the last 2 nv)
+        kept = (len(indptr) - 1) - 2 * nv
+        indptr = indptr[:kept + 1]
+        indices, data = indices[:indptr[-1]], data[:indptr[-1]]
     extra = [np.full(len(v.t), indptr[-1])]
     holds = model.hold_columns
     if holds.shape[1]:
@@ -461,12 +468,12 @@ def _equilibrium_columns(model: EquilibriumModel, v: _Variables, column) -> sp.c
 
 
 class _Variables:
-    """Column layout: fn+, [fn-], fu, fv (nv each), [t (nv), LP friction magnitudes], [hold
+    """Column layout: fn+, [fn-], [fu, fv] (nv each), [t (nv), LP friction magnitudes], [hold
     wrenches], [imbalance e of the equilibrium rows, under inertia], [lambda]."""
 
     def __init__(self, nv: int, tension: bool, lp: bool, multiplier: bool, holds: int = 0,
-                 rows: int = 0):
-        kinds = (0, 1, 2, 3) if tension else (0, 2, 3)
+                 rows: int = 0, friction: bool = True):
+        kinds = ((0, 1) if tension else (0,)) + ((2, 3) if friction else ())
         self.base = np.full(4, -1)
         self.base[list(kinds)] = np.arange(len(kinds)) * nv
         self.t = len(kinds) * nv + np.arange(nv if lp else 0)
@@ -600,17 +607,18 @@ class _Csc:
 
 
 def _with_inertia(p_diag: np.ndarray, v: _Variables, inertia: sp.spmatrix) -> _Csc:
-    """The objective's matrix: diag(p_diag) and ``inertia`` on the imbalance variables
-    (upper triangle, as Clarabel reads it)."""
-    first = int(v.res[0])
-    block = sp.coo_matrix(sp.triu(inertia))
-    full = sp.coo_matrix((np.concatenate((p_diag[p_diag != 0], block.data)),
-                          (np.concatenate((np.flatnonzero(p_diag), block.row + first)),
-                           np.concatenate((np.flatnonzero(p_diag), block.col + first)))),
-                         shape=(v.count, v.count)).tocsc()
-    full.sum_duplicates()
-    full.sort_indices()
-    return _Csc(full.data, full.indices, full.indptr, full.shape)
+    """The objective's matrix: diag(p_diag) and ``inertia`` (upper triangular CSC) on the
+    imbalance variables, which carry no diagonal entry of their own; as Clarabel reads it."""
+    first, rows = int(v.res[0]), len(v.res)
+    upper = sp.csc_matrix(inertia)
+    before, after = p_diag[:first], p_diag[first + rows:]
+    nz_before, nz_after = np.flatnonzero(before), np.flatnonzero(after)
+    counts = np.concatenate(((before != 0).astype(np.int64), np.diff(upper.indptr),
+                             (after != 0).astype(np.int64)))
+    indptr = np.concatenate(([0], np.cumsum(counts)))
+    indices = np.concatenate((nz_before, upper.indices + first, nz_after + first + rows))
+    data = np.concatenate((before[nz_before], upper.data, after[nz_after]))
+    return _Csc(data, indices, indptr, (v.count, v.count))
 
 
 def _objective(options: SolveOptions, v: _Variables, lp: bool, multiplier: bool):

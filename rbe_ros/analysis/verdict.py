@@ -184,9 +184,12 @@ def _explain(model: EquilibriumModel, options: CheckOptions) -> Report:
         placement = placed(model, options.deciding)
         if placement.stands or not placement.moving:
             return report
-        mu = options.deciding.mu
+        first = report.interfaces[placement.sliding[0]] if placement.sliding else None
+        ratio = (f": |V|/N = {first.friction_ratio:.3g} there" if first is not None
+                 and math.isfinite(first.friction_ratio) else "")
         return replace(_sliding_report(model, report, placement), message=(
-            f"friction exceeded: {_motion(model, placement)}, more than mu {mu:.3g} holds"))
+            f"friction exceeded: {_motion(model, placement)}{ratio}, more than"
+            f" {_limit(options, True)}"))
     glued = solve(model, replace(options.solve, friction="plus"))
     if not glued.solved:
         return (_failed(glued) if glued.status == "failed" else
@@ -233,9 +236,11 @@ def _placement_report(model, report: Report, placement: Placement,
 
 def _sliding_report(model, report: Report, placement: Placement) -> Report:
     """``report`` FRICTION_EXCEEDED, its interfaces flagged and blocks named from
-    ``placement``'s motion: those across which the moving blocks slide, those that move."""
+    ``placement``'s motion: those across which the moving blocks slide (if none slides, the
+    report's own flags), those that move."""
     hit = set(placement.sliding)
-    flagged = [replace(r, friction_exceeded=k in hit) for k, r in enumerate(report.interfaces)]
+    flagged = [replace(r, friction_exceeded=k in hit) for k, r in enumerate(report.interfaces)] \
+        if hit else report.interfaces        # they tip or turn: the field's own flags
     moving = tuple(sorted(model.blocks[j].id for j in placement.moving))
     return replace(report, status=Status.FRICTION_EXCEEDED, interfaces=flagged,
                    unstable_blocks=moving)
@@ -292,11 +297,9 @@ def _report(model, solution, options: CheckOptions, *, sliding: bool = False) ->
     elif friction:
         worst_it = max(friction, key=lambda r: r.friction_ratio)
         status = Status.FRICTION_EXCEEDED
-        limit = (f"the {options.solve.cone} cone allows with mu {mu:.3g}"
-                 if sliding and mu == options.solve.mu
-                 else f"the threshold {options.threshold:.3g}")
         message = (f"friction exceeded: |V|/N = {worst_it.friction_ratio:.3g} at interface"
-                   f" {_iface(worst_it)}, more than {limit} ({_names(unstable)} would slide)")
+                   f" {_iface(worst_it)}, more than {_limit(options, sliding)}"
+                   f" ({_names(unstable)} would slide)")
     else:
         status = Status.STABLE
         message = (f"stable: {len(results)} interface{'s' * (len(results) != 1)} in compression,"
@@ -321,6 +324,15 @@ def _loaded(model, results: list[InterfaceResult], options: CheckOptions) -> lis
         return [True] * len(results)
     least = LOADED_SHARE * model.force_scale / len(model.free)
     return [r.normal_resultant >= least for r in results]
+
+
+def _limit(options: CheckOptions, sliding: bool) -> str:
+    """What a sliding interface needs more than: the cone (the deciding problem had no
+    field) or the threshold (a field within the cone, over it)."""
+    mu = options.deciding.mu
+    if sliding and mu == options.solve.mu:
+        return f"the {options.solve.cone} cone allows with mu {mu:.3g}"
+    return f"the threshold {options.threshold:.3g}"
 
 
 def _flag_sliding(results: list[InterfaceResult], capacity: float) -> list[InterfaceResult]:

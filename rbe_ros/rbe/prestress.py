@@ -60,8 +60,9 @@ NOISE_SHARE = 1e-2
 #: At most this many steps: the fixed point's caps converge geometrically; a case that has
 #: not converged by then is judged on its last step.
 MAX_STEPS = 40
-#: A block moves when its acceleration (at its farthest vertex) exceeds this share of the
-#: largest one and MOVING_G of g.
+#: A block moves when its acceleration (|a| + |alpha| times its size) exceeds this share of
+#: the largest one and MOVING_G of g; an interface slides when its blocks' relative
+#: tangential acceleration at its centre exceeds the same share and the normal one.
 MOVING_SHARE = 1e-2
 MOVING_G = 1e-4
 #: The caps hold the test's field within mu N (1 + CONE_TOL) + SHARE_TOL W (the accuracy
@@ -74,7 +75,7 @@ SHARE_TOL = 1e-7
 class Placement:
     """The answer of the test: the field that stands (None when the blocks move), else the
     free blocks that move (indices into the model's blocks, the fastest first) and the
-    interfaces they slide across (a boolean mask; the most loaded first in ``sliding_order``)."""
+    interfaces they slide across (indices, the most loaded first)."""
 
     field: Solution | None
     moving: tuple[int, ...] = ()

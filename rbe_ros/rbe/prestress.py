@@ -101,8 +101,9 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
     step's caps, none, it keeps to the noise floor: friction below 1% of the lighter
     block's weight is the solver's rounding there (a running-bond wall's QP field: 1e-3 of
     a brick's weight)."""
-    if not math.isfinite(options.mu):
-        field = solve(model, options, load=load)
+    if not math.isfinite(options.mu) or not len(model.free):    # nothing can slide
+        field = solution if solution is not None and solution.solved else \
+            solve(model, options, load=load)
         return Placement(field if field.solved else None)
     options = replace(options, objective="qp", friction="net")
     metric = inertia_metric(model)

@@ -252,10 +252,12 @@ def _force(w) -> float:
 
 
 def test_the_plane_oracle_with_a_bounded_force_agrees_with_the_arch_hold_wrenches():
-    """The arch's plan checked with pin grips at the centroids: where one voussoir is held,
-    its force is the smallest the plane rigid-block LP finds (tests/oracles/plane_blocks.py,
-    the held block free with an external force); where two are, the LP's smallest largest
-    force is at most the larger of the two (the check minimises their sum of squares)."""
+    """The arch's plan checked with pin grips at the centroids: the plane rigid-block LP's
+    smallest force (tests/oracles/plane_blocks.py, the held block free with an external
+    force: any admissible field) is a lower bound of the check's, whose field is one the
+    blocks get set in place without pre-load (rbe/prestress.py); where RBE's own field is
+    that one, they are equal (at least one step). Where two are held, the LP's smallest
+    largest force is at most the larger of the two."""
     arch = generators.semicircular_arch(7)
     blocks, joints, supports = plane_blocks.semicircular_arch(7)
     plan = plan_sequence(arch, 2)
@@ -270,8 +272,8 @@ def test_the_plane_oracle_with_a_bounded_force_agrees_with_the_arch_hold_wrenche
         assert report.stable and math.isfinite(smallest), step.index
         forces = [_force(w) for w in report.hold_wrenches]
         if len(forces) == 1:
-            assert forces[0] == pytest.approx(smallest, rel=REL), step.index
-            compared += 1
+            assert smallest <= forces[0] * (1 + REL), step.index
+            compared += forces[0] == pytest.approx(smallest, rel=REL)
         else:
             assert smallest <= max(forces) * (1 + REL), step.index
     assert compared >= 1
@@ -314,18 +316,31 @@ def test_the_arch_planned_below_its_largest_hold_fails_at_a_step_the_oracle_conf
                 assert smallest > limit, (candidate, held, smallest)
 
 
-def test_the_dome_planned_below_its_largest_hold_fails_where_no_hold_pair_fits():
-    """The 8 x 5 dome's plan holds the first block of the third ring alone as it is placed
-    (step 16), with 5.6 kN. Below that no plan exists with 2 robots: the plan fails at step
-    16 naming that block's wrench, and every hold set of at most 2 blocks of the step fails
-    the capped check (exhaustive; the ring's blocks are alike by the dome's rotational
-    symmetry, so one candidate stands for all)."""
+@pytest.fixture(scope="module")
+def dome_plan():
     dome = generators.dome(8, 5)
-    plan = plan_sequence(dome, 2)
+    return dome, plan_sequence(dome, 2)
+
+
+def test_the_dome_plan_holds_the_third_rings_first_block_alone_with_6_4_kn(dome_plan):
+    """The 8 x 5 dome's plan holds the first block of the third ring alone as it is placed
+    (step 16), with 6.4 kN (5.6 kN in RBE's least field, which takes friction where the
+    loads set in place without pre-load give none: rbe/prestress.py)."""
+    _, plan = dome_plan
     assert plan.feasible
     assert plan.held[16] == (plan.order[16],) == ("course3_slice00",)
+    assert largest_hold_force(plan.reports[16]) == pytest.approx(6391, rel=1e-3)
+
+
+@pytest.mark.long
+def test_the_dome_planned_below_its_largest_hold_fails_where_no_hold_pair_fits(dome_plan):
+    """Below the 8 x 5 dome's step-16 hold no plan exists with 2 robots: the plan fails at
+    step 16 naming that block's wrench, and every hold set of at most 2 blocks of the step
+    fails the capped check (exhaustive; the ring's blocks are alike by the dome's rotational
+    symmetry, so one candidate stands for all). Long: 45 s, the capped plan's trials each
+    run the placement test."""
+    dome, plan = dome_plan
     largest = largest_hold_force(plan.reports[16])
-    assert largest == pytest.approx(5610, rel=1e-3)
     limit = 0.9 * largest
     options = CheckOptions(hold_force_max=limit)
     capped = plan_sequence(dome, 2, options)

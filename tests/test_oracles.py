@@ -72,10 +72,13 @@ def test_arch_kern_fitting_is_the_thrust_line_in_the_middle_thirds(n):
 
 @pytest.mark.parametrize("ratio", [0.15, 0.3])
 def test_arch_minimum_friction_is_the_thrust_line_limit(ratio):
-    """0.348376 at t / R = 0.15, 0.308988 at 0.3 (thrust-line LP with |V| <= mu N)."""
+    """0.348376 at t / R = 0.15, 0.308988 at 0.3 (thrust-line LP with |V| <= mu N: any
+    admissible field). The minimum friction of blocks set in place without pre-load
+    (rbe/prestress.py) is bounded below by it and within 3e-4 of it here (its fixed point
+    near the limit)."""
     exact = arch_limit.minimum_friction(15, ratio)
     ours = minimum_friction(Assembly.from_scene(gen.semicircular_arch(15, ratio)), tol=1e-6)
-    assert ours == pytest.approx(exact, rel=1e-4)
+    assert exact * (1 - 1e-6) <= ours <= exact * (1 + 1e-3)
 
 
 def wedge_on_ground(p: float = 1.0, q: float = 0.8, depth: float = 1.0):

@@ -75,9 +75,12 @@ def test_friction_plus_at_mu_0_2_stays_feasible_and_shows_tension():
 def test_buttressed_arch_minimum_friction_is_0_31_that_of_its_arch_on_rigid_springings():
     """Paper: 0.31. Independent value: the thrust-line LP of the 15-voussoir arch alone
     (t / R = 0.3 / 1.15, rigid springings), 0.308988: the buttresses could only raise it,
-    and they do not (the arch's joints slide first)."""
+    and they do not (the arch's joints slide first). The minimum friction is now that of
+    blocks set in place without pre-load (rbe/prestress.py), which the LP's any admissible
+    field bounds from below: 0.3101, 0.4% above it (the fixed point near its limit)."""
     exact = arch_limit.minimum_friction(15, 0.3 / 1.15)
-    assert minimum_friction(arch(), PAPER, tol=1e-5) == pytest.approx(exact, rel=1e-4)
+    found = minimum_friction(arch(), PAPER, tol=1e-5)
+    assert exact <= found <= exact * 1.005
     assert exact == pytest.approx(0.31, abs=0.005)
 
 

@@ -67,9 +67,11 @@ def test_every_candidate_verdict_is_the_full_checks(scene, max_held, shortcuts, 
 
 def test_a_held_course_costs_one_whole_check_per_step(monkeypatch):
     """On the 10 x 5 dome, whose fourth ring is built held at its first and its newest
-    block, each step of that ring is decided by one whole check: the other sets of holds
-    fail by relaxations (the held blocks rigid), and the set of the previous holds and the
-    new block is never checked, since a release of one of them stands."""
+    block, each step of that ring is decided by at most four whole checks: the other sets
+    of holds fail by relaxations (the held blocks rigid) where RBE has no field, by whole
+    checks where it has one that blocks set in place without pre-load do not get
+    (rbe/prestress.py: 3 such sets at most, one before), and the set of the previous holds
+    and the new block is never checked, since a release of one of them stands."""
     trials = collections.defaultdict(list)
     result = planning._Trial.result
 
@@ -87,7 +89,7 @@ def test_a_held_course_costs_one_whole_check_per_step(monkeypatch):
               if len(plan.held[k]) == 2 == len(plan.held[k - 1])]   # the newest hold moved on
     assert len(course) >= 7
     for k in course:
-        assert [model for _, model in trials[k]].count("full") == 1, (k, trials[k])
+        assert 1 <= [model for _, model in trials[k]].count("full") <= 4, (k, trials[k])
         assert frozenset(plan.held[k - 1]) | {plan.order[k]} not in dict(trials[k])
 
 

@@ -34,7 +34,7 @@ from scipy.spatial.transform import Rotation
 
 from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.analysis.pipeline import check_scene
-from rbe_ros.rbe.cones import CONES, FRICTION_MODELS
+from rbe_ros.rbe.cones import CONES, FRICTION_MODELS, cone_capacity
 from rbe_ros.rbe.result import Status
 from rbe_ros.rbe.solver import SolveOptions
 from rbe_ros.scene import box_block, make_scene
@@ -220,12 +220,16 @@ def test_stack_verdict_is_the_closed_form_one_and_explained(spec, solve):
                     assert by_pair[(it.below, it.above)].tension, (it.below, it.above)
                     assert it.above in report.unstable_blocks
         else:
-            # friction+ only: glue raises fn+ so that tan(tilt) > mu can be carried
-            assert solve.friction == "plus" and tan > solve.mu
+            # friction+ only: glue raises fn+ so that tan(tilt) beyond the cone's smallest
+            # capacity (mu, or mu h of an inscribed pyramid) can be carried
+            assert solve.friction == "plus" and tan > solve.mu * cone_capacity(solve.cone)
             assert report.worst_friction_ratio == pytest.approx(tan, rel=1e-5)
     elif report.status == Status.FRICTION_EXCEEDED:
-        # explained: every interface needs tan(tilt) and is flagged as sliding
-        assert all(r.friction_exceeded for r in report.interfaces)
+        # explained: every interface needs tan(tilt), so the boxes slide together on the
+        # lowest one (the least constraint's motion: rbe/prestress.py), all named
+        assert by_pair[(its[0].below, its[0].above)].friction_exceeded
+        assert report.unstable_blocks == tuple(sorted(b.id for b in spec.boxes
+                                                      if not b.support))
         assert report.worst_friction_ratio == pytest.approx(tan, rel=1e-5, abs=1e-7)
     elif report.status == Status.STABLE:
         # the statically determinate chain: closed-form resultants and centres of pressure

@@ -160,16 +160,19 @@ def test_the_stable_message_counts_its_interfaces(scene, message):
 
 
 def test_the_friction_message_names_the_cone_or_the_threshold():
-    """Sliding beyond the cone (mu 0.3: both slopes slide) names the cone and mu; a
+    """Sliding beyond the cone (mu 0.3: both slopes slide) names the blocks that slide (the
+    faster first: tan 25), the interfaces they slide across (the more loaded first: cos 20),
+    the cone and mu; a
     solution within the cone over the threshold (mu 0.6, threshold 0.4) names the
     threshold; the worst interface is the 25 deg slope's (|V|/N = tan 25)."""
     slides = checked(slopes_and_flat(), CheckOptions(SolveOptions(mu=0.3)))
-    assert slides.message == ("friction exceeded: |V|/N = 0.466 at interface s25_slope|s25_box,"
-                              " more than the soc cone allows with mu 0.3 (blocks s20_box,"
-                              " s25_box would slide)")
+    assert slides.message == ("friction exceeded: blocks s25_box, s20_box would slide at"
+                              " interface s20_slope|s20_box (and s25_slope|s25_box): |V|/N ="
+                              " 0.364 there, more than the soc cone allows with mu 0.3")
     over = checked(slopes_and_flat(), CheckOptions(mu_threshold=0.4))
-    assert over.message == ("friction exceeded: |V|/N = 0.466 at interface s25_slope|s25_box,"
-                            " more than the threshold 0.4 (block s25_box would slide)")
+    assert over.message == ("friction exceeded: block s25_box would slide at interface"
+                            " s25_slope|s25_box: |V|/N = 0.466 there, more than the threshold"
+                            " 0.4")
     assert over.worst_friction_ratio == pytest.approx(math.tan(math.radians(25)), rel=1e-6)
 
 

@@ -1,14 +1,14 @@
-"""Minimum friction (paper Sec. 3.2, Fig. 10a): the smallest mu for which the friction-net
-problem is feasible without tension, by bisection on mu."""
+"""Minimum friction (paper Sec. 3.2, Fig. 10a): the smallest mu at which the assembly stands
+by the criterion of ``check`` (the friction-net problem feasible without tension, and the
+blocks standing as set in place without pre-load, rbe/prestress.py), by bisection on mu."""
 from __future__ import annotations
 
 import math
 from dataclasses import replace
 
-from ..rbe.model import build_model
 from .assembly import Assembly
 from .options import CheckOptions
-from .verdict import feasible_without_tension
+from .verdict import model_of, stable_forces
 
 MU_MAX = 100.0
 
@@ -16,11 +16,11 @@ MU_MAX = 100.0
 def minimum_friction(assembly: Assembly, options: CheckOptions = CheckOptions(),
                      tol: float = 1e-4) -> float:
     """Smallest mu (to ``tol``) at which the assembly stands; inf if no friction suffices."""
-    model = build_model(assembly.blocks, assembly.interfaces, assembly.gravity)
+    model = model_of(assembly, options)
 
     def stands_with(mu: float) -> bool:
-        with_mu = replace(options, solve=replace(options.solve, mu=mu))
-        return feasible_without_tension(model, with_mu)
+        with_mu = replace(options, solve=replace(options.solve, mu=mu), mu_threshold=None)
+        return stable_forces(model, with_mu) is not None
 
     if not stands_with(math.inf):
         return math.inf

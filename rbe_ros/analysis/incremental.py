@@ -31,7 +31,6 @@ import numpy as np
 
 from ..geometry.polygon import cross
 from ..rbe.model import build_model
-from ..rbe.prestress import closed_interfaces
 from ..rbe.result import InterfaceResult, Report, Status
 from .assembly import Assembly
 from .graph import ContactGraph
@@ -99,16 +98,9 @@ class StepChecker:
         if not restrict:
             return next(filter(None, (self._relaxed(assembly, graph, region)
                                       for region in (set(new), first))), None)
-        report = self._local(assembly, graph, new, first)
-        return None if report is not None and report.stable and self._squeezable(assembly) \
-            else report
-
-    def _squeezable(self, assembly: Assembly) -> bool:
-        """Whether some interface of ``assembly`` could carry a squeeze (rbe/prestress.py):
-        a local proof of stability shows an admissible field of the whole, not that the
-        whole stands without prestress, so then only the full problem decides."""
-        model = build_model(assembly.blocks, assembly.interfaces, assembly.gravity)
-        return bool(closed_interfaces(model, self.options.deciding).any())
+        # a restriction's region passes the placement test (rbe/prestress.py) under the
+        # kept forces of the rest as loads: the step from the previous step's forces
+        return self._local(assembly, graph, new, first)
 
     def advance(self, assembly: Assembly, report: Report) -> None:
         """Take ``report`` (of ``assembly``) as the step reached: kept if it stands."""

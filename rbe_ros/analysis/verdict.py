@@ -22,7 +22,7 @@ import numpy as np
 
 from ..rbe.cones import cone_capacity
 from ..rbe.model import EquilibriumModel, Grip, build_model, finite
-from ..rbe.prestress import Squeeze, squeeze
+from ..rbe.prestress import Placement, placed
 from ..rbe.result import HoldWrench, InterfaceResult, Report, Status
 from ..rbe.resultants import interface_results
 from ..rbe.solver import Solution, solve
@@ -77,20 +77,36 @@ def _verdict(assembly: Assembly, options: CheckOptions) -> Report:
         report = _report(model, primary, options)
         if not report.stable:
             return report
-        found = _squeezed(model, options, primary)
-        return report if found is None else _prestress_report(model, report, found, options)
+        placement = placed(model, options.deciding, solution=primary)
+        if placement.stands:        # its field: RBE's where that one needs no squeeze
+            own = (report if placement.field is primary
+                   else _report(model, placement.field, options))
+            return own if own.stable else report     # (a ratio at mu to the solver's rounding)
+        if placement.beyond is not None:
+            return _exceeded(_report(model_of(assembly, options, bounded=False),
+                                     placement.beyond, options), model.grips)
+        return _placement_report(model, report, placement, options)
     if primary.status == "failed":
         return _failed(primary)
-    if any(finite(g.max_force) or finite(g.max_torque) for g in model.grips):
+    if _capped(model):
         unbounded = model_of(assembly, options, bounded=False)
         needed = solve(unbounded, options.deciding)
         if needed.solved:
             report = _report(unbounded, needed, options)
-            return _exceeded(report, model.grips) if report.stable else report
+            if not report.stable:
+                return report
+            placement = placed(model, options.deciding, solution=needed)
+            if placement.beyond is not None:
+                return _exceeded(_report(unbounded, placement.beyond, options), model.grips)
+            return _placement_report(unbounded, report, placement, options)
         if needed.status == "failed":
             return _failed(needed)
         model = unbounded
     return _explain(model, options)
+
+
+def _capped(model: EquilibriumModel) -> bool:
+    return any(finite(g.max_force) or finite(g.max_torque) for g in model.grips)
 
 
 def _exceeded(report: Report, grips: tuple[Grip, ...]) -> Report:
@@ -164,7 +180,16 @@ def _explain(model: EquilibriumModel, options: CheckOptions) -> Report:
         return Report(Status.INFEASIBLE, "no equilibrium even with tension")
     unlimited = solve(model, replace(options.solve, mu=math.inf, allow_tension=False))
     if unlimited.solved:
-        return _report(model, unlimited, options, sliding=True)
+        report = _report(model, unlimited, options, sliding=True)
+        placement = placed(model, options.deciding)
+        if placement.stands or not placement.moving:
+            return report
+        first = report.interfaces[placement.sliding[0]] if placement.sliding else None
+        ratio = (f": |V|/N = {first.friction_ratio:.3g} there" if first is not None
+                 and math.isfinite(first.friction_ratio) else "")
+        return replace(_sliding_report(model, report, placement), message=(
+            f"friction exceeded: {_motion(model, placement)}{ratio}, more than"
+            f" {_limit(options, True)}"))
     glued = solve(model, replace(options.solve, friction="plus"))
     if not glued.solved:
         return (_failed(glued) if glued.status == "failed" else
@@ -194,36 +219,46 @@ def stable_forces(model: EquilibriumModel, options: CheckOptions, load=None
     if any(r.tension or (r.friction_exceeded and counts)
            for r, counts in zip(results, _loaded(model, results, options))):
         return None
-    if _squeezed(model, options, solution, load) is not None:
+    if not placed(model, options.deciding, load, solution).stands:
         return None
     return solution, results
 
 
-def _squeezed(model: EquilibriumModel, options: CheckOptions, solution: Solution,
-              load=None) -> Squeeze | None:
-    """The last part of the criterion of check and stable_forces, for a ``solution`` that
-    passed the others: the squeeze when its blocks stand only by prestress
-    (rbe/prestress.py), else None. The reported field stays ``solution`` (RBE's)."""
-    found = squeeze(model, options.deciding, solution, load)
-    return None if found is None or found.stands else found
+def _placement_report(model, report: Report, placement: Placement,
+                      options: CheckOptions) -> Report:
+    """FRICTION_EXCEEDED for a field that blocks set in place without pre-load do not get:
+    the interfaces across which they slide flagged, the blocks that move named."""
+    return replace(_sliding_report(model, report, placement), message=(
+        f"friction exceeded without prestress: {_motion(model, placement)} (set in place"
+        f" from rest, with the friction of each contact up to mu {options.deciding.mu:.3g}"
+        f" times the normal force the loads produce there; RBE's field needs a squeeze)"))
 
 
-def _prestress_report(model, report: Report, found: Squeeze, options: CheckOptions) -> Report:
-    """FRICTION_EXCEEDED for a field that stands only by prestress: its squeezed interfaces
-    flagged, their free blocks named."""
-    hit = set(model.vertex_interface[found.vertices].tolist())
-    free = {model.blocks[j].id for j in model.free}
-    squeezed = sorted({b for k in hit for b in (report.interfaces[k].block_a,
-                                                report.interfaces[k].block_b)} & free)
-    interfaces = [replace(r, friction_exceeded=True) if k in hit else r
-                  for k, r in enumerate(report.interfaces)]
-    one = len(squeezed) == 1
-    message = (f"friction exceeded without prestress: {_names(squeezed)} stand{'s' * one} only"
-               f" squeezed between {'its' if one else 'their'} neighbours (with the friction"
-               f" of each contact up to mu {options.deciding.mu:.3g} times the normal force the"
-               f" loads alone produce there, no equilibrium)")
-    return replace(report, status=Status.FRICTION_EXCEEDED, message=message,
-                   interfaces=interfaces, unstable_blocks=squeezed)
+def _sliding_report(model, report: Report, placement: Placement) -> Report:
+    """``report`` FRICTION_EXCEEDED, its interfaces flagged and blocks named from
+    ``placement``'s motion: those across which the moving blocks slide (if none slides, the
+    report's own flags), those that move."""
+    hit = set(placement.sliding)
+    flagged = [replace(r, friction_exceeded=k in hit) for k, r in enumerate(report.interfaces)] \
+        if hit else report.interfaces        # they tip or turn: the field's own flags
+    moving = tuple(sorted(model.blocks[j].id for j in placement.moving))
+    return replace(report, status=Status.FRICTION_EXCEEDED, interfaces=flagged,
+                   unstable_blocks=moving)
+
+
+def _motion(model, placement: Placement) -> str:
+    """'block X would slide at interface a|b' from a placement's motion."""
+    moving = [model.blocks[j].id for j in placement.moving]
+    len(moving) == 1
+    where = [f"{model.blocks[it.a].id}|{model.blocks[it.b].id}"
+             for it in (model.interfaces[k] for k in placement.sliding[:3])]
+    if not moving:
+        return "no equilibrium"
+    if not where:
+        return f"{_names(moving)} would move"
+    more = f" and {len(placement.sliding) - 3} more" if len(placement.sliding) > 3 else ""
+    return (f"{_names(moving)} would slide at interface {where[0]}"
+            + (f" (and {', '.join(where[1:])}{more})" if len(where) > 1 else ""))
 
 
 def feasible_without_tension(model: EquilibriumModel, options: CheckOptions, load=None) -> bool:
@@ -262,11 +297,9 @@ def _report(model, solution, options: CheckOptions, *, sliding: bool = False) ->
     elif friction:
         worst_it = max(friction, key=lambda r: r.friction_ratio)
         status = Status.FRICTION_EXCEEDED
-        limit = (f"the {options.solve.cone} cone allows with mu {mu:.3g}"
-                 if sliding and mu == options.solve.mu
-                 else f"the threshold {options.threshold:.3g}")
         message = (f"friction exceeded: |V|/N = {worst_it.friction_ratio:.3g} at interface"
-                   f" {_iface(worst_it)}, more than {limit} ({_names(unstable)} would slide)")
+                   f" {_iface(worst_it)}, more than {_limit(options, sliding)}"
+                   f" ({_names(unstable)} would slide)")
     else:
         status = Status.STABLE
         message = (f"stable: {len(results)} interface{'s' * (len(results) != 1)} in compression,"
@@ -291,6 +324,15 @@ def _loaded(model, results: list[InterfaceResult], options: CheckOptions) -> lis
         return [True] * len(results)
     least = LOADED_SHARE * model.force_scale / len(model.free)
     return [r.normal_resultant >= least for r in results]
+
+
+def _limit(options: CheckOptions, sliding: bool) -> str:
+    """What a sliding interface needs more than: the cone (the deciding problem had no
+    field) or the threshold (a field within the cone, over it)."""
+    mu = options.deciding.mu
+    if sliding and mu == options.solve.mu:
+        return f"the {options.solve.cone} cone allows with mu {mu:.3g}"
+    return f"the threshold {options.threshold:.3g}"
 
 
 def _flag_sliding(results: list[InterfaceResult], capacity: float) -> list[InterfaceResult]:

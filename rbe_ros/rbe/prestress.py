@@ -1,22 +1,34 @@
-"""Force fields that stand only by prestress: blocks squeezed between their neighbours.
+"""Whether blocks set one at a time, without pre-load, stand: the test after RBE's field.
 
-RBE asks for some admissible force field. With Coulomb friction (no dilatancy) a field may
-hold a block by a compression the loads never produce in rigid blocks that start unstressed:
-a bar between two posts held by friction from a horizontal squeeze (Kao et al. 2022, Coupled
-Rigid-Block Analysis). The test (docs/METHOD.md, "Prestress"):
+RBE asks for some admissible force field. With Coulomb friction (sliding does not dilate a
+joint) a field may hold a block by normal forces the loads never produce in rigid blocks set
+in place unstressed: a bar between two posts held by a horizontal squeeze, a flat arch with
+vertical joints held by an arching thrust, a block on an incline pressed by a bar above it.
+A block is placed from rest and its weight comes on from zero: a contact gets a normal force
+only where the motion the loads would start closes it, and friction only up to mu times that
+(docs/METHOD.md, "Placement without pre-load").
 
-1. Gate: a virtual dilation of the blocks that opens an interface with d_n > mu |d_t| leaves
-   it no share in any self-equilibrated compression (its virtual work on the dilation would
-   be positive). Walls, arches and domes on the ground have every interface opened: no test.
-2. On the interfaces left closed: the stick field (elastic contacts sticking, unstressed at
-   the start: the minimum of the RBE QP's complementary energy without friction limit)
-   carries no prestress. If it lies within the vertex cones, the blocks stand. Otherwise
-   the RBE problem is solved again with the friction resultant of every closed interface
-   capped at mu times the stick field's normal resultant there (a Tresca bound, fixed before
-   the solve, that no squeeze can raise: one step of Panagiotopoulos' fixed point). No
-   field: they stand only squeezed. A field with no friction on the closed interfaces is
-   within every such cap: tried first, it decides most steps beside a held block in one
-   solve, without the stick field.
+The test is Panagiotopoulos' fixed point (*Inequality Problems in Mechanics*, 1985) on the
+step from rest of non-smooth contact dynamics (Moreau-Jean, as LMGC90 takes it, impulses
+from zero), each step a convex problem:
+
+1. Tresca caps g_I on the friction resultant of every interface I, first 0 (no friction).
+2. The step from rest under the caps: the motion the contact forces leave, the least
+   kinetic energy 1/2 e^T M^-1 e with e = A f + p the net wrench on each free block (M its
+   mass and inertia), with the vertex cones and the caps; then the forces of that motion:
+   the least 1/2 |f|^2 (the check's objective) with A f + p = e (no self-stress: it would
+   cost and do nothing), e's rounding absorbed by the same kinetic term. Two solves: one
+   with both terms would judge the forces to the solver's relative accuracy on the far
+   larger kinetic term of a falling block.
+3. If it leaves no motion (e = 0 to the solver's accuracy: the RBE problem with the caps has
+   a field), the blocks stand: that field is reached from rest. Else the caps become mu
+   times the step's normal resultants, and 2 again, until they no longer change: then the
+   blocks fall, those left with an acceleration are the ones that move, and the interfaces
+   across which they slide are named.
+
+A normal force that only a squeeze gives never enters a cap: the step from rest has no
+reason to produce it, and a cap fixed before a step cannot grow with the squeeze of that
+step. Normal forces that the load's moment produces (a block turning onto a face) enter.
 """
 from __future__ import annotations
 
@@ -24,124 +36,282 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
+import scipy.sparse as sp
 
 from .cones import pyramid_facets
 from .model import EquilibriumModel
 from .solver import Solution, SolveOptions, solve
 
-#: Vertical stretch factors of the virtual dilations tried (1: a similarity about a point far
-#: below; larger ones open the bed joints of courses whose bricks are long against their
-#: height); the one that leaves fewest interfaces closed is used.
-DILATIONS = (1.0, 4.0, 16.0)
-#: Depth of the dilation's centre below the scene, in scene lengths.
-CENTRE_DEPTH = 10.0
-#: The stick field lies within a vertex cone up to this share of mu fn, plus SHARE_TOL of
-#: the free weight (the solver's accuracy); the caps are raised by the same share.
-CONE_TOL = 1e-3
+#: Weight of the kinetic energy of the motion against the check's objective 1/2 |f|^2 (both
+#: in units of the free weight W): the step's forces are those of the motion to about
+#: 1 / INERTIA_WEIGHT of W.
+INERTIA_WEIGHT = 1e6
+#: A step that leaves no free block a net force above this share of its weight (a moment
+#: above it times its weight and size) may have left no motion: the RBE problem with the
+#: step's caps decides (the kinetic term's weight against the check's objective and the
+#: robots' wrenches leaves about 1e-3 of a held block's weight unbalanced).
+STILL = 1e-2
+#: The caps no longer change when none moves by more than this share of W.
+CONVERGED = 1e-4
+#: Normal resultants below this share of the lighter free block's weight at an interface
+#: give no cap (see _noise_floor): the solver's offset from a cone's apex (1e-4 of the block
+#: weight, measured) would otherwise grow, step by step, into friction no load produced.
+NOISE_SHARE = 1e-2
+#: At most this many steps: the fixed point's caps converge geometrically; a case that has
+#: not converged by then is judged on its last step.
+MAX_STEPS = 40
+#: A block moves when its acceleration (|a| + |alpha| times its size) exceeds this share of
+#: the largest one and MOVING_G of g; an interface slides when its blocks' relative
+#: tangential acceleration at its centre exceeds the same share and the normal one.
+MOVING_SHARE = 1e-2
+MOVING_G = 1e-4
+#: The caps hold the test's field within mu N (1 + CONE_TOL) + SHARE_TOL W (the accuracy
+#: of the solver's normal forces).
+CONE_TOL = 1e-6
 SHARE_TOL = 1e-7
 
 
 @dataclass(frozen=True)
-class Squeeze:
-    """The vertices (a boolean mask) of the squeezed blocks' closed interfaces where the
-    stick field needed more friction than its normal forces give, when no field within the
-    caps exists; none when the loads alone hold the blocks."""
+class Placement:
+    """The answer of the test: the field that stands (None when the blocks move), else the
+    free blocks that move (indices into the model's blocks, the fastest first) and the
+    interfaces they slide across (indices, the most loaded first)."""
 
-    vertices: np.ndarray
+    field: Solution | None
+    moving: tuple[int, ...] = ()
+    sliding: tuple[int, ...] = ()
+    steps: int = 0
+    #: a field that stands with more than the grips' capacities (their wrenches needed)
+    beyond: Solution | None = None
+    #: the last step from rest (its net wrenches: the motion), when the blocks move
+    motion: Solution | None = None
 
     @property
     def stands(self) -> bool:
-        return not self.vertices.any()
+        return self.field is not None
 
 
-def unopened(model: EquilibriumModel, mu: float) -> np.ndarray:
-    """The interfaces (a boolean mask) that the best of the virtual dilations (translations
-    of the free blocks away from a point far below, supports and held blocks fixed: the
-    robots' wrenches then do no virtual work) does not open with
-    d_n > mu |d_t|. None unopened: no self-equilibrated compression exists (its virtual work
-    on the dilation would be positive, yet A s = 0 makes it zero)."""
-    if not len(model.interfaces):
-        return np.zeros(0, dtype=bool)
-    blocks = model.blocks
-    centroids = np.array([b.centroid for b in blocks])
-    free = np.zeros(len(blocks), dtype=bool)
-    free[model.free] = True
-    held = {g.block for g in model.grips}          # a robot keeps a held block in place
-    free[[j for j, b in enumerate(blocks) if b.id in held]] = False
-    if not free.any():          # every free block held: nothing to squeeze
-        return np.zeros(len(model.interfaces), dtype=bool)
-    up = _up(model)
-    centre = centroids[free].mean(axis=0) - CENTRE_DEPTH * model.length_scale * up
-    pairs = np.array([(it.a, it.b) for it in model.interfaces], dtype=int)
-    normal = model.normal[np.searchsorted(model.vertex_interface, np.arange(len(pairs)))]
-    best = None
-    for stretch in DILATIONS:
-        offset = centroids - centre
-        offset += (stretch - 1.0) * (offset @ up)[:, None] * up[None, :]
-        moved = np.where(free[:, None], offset, 0.0)
-        d = moved[pairs[:, 1]] - moved[pairs[:, 0]]
-        dn = np.einsum("ij,ij->i", d, normal)
-        shut = dn <= mu * np.linalg.norm(d - dn[:, None] * normal, axis=1)
-        if best is None or shut.sum() < best.sum():
-            best = shut
-    return best
-
-
-def squeeze(model: EquilibriumModel, options: SolveOptions, solution: Solution,
-            load=None) -> Squeeze | None:
-    """Whether the loads (scaled p; default the dead load) alone hold ``model``'s blocks,
-    of which ``solution`` is an RBE field: None when a dilation opens every interface (no
-    squeeze can arise), else the result of the test on the interfaces it leaves closed."""
-    shut = closed_interfaces(model, options)
-    if not shut.any():
-        return None
-    return _unsqueezed(model, options, solution, load, shut)
-
-
-def closed_interfaces(model: EquilibriumModel, options: SolveOptions) -> np.ndarray:
-    """The interfaces (a boolean mask) where a squeeze could arise under ``options``'
-    friction: those the gate's dilations leave closed; none without a friction limit (no
-    squeeze is needed then)."""
-    if not math.isfinite(options.mu):
-        return np.zeros(len(model.interfaces), dtype=bool)
-    return unopened(model, options.mu / _capacity_of_outer(options.cone))
-
-
-def _least_caps(model: EquilibriumModel, shut: np.ndarray) -> np.ndarray:
-    """Friction caps (N per interface, inf: none) no larger than any cap of the test on the
-    ``shut`` interfaces (the additive tolerance alone): a field within them passes it
-    whatever the stick field, so it stands without that solve."""
-    return np.where(shut, SHARE_TOL * model.force_scale, math.inf)
-
-
-def _unsqueezed(model, options: SolveOptions, solution: Solution, load,
-                shut: np.ndarray) -> Squeeze:
-    """Caps on the friction resultant of every ``shut`` interface: mu times the normal
-    resultant of the stick field (no friction limit) there, a Tresca bound no squeeze can
-    raise. They stand if the RBE problem has a field within the least caps (none needs the
-    stick field), or ``solution`` keeps the caps, or the stick field lies within the vertex
-    cones, or the RBE problem solved with the caps has a field."""
+def placed(model: EquilibriumModel, options: SolveOptions, load=None,
+           solution: Solution | None = None) -> Placement:
+    """The test on ``model`` under ``load`` (scaled p; default its dead load) with the
+    friction of ``options`` (a check's deciding problem). ``solution``: a field of the RBE
+    problem already solved (of ``model`` or of it without the grips' capacities); where it
+    keeps a step's caps it is the field that stands, without that step's solves (a wall on
+    level ground needs no friction: no solve at all), or beyond the capacities. The first
+    step's caps, none, it keeps to the noise floor: friction below 1% of the lighter
+    block's weight is the solver's rounding there (a running-bond wall's QP field: 1e-3 of
+    a brick's weight)."""
+    if not math.isfinite(options.mu) or not len(model.free):    # nothing can slide
+        field = solution if solution is not None and solution.solved else \
+            solve(model, options, load=load)
+        return Placement(field if field.solved else None)
     options = replace(options, objective="qp", friction="net")
-    if solve(model, options, load=load, friction_cap=_least_caps(model, shut)).solved:
-        return Squeeze(np.zeros(model.num_vertices, dtype=bool))
-    stick = solve(model, replace(options, mu=math.inf), load=load)
-    if not stick.solved:
-        return Squeeze(shut[model.vertex_interface])
-    cap = options.mu * np.maximum(_sums(model, stick.forces[0]), 0.0) * (1.0 + CONE_TOL) \
-        + SHARE_TOL * model.force_scale
-    none = np.zeros(model.num_vertices, dtype=bool)
-    friction = _tangential(*(_sums(model, solution.forces[k]) for k in (2, 3)), options.cone)
-    if np.all(friction[shut] <= cap[shut]):
-        return Squeeze(none)
-    fn, _, fu, fv = stick.forces
-    over = (_tangential(fu, fv, options.cone)
-            > options.mu * np.maximum(fn, 0.0) * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale)
-    if not over.any():
-        return Squeeze(none)
-    if solve(model, options, load=load, friction_cap=np.where(shut, cap, math.inf)).solved:
-        return Squeeze(none)
-    named = shut[model.vertex_interface] & over      # where the stick field needed more
-    return Squeeze(named if named.any() else shut[model.vertex_interface])
+    metric = inertia_metric(model)
+    # a robot keeps its block where it is (its arm is position-controlled): during the
+    # steps its wrench is what holding it takes; the capacities bound the field that stands
+    rigid = replace(model, grips=tuple(replace(g, max_force=_unless_none(g.max_force),
+                                               max_torque=_unless_none(g.max_torque))
+                                       for g in model.grips))
+    load = model.dead_load if load is None else np.asarray(load, dtype=float)
+    caps = np.zeros(len(model.interfaces))
+    floor = _noise_floor(model)
+    motion = None
+    for count in range(1, MAX_STEPS + 1):
+        bound = caps * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
+        if solution is not None and solution.solved and _within(
+                model, solution, bound if caps.any() else bound + floor, options.cone):
+            return (Placement(solution, steps=count - 1) if _held(model, solution)
+                    else Placement(None, steps=count - 1, beyond=solution))
+        frictionless = not caps.any()       # the first step: no variables of friction
+        motion = solve(rigid, options, load=load, friction_cap=bound, inertia=metric,
+                       frictionless=frictionless)
+        if not motion.solved:
+            break
+        if _still(model, motion):
+            settled = _settled(model, rigid, options, load, caps, floor)
+            if settled is not None:
+                return replace(settled, steps=count)
+        # the least forces that leave the motion found: its normal forces, none by squeeze
+        forces = solve(rigid, options, load=load - _scaled(model, motion.unbalanced),
+                       friction_cap=bound, inertia=metric, frictionless=frictionless)
+        if not forces.solved:
+            break
+        normal = options.mu * _above_noise(_sums(model, forces.forces[0]), floor)
+        if np.abs(normal - caps).max(initial=0.0) <= CONVERGED * model.force_scale:
+            break
+        caps = normal
+    return _moved(model, motion, count)
+
+
+def _settled(model: EquilibriumModel, rigid: EquilibriumModel, options: SolveOptions, load,
+             caps: np.ndarray, floor: np.ndarray) -> Placement | None:
+    """The field that stands once a step leaves no motion: the least one within the caps
+    (None if there is none). With grips, again with caps from its own normal forces until
+    they settle: a robot's wrench is a load, and the normal forces it makes give friction
+    (else a robot that holds its block still would carry all of it without friction).
+    Beyond the grips' capacities (``beyond``) unless a field within the caps keeps them."""
+    field = None
+    for _ in range(MAX_STEPS):
+        bound = caps * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
+        found = solve(rigid, options, load=load, friction_cap=bound)
+        if not found.solved:
+            break
+        field = found
+        normal = options.mu * _above_noise(_sums(model, field.forces[0]), floor)
+        if not model.grips or np.abs(normal - caps).max(initial=0.0) \
+                <= CONVERGED * model.force_scale:
+            break
+        caps = normal
+    if field is None:
+        return None
+    if _held(model, field):
+        return Placement(field)
+    capped = solve(model, options, load=load, friction_cap=bound)
+    return Placement(capped) if capped.solved else Placement(None, beyond=field)
+
+
+def _held(model: EquilibriumModel, solution: Solution) -> bool:
+    """Whether the grips' wrenches in ``solution`` are within their capacities."""
+    return all(np.linalg.norm(w[:3]) <= g.max_force * (1.0 + CONE_TOL) + SHARE_TOL *
+               model.force_scale and np.linalg.norm(w[3:]) <= g.max_torque * (1.0 + CONE_TOL)
+               + SHARE_TOL * model.force_scale * model.length_scale
+               for g, w in zip(model.grips, solution.wrenches))
+
+
+def _unless_none(capacity: float) -> float:
+    """A grip's capacity made unbounded, unless it is 0 (what the grip cannot apply)."""
+    return capacity if capacity == 0 else math.inf
+
+
+def _within(model: EquilibriumModel, solution: Solution, bound: np.ndarray, cone: str) -> bool:
+    """Whether every interface's friction resultant in ``solution`` is within ``bound``."""
+    friction = _tangential(*(_sums(model, solution.forces[k]) for k in (2, 3)), cone)
+    return bool(np.all(friction <= bound))
+
+
+def _noise_floor(model: EquilibriumModel) -> np.ndarray:
+    """Per interface NOISE_SHARE of the weight of its lighter free block (of the free
+    weight W when it joins no free block's weight): a normal resultant below it is the
+    interior-point solver's offset from the cone's apex, not a force of the motion."""
+    weight = np.full(len(model.blocks), np.inf)
+    weight[model.free] = [model.blocks[j].mass for j in model.free]
+    weight *= model.force_scale / max(sum(model.blocks[j].mass for j in model.free), 1e-300)
+    pairs = np.array([(it.a, it.b) for it in model.interfaces], dtype=int).reshape(-1, 2)
+    lighter = np.minimum(weight[pairs[:, 0]], weight[pairs[:, 1]])
+    return NOISE_SHARE * np.where(np.isfinite(lighter), lighter, model.force_scale)
+
+
+def _above_noise(normal: np.ndarray, floor: np.ndarray) -> np.ndarray:
+    return np.where(normal > floor, normal, 0.0)
+
+
+def _scaled(model: EquilibriumModel, wrenches: np.ndarray) -> np.ndarray:
+    """Net wrenches (N, N m per free block row) in the model's scaled units."""
+    e = wrenches.reshape(-1, 6) / model.force_scale
+    e[:, 3:] /= model.length_scale
+    return e.ravel()
+
+
+def inertia_metric(model: EquilibriumModel) -> sp.csc_matrix:
+    """INERTIA_WEIGHT x the inverse of the free blocks' mass matrix on the scaled
+    equilibrium rows (force / W, moment / (W L)), relative to the mean free mass: block
+    diagonal, as an upper triangle (what the solver reads). A block's inertia about its
+    centroid is that of its vertices as point masses, over 3 (exact for a parallelepiped,
+    whose vertices' second moment is 3 times the solid's)."""
+    blocks = [model.blocks[j] for j in model.free]
+    if not blocks:
+        return sp.csc_matrix((0, 0))
+    mass = np.array([b.mass for b in blocks], dtype=float)
+    mean = float(mass.mean()) or 1.0
+    mass = np.where(mass > 0, mass, mean)
+    second = np.array([(b.vertices - b.centroid).T @ (b.vertices - b.centroid) / len(b.vertices)
+                       for b in blocks])
+    size = np.array([b.size for b in blocks])
+    eye = np.eye(3)
+    inertia = (mass / 3.0)[:, None, None] * (np.trace(second, axis1=1, axis2=2)[:, None, None]
+                                             * eye - second)
+    inertia += (1e-9 * mass * size ** 2)[:, None, None] * eye     # a flat or linear block
+    rotation = mean * model.length_scale ** 2 * np.linalg.inv(inertia)
+    m = len(blocks)
+    # per block 6 columns: 3 of the force (one diagonal entry each), 3 of the moment (the
+    # upper triangle of the 3 x 3 block: 1, 2, 3 entries)
+    first = 6 * np.arange(m)
+    rows = [first + k for k in range(3)] + [first + 3, first + 3, first + 4, first + 3,
+                                            first + 4, first + 5]
+    data = [mean / mass] * 3 + [rotation[:, 0, 0], rotation[:, 0, 1], rotation[:, 1, 1],
+                                rotation[:, 0, 2], rotation[:, 1, 2], rotation[:, 2, 2]]
+    counts = np.array([1, 1, 1, 1, 2, 3])
+    indptr = np.concatenate(([0], np.cumsum(np.tile(counts, m))))
+    return sp.csc_matrix((INERTIA_WEIGHT * np.column_stack(data).ravel(),
+                          np.column_stack(rows).ravel(), indptr), shape=(6 * m, 6 * m))
+
+
+def _still(model: EquilibriumModel, step: Solution) -> bool:
+    """Whether no free block is left with a net force above STILL of its weight (or a net
+    moment above STILL of its weight times its size)."""
+    e = step.unbalanced.reshape(-1, 6)
+    weight = np.array([model.blocks[j].mass for j in model.free]) * (
+        model.force_scale / sum(model.blocks[j].mass for j in model.free))
+    size = np.array([model.blocks[j].size for j in model.free])
+    return bool(np.all(np.linalg.norm(e[:, :3], axis=1) <= STILL * weight) and
+                np.all(np.linalg.norm(e[:, 3:], axis=1) <= STILL * weight * size))
+
+
+def accelerations(model: EquilibriumModel, step: Solution) -> tuple[np.ndarray, np.ndarray]:
+    """Per free block (rows of model.free) its acceleration (m/s^2) and angular
+    acceleration (rad/s^2) from the step's net wrenches."""
+    e = step.unbalanced.reshape(-1, 6)
+    upper = inertia_metric(model) / INERTIA_WEIGHT
+    metric = upper + sp.triu(upper, 1).T
+    scaled = np.column_stack((e[:, :3] / model.force_scale,
+                              e[:, 3:] / (model.force_scale * model.length_scale)))
+    rate = (metric @ scaled.ravel()).reshape(-1, 6)
+    mean = np.mean([model.blocks[j].mass for j in model.free])
+    return (rate[:, :3] * model.force_scale / mean,
+            rate[:, 3:] * model.force_scale / (mean * model.length_scale))
+
+
+def _moved(model: EquilibriumModel, step: Solution | None, count: int) -> Placement:
+    """The blocks that move at the last step and the interfaces they slide across."""
+    if step is None or not step.solved:
+        return Placement(None, tuple(int(j) for j in model.free), (), count)
+    moved = _motion_of(model, step)
+    return Placement(None, *moved, count, motion=step)
+
+
+def _motion_of(model: EquilibriumModel, step: Solution):
+    """(moving blocks, sliding interfaces) of a step: see :class:`Placement`."""
+    linear, angular = accelerations(model, step)
+    sizes = np.array([model.blocks[j].size for j in model.free])
+    rate = np.linalg.norm(linear, axis=1) + np.linalg.norm(angular, axis=1) * sizes
+    g = model.force_scale / sum(model.blocks[j].mass for j in model.free)
+    moving = np.flatnonzero((rate > MOVING_SHARE * rate.max(initial=0.0))
+                            & (rate > MOVING_G * g))
+    order = moving[np.argsort(-rate[moving], kind="stable")]
+    row = np.full(len(model.blocks), -1)
+    row[model.free] = np.arange(len(model.free))
+    normal = _sums(model, step.forces[0])
+    slide = []
+    for k, it in enumerate(model.interfaces):
+        ra, rb = row[it.a], row[it.b]
+        if not ((ra >= 0 and ra in moving) or (rb >= 0 and rb in moving)):
+            continue
+        x = it.frame.origin
+        va = _velocity(linear, angular, ra, x, model.blocks[it.a].centroid)
+        vb = _velocity(linear, angular, rb, x, model.blocks[it.b].centroid)
+        d = vb - va
+        n = it.frame.n
+        dn = float(d @ n)
+        dt = float(np.linalg.norm(d - dn * n))
+        if dt > MOVING_SHARE * rate.max() and dn <= dt:     # sliding, not lifting off
+            slide.append((-normal[k], -dt, k))
+    return (tuple(int(model.free[r]) for r in order), tuple(k for _, _, k in sorted(slide)))
+
+
+def _velocity(linear, angular, r: int, x, centre) -> np.ndarray:
+    if r < 0:
+        return np.zeros(3)
+    return linear[r] + np.cross(angular[r], x - centre)
 
 
 def _sums(model: EquilibriumModel, values: np.ndarray) -> np.ndarray:
@@ -156,19 +326,3 @@ def _tangential(fu: np.ndarray, fv: np.ndarray, cone: str) -> np.ndarray:
         return np.hypot(fu, fv)
     angles, h = pyramid_facets(cone)
     return np.max(np.outer(fu, np.cos(angles)) + np.outer(fv, np.sin(angles)), axis=1) / h
-
-
-def _capacity_of_outer(cone: str) -> float:
-    """cos(pi / n) of a pyramid (its largest friction is mu fn / cos(pi / n) along an edge),
-    1 for the exact cone: the certificate must hold for the cone's largest friction."""
-    if cone == "soc":
-        return 1.0
-    angles, h = pyramid_facets(cone)
-    return math.cos(math.pi / len(angles)) / h
-
-
-def _up(model: EquilibriumModel) -> np.ndarray:
-    """Unit vector against the model's dead load (z when it has none)."""
-    load = -model.dead_load.reshape(-1, 6)[:, :3].sum(axis=0)
-    norm = np.linalg.norm(load)
-    return load / norm if norm > 0 else np.array([0.0, 0.0, 1.0])

@@ -111,6 +111,9 @@ class Solution:
     multiplier: float = math.nan     # lambda of the load-multiplier problem
     #: (grips, 6): per grip of the model its force (N) and torque about the grip (N m)
     wrenches: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
+    #: (6 m,): under ``inertia``, the net wrench left on each free block (force in N, moment
+    #: about its centroid in N m; m a and the rate of its angular momentum); else empty
+    unbalanced: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def solved(self) -> bool:
@@ -186,11 +189,16 @@ def _spent_since(start: float) -> float:
 
 def solve(model: EquilibriumModel, options: SolveOptions = SolveOptions(), *,
           load: np.ndarray | None = None, live_load: np.ndarray | None = None,
-          friction_cap: np.ndarray | None = None) -> Solution:
+          friction_cap: np.ndarray | None = None,
+          inertia: sp.spmatrix | None = None, frictionless: bool = False) -> Solution:
     """Solve the RBE problem of ``model`` under ``load`` (scaled p; default: dead load).
     ``friction_cap`` (N per interface, inf: none) bounds the resultant of each interface's
     friction forces in the cone's norm, as well as the vertex cones (Tresca bounds of the
-    prestress test, rbe/prestress.py).
+    placement test, rbe/prestress.py). ``inertia`` (a positive definite (6 m, 6 m) matrix
+    on the scaled equilibrium rows) turns equilibrium into the step from rest: the rows'
+    imbalance e = A x + p is free, at the cost 1/2 e^T inertia e added to the objective
+    (the kinetic energy of the motion it starts, rbe/prestress.py). ``frictionless``: no
+    friction variables at all (fn >= 0 only; a third of the variables and no cones).
     Within a check's time budget (:mod:`rbe_ros.deadline`) the solver gets what is left of it,
     and a solve that runs out of it raises CheckTimeout."""
     checkpoint()
@@ -202,16 +210,20 @@ def solve(model: EquilibriumModel, options: SolveOptions = SolveOptions(), *,
     # cost with the same net force and cone, so it is left out (and with it the 1e6 penalty
     # weight, which only slows the solver down).
     tension = options.allow_tension and not multiplier and options.friction == "plus"
-    v = _Variables(nv, tension, lp, multiplier, model.hold_columns.shape[1])
+    if frictionless:            # fn >= 0 rows, no cones (as with no friction limit)
+        options, friction_cap = replace(options, mu=math.inf), None
+    v = _Variables(nv, tension, lp, multiplier, model.hold_columns.shape[1],
+                   0 if inertia is None else model.a_eq.shape[0], not frictionless)
     cap = None if friction_cap is None else np.asarray(friction_cap, float) / model.force_scale
     a, b, cones = _constraints(model, options, v, p, live_load, (1.0, MAX_MULTIPLIER), cap)
     p_diag, q = _objective(options, v, lp, multiplier)
+    p_matrix = _Csc.diagonal(p_diag) if inertia is None else _with_inertia(p_diag, v, inertia)
     if lp and nv:
         offsets = (model.points - model.points.mean(axis=0)) @ _TIE_DIRECTION
         tie = 1.0 + LP_TIE_BREAK * (offsets / model.length_scale) ** 2
         for k in (0, 1) if tension else (0,):
             q[v.base[k]:v.base[k] + nv] *= tie
-    data = [_Csc.diagonal(p_diag), _floats(q), a, _floats(b), cones]
+    data = [p_matrix, _floats(q), a, _floats(b), cones]
     start = time.perf_counter()
     status, accepted = "", None
     for k, attempt in enumerate(_attempts(tension)):
@@ -221,7 +233,8 @@ def solve(model: EquilibriumModel, options: SolveOptions = SolveOptions(), *,
         if attempt.tension_scale != 1.0:
             p_retry, q_retry = p_diag.copy(), q.copy()
             (q_retry if lp else p_retry)[v.base[1]:v.base[1] + nv] *= attempt.tension_scale
-            data[:2] = [_Csc.diagonal(p_retry), _floats(q_retry)]
+            data[:2] = [_Csc.diagonal(p_retry) if inertia is None else
+                        _with_inertia(p_retry, v, inertia), _floats(q_retry)]
         settings = _settings(options, attempt, time.perf_counter() - start, a.shape[0] + v.count)
         result = clarabel.DefaultSolver(*data, settings).solve()
         status = str(result.status)
@@ -320,15 +333,19 @@ def _accept(model: EquilibriumModel, v: _Variables, x: np.ndarray, p, live_load,
         if v.base[k] >= 0:
             forces[k] = x[v.base[k]:v.base[k] + nv]
     z = x[v.hold]
-    residual = model.a_eq @ forces.ravel() + model.hold_columns @ z + p
+    e = x[v.res]
+    residual = model.a_eq @ forces.ravel() + model.hold_columns @ z + p - (e if len(e) else 0.0)
     lam = float(x[v.lam]) if live_load is not None else math.nan
     if live_load is not None:
         residual = residual + lam * np.asarray(live_load)
     residual = float(np.abs(residual).max(initial=0.0))
     if residual > RESIDUAL_TOL:
         return None
+    unbalanced = e.reshape(-1, 6) * model.force_scale if len(e) else e
+    if len(e):
+        unbalanced[:, 3:] *= model.length_scale
     return Solution("solved", status, forces * model.force_scale, 0.0, residual, lam,
-                    _wrenches(model, z))
+                    _wrenches(model, z), unbalanced.ravel())
 
 
 def _wrenches(model: EquilibriumModel, z: np.ndarray) -> np.ndarray:
@@ -426,6 +443,10 @@ def _equilibrium_columns(model: EquilibriumModel, v: _Variables, column) -> sp.c
         indptr = np.concatenate((indptr[:nv + 1], indptr[2 * nv + 1:] - (hi - lo)))
         indices = np.concatenate((indices[:lo], indices[hi:]))
         data = np.concatenate((data[:lo], data[hi:]))
+    if v.base[2] < 0:       # frictionless: drop the fu, fv columns (the last 2 nv)
+        kept = (len(indptr) - 1) - 2 * nv
+        indptr = indptr[:kept + 1]
+        indices, data = indices[:indptr[-1]], data[:indptr[-1]]
     extra = [np.full(len(v.t), indptr[-1])]
     holds = model.hold_columns
     if holds.shape[1]:
@@ -433,9 +454,13 @@ def _equilibrium_columns(model: EquilibriumModel, v: _Variables, column) -> sp.c
         extra.append(indptr[-1] + holds.indptr[1:])
         indices = np.concatenate((indices, holds.indices))
         data = np.concatenate((data, holds.data))
+    if len(v.res):
+        extra.append(indices.size + 1 + np.arange(len(v.res)))
+        indices = np.concatenate((indices, np.arange(len(v.res))))
+        data = np.concatenate((data, -np.ones(len(v.res))))
     if column is not None:
         values = np.asarray(column, dtype=float)
-        extra.append([indptr[-1] + len(values)])
+        extra.append([indices.size + len(values)])
         indices = np.concatenate((indices, np.arange(len(values))))
         data = np.concatenate((data, values))
     indptr = np.concatenate([indptr] + extra)
@@ -443,16 +468,18 @@ def _equilibrium_columns(model: EquilibriumModel, v: _Variables, column) -> sp.c
 
 
 class _Variables:
-    """Column layout: fn+, [fn-], fu, fv (nv each), [t (nv), LP friction magnitudes], [hold
-    wrenches], [lambda]."""
+    """Column layout: fn+, [fn-], [fu, fv] (nv each), [t (nv), LP friction magnitudes], [hold
+    wrenches], [imbalance e of the equilibrium rows, under inertia], [lambda]."""
 
-    def __init__(self, nv: int, tension: bool, lp: bool, multiplier: bool, holds: int = 0):
-        kinds = (0, 1, 2, 3) if tension else (0, 2, 3)
+    def __init__(self, nv: int, tension: bool, lp: bool, multiplier: bool, holds: int = 0,
+                 rows: int = 0, friction: bool = True):
+        kinds = ((0, 1) if tension else (0,)) + ((2, 3) if friction else ())
         self.base = np.full(4, -1)
         self.base[list(kinds)] = np.arange(len(kinds)) * nv
         self.t = len(kinds) * nv + np.arange(nv if lp else 0)
         self.hold = len(kinds) * nv + len(self.t) + np.arange(holds)
-        self.lam = len(kinds) * nv + len(self.t) + holds
+        self.res = len(kinds) * nv + len(self.t) + holds + np.arange(rows)
+        self.lam = len(kinds) * nv + len(self.t) + holds + rows
         self.count = self.lam + int(multiplier)
         self.nv = nv
 
@@ -577,6 +604,21 @@ class _Csc:
     def tocsc(self) -> sp.csc_matrix:
         return sp.csc_matrix((np.array(self.data), np.array(self.indices), np.array(self.indptr)),
                              shape=self.shape)
+
+
+def _with_inertia(p_diag: np.ndarray, v: _Variables, inertia: sp.spmatrix) -> _Csc:
+    """The objective's matrix: diag(p_diag) and ``inertia`` (upper triangular CSC) on the
+    imbalance variables, which carry no diagonal entry of their own; as Clarabel reads it."""
+    first, rows = int(v.res[0]), len(v.res)
+    upper = sp.csc_matrix(inertia)
+    before, after = p_diag[:first], p_diag[first + rows:]
+    nz_before, nz_after = np.flatnonzero(before), np.flatnonzero(after)
+    counts = np.concatenate(((before != 0).astype(np.int64), np.diff(upper.indptr),
+                             (after != 0).astype(np.int64)))
+    indptr = np.concatenate(([0], np.cumsum(counts)))
+    indices = np.concatenate((nz_before, upper.indices + first, nz_after + first + rows))
+    data = np.concatenate((before[nz_before], upper.data, after[nz_after]))
+    return _Csc(data, indices, indptr, (v.count, v.count))
 
 
 def _objective(options: SolveOptions, v: _Variables, lp: bool, multiplier: bool):

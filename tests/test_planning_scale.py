@@ -143,7 +143,7 @@ def test_json_has_one_summary_per_step_and_reports_stream(tmp_path, capsys):
     steps = out["steps"]
     assert [s["block"] for s in steps] == out["order"]
     assert set(steps[0]) == {"step", "block", "status", "stable", "held_blocks", "margin_g",
-                             "worst_friction_ratio", "max_tension", "time", "model"}
+                             "worst_friction_ratio", "max_tension", "time", "model", "hold_wrenches"}
     full = [json.loads(line) for line in lines.read_text().splitlines()]
     assert [r["block_placed"] for r in full] == out["order"]
     assert [r["held_blocks"] for r in full] == [s["held_blocks"] for s in steps]

@@ -62,6 +62,7 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallb
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
 from rclpy.signals import SignalHandlerOptions
@@ -223,7 +224,7 @@ class RbeChecks:
 
         self.add_on_set_parameters_callback(self._validate_parameters)
         for name, (value, descriptor) in PARAMETERS.items():
-            self.declare_parameter(name, value, descriptor)
+            self._declare(name, value, descriptor)
 
         # States on the topic are checked in order; the service has its own group so that a
         # long sequence on the topic does not block it; action callbacks are reentrant so a
@@ -268,6 +269,16 @@ class RbeChecks:
         self._log_counts: dict[str, int] = {}
         self._log_since = time.monotonic() - LOG_SUMMARY_S     # the first report: a line
         self._last_verdict = None
+
+    def _declare(self, name: str, value, descriptor: ParameterDescriptor) -> None:
+        """Declare a parameter; an integer given for a float one (``-p
+        max_bag_duration_s:=120``: the launch line cannot say 120.0) is taken as that float,
+        not refused with a FATAL at start."""
+        given = self._parameter_overrides.get(name)
+        if descriptor.type == ParameterType.PARAMETER_DOUBLE and given is not None and \
+                given.type_ == Parameter.Type.INTEGER:
+            self._parameter_overrides[name] = Parameter(name, value=float(given.value))
+        self.declare_parameter(name, value, descriptor)
 
     def _start_foxglove(self) -> None:
         if self.get_parameter("foxglove_port").value:
@@ -928,7 +939,7 @@ def spin(node_class, args=None) -> None:
             executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except ParameterException as exc:  # e.g. -p friction_coefficient:=1 (an integer)
+    except ParameterException as exc:  # e.g. -p friction_coefficient:=high
         rclpy.logging.get_logger(NODE_NAME).fatal(f"bad parameter: {exc}")
         raise SystemExit(2) from None
     except ConfigurationError as exc:

@@ -454,8 +454,41 @@ def plan_feedback_to_dict(progress: PlanProgress) -> dict:
             "held": [str(b) for b in progress.held], "elapsed": float(progress.elapsed)}
 
 
-__all__ = ["SOLID_PRIMITIVE_BOX", "header_dict", "header_stamp_ns", "json_safe",
-           "plan_feedback_to_dict", "plan_goal_from_dict", "plan_goal_to_dict",
-           "plan_result_to_dict", "poses_from_dict", "poses_to_dict", "report_from_dict",
-           "report_header", "report_json", "report_to_dict", "scene_from_state_dict",
-           "state_to_dict"]
+# --- plan execution (~/execution, ~/plan_update) -----------------------------------------------
+
+def lookahead_step_to_dict(report: Report) -> dict:
+    """An rbe_msgs/LookaheadStep dict of a future step's report (checked with the placed
+    blocks at their measured poses and the rest at design)."""
+    force = max((float(np.linalg.norm(w.force)) for w in report.hold_wrenches), default=0.0)
+    return {"step": int(report.step_index), "block": str(report.block_placed),
+            "stable": bool(report.stable), "status": int(report.status),
+            "insertable": bool(report.insertable), "margin_g": float(report.margin_g),
+            "max_hold_force": force, "message": "" if report.stable else str(report.message)}
+
+
+def execution_to_dict(header: dict, *, active: bool, current_step: int, total_steps: int,
+                      as_built: dict | None, lookahead: list[dict], first_failing_step: int,
+                      message: str) -> dict:
+    """An rbe_msgs/ExecutionState dict (``as_built``: a StabilityReport dict, None: empty)."""
+    return {"header": header, "active": bool(active), "current_step": int(current_step),
+            "total_steps": int(total_steps),
+            "as_built": as_built if as_built is not None else report_to_dict(
+                Report(Status.INVALID_INPUT, ""), header),
+            "lookahead": list(lookahead), "first_failing_step": int(first_failing_step),
+            "message": str(message)}
+
+
+def plan_update_to_dict(header: dict, *, reason: str, changed_step: int, feasible: bool,
+                        repair: str, order, holds, message: str) -> dict:
+    """An rbe_msgs/PlanUpdate dict: the repaired plan (whole order, holds by step)."""
+    return {"header": header, "reason": str(reason), "changed_step": int(changed_step),
+            "feasible": bool(feasible), "repair": str(repair),
+            "order": [str(b) for b in order], "holds": [_hold_to_dict(h) for h in holds],
+            "timeline": [], "message": str(message)}
+
+
+__all__ = ["SOLID_PRIMITIVE_BOX", "execution_to_dict", "header_dict", "header_stamp_ns",
+           "json_safe", "lookahead_step_to_dict", "plan_feedback_to_dict", "plan_goal_from_dict",
+           "plan_goal_to_dict", "plan_result_to_dict", "plan_update_to_dict", "poses_from_dict",
+           "poses_to_dict", "report_from_dict", "report_header", "report_json", "report_to_dict",
+           "scene_from_state_dict", "state_to_dict"]

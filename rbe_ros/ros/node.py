@@ -45,6 +45,8 @@ from __future__ import annotations
 
 import os
 import math
+from concurrent.futures import ProcessPoolExecutor
+from multiprocessing import get_context
 import signal
 import struct
 import json
@@ -67,7 +69,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.serialization import deserialize_message, serialize_message
 from rclpy.signals import SignalHandlerOptions
 from rbe_msgs.action import CheckSequence, PlanSequence
-from rbe_msgs.msg import AssemblyState, BlockPoses, StabilityReport
+from rbe_msgs.msg import AssemblyState, BlockPoses, ExecutionState, PlanUpdate, StabilityReport
 from rbe_msgs.srv import CheckAssembly
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
@@ -84,10 +86,13 @@ from ..io.foxglove_scene import SceneServer
 from ..io.markers import MARKER_TYPE, run_markers, step_markers
 from ..io.messages import (plan_feedback_to_dict, plan_goal_from_dict, plan_result_to_dict,
                            poses_to_dict, report_header, report_to_dict, state_to_dict)
+from ..io.execution import (EXECUTION, LOOKAHEAD_STEPS, MIN_MARGIN_G, Execution, Settings,
+                            repair_plan)
 from ..io.plans import plan_state
 from ..io.poses import AsBuilt
-from ..io.replay import (DESIGN, OPTIONS_KEY, PLAN_GOAL_TYPE, PLAN_RESULT_TYPE, POSES,
-                         SETTINGS_TYPE, asbuilt_check, merge_message, options_to_json)
+from ..io.replay import (DESIGN, EXECUTION_TYPE, OPTIONS_KEY, PLAN_GOAL_TYPE, PLAN_RESULT_TYPE,
+                         PLAN_UPDATE_TYPE, POSES, SETTINGS_TYPE, asbuilt_check, merge_message,
+                         options_to_json, settings_dict)
 from ..rbe.result import Report, Status
 from ..scene import Scene, SceneError
 from .convert import dict_to_message, message_to_dict, scene_from_msg
@@ -178,6 +183,14 @@ PARAMETERS = {
     "max_bag_duration_s": _double(
         0.0, 1e7, "with mcap_path: begin the next file of the bag when one spans this many "
         "seconds; 0: no split by duration", read_only=True),
+    "lookahead_steps": (LOOKAHEAD_STEPS, ParameterDescriptor(
+        type=ParameterType.PARAMETER_INTEGER,
+        description="~/execution: the next this many steps of the plan are checked with the "
+        "placed blocks at their measured poses and the rest at design; 0: to the end",
+        integer_range=[IntegerRange(from_value=0, to_value=100000, step=1)])),
+    "min_margin_g": _double(
+        MIN_MARGIN_G, 10.0, "~/execution: a look-ahead step whose stability margin (share of "
+        "g) is below this fails, and the plan is repaired; 0: off"),
 }
 
 #: How often a report's markers held back by ``marker_rate_hz`` are looked at.
@@ -221,6 +234,14 @@ class RbeChecks:
         # callbacks, so that no measurement is lost when its check is dropped under overload
         self._asbuilt = AsBuilt()
         self.foxglove = None
+        # ~/execution: the plan under execution, advanced by its own thread from the as-built
+        # states the worker checked (the newest; a design never dropped), so that looking
+        # ahead and repairing never hold up the as-built checks; repairs run in a process
+        self._execution = Execution()
+        self._exec_slot: dict = {}
+        self._exec_cond = threading.Condition()
+        self._exec_thread: threading.Thread | None = None
+        self._repair_pool = None
 
         self.add_on_set_parameters_callback(self._validate_parameters)
         for name, (value, descriptor) in PARAMETERS.items():
@@ -238,6 +259,10 @@ class RbeChecks:
         self._encode_report = cdr.encoder(typestore(), "rbe_msgs/msg/StabilityReport")
         self._encode_markers = cdr.encoder(typestore(), MARKER_TYPE)
         self._encode_plan = cdr.encoder(typestore(), PLAN_RESULT_TYPE)
+        self._encode_execution = cdr.encoder(typestore(), EXECUTION_TYPE)
+        self._encode_update = cdr.encoder(typestore(), PLAN_UPDATE_TYPE)
+        self._execution_pub = self.create_publisher(ExecutionState, "~/execution", LATCHED_QOS)
+        self._update_pub = self.create_publisher(PlanUpdate, "~/plan_update", LATCHED_QOS)
         self._report_pub = self.create_publisher(StabilityReport, "~/report", LATCHED_QOS)
         self._marker_pub = self.create_publisher(MarkerArray, "~/markers", LATCHED_QOS)
 
@@ -255,6 +280,8 @@ class RbeChecks:
         self.marker_topic = self._marker_pub.topic_name
         self.plan_goal_topic = self.resolve_topic_name("~/plan/goal")
         self.plan_result_topic = self.resolve_topic_name("~/plan/result")
+        self.execution_topic = self._execution_pub.topic_name
+        self.plan_update_topic = self._update_pub.topic_name
         # marker_rate_hz: the markers of the newest report held back, sent when their time
         # comes (polled while one waits)
         self._marker_lock = threading.Lock()
@@ -315,6 +342,9 @@ class RbeChecks:
                                           (PlanSequence, "~/plan", self._execute_plan))]
         self._worker = threading.Thread(target=self._work, name="rbe_state_worker", daemon=True)
         self._worker.start()
+        self._exec_thread = threading.Thread(target=self._execute_work, name="rbe_execution",
+                                             daemon=True)
+        self._exec_thread.start()
         with self._slot_cond:
             self._paused, paused = False, self._paused_messages
             self._paused_messages = 0
@@ -337,11 +367,13 @@ class RbeChecks:
             self._paused = pause
         self.health.set_active(False)
         self.stop()
-        worker, self._worker = self._worker, None
-        if worker is not None and worker is not threading.current_thread():
-            worker.join(timeout=10.0)
-            if worker.is_alive():
-                self.get_logger().warning("the state worker is still checking; closing anyway")
+        for name in ("_worker", "_exec_thread"):
+            worker = getattr(self, name)
+            setattr(self, name, None)
+            if worker is not None and worker is not threading.current_thread():
+                worker.join(timeout=10.0)
+                if worker.is_alive():
+                    self.get_logger().warning(f"{worker.name} is still working; closing anyway")
         for service in self._interfaces:
             self.destroy_service(service)
         self._interfaces = []
@@ -406,7 +438,9 @@ class RbeChecks:
         self._later_topics = {self.design_topic: ("rbe_msgs/msg/AssemblyState", True),
                               self.poses_topic: ("rbe_msgs/msg/BlockPoses", False),
                               self.plan_goal_topic: (PLAN_GOAL_TYPE, False),
-                              self.plan_result_topic: (PLAN_RESULT_TYPE, False)}
+                              self.plan_result_topic: (PLAN_RESULT_TYPE, False),
+                              self.execution_topic: (EXECUTION_TYPE, True),
+                              self.plan_update_topic: (PLAN_UPDATE_TYPE, True)}
         self.bag_path = path
         self.get_logger().info(f"recording states and reports to {path}")
 
@@ -442,8 +476,8 @@ class RbeChecks:
         parameter change), so that a replay checks each state with what it was checked with."""
         if self._bag is None:
             return
-        settings = {"options": json.loads(options_to_json(self.check_options())),
-                    "frame_id": self.get_parameter("frame_id").value}
+        settings = settings_dict(self.check_options(), self.get_parameter("frame_id").value,
+                                 self._execution_settings())
         data = serialize_message(String(data=json.dumps(settings, sort_keys=True)))
         self._record(self.settings_topic, data)
         self._carry(self.settings_topic, data)
@@ -466,6 +500,13 @@ class RbeChecks:
         self._closing = True
         with self._slot_cond:
             self._slot_cond.notify_all()
+        with self._exec_cond:
+            self._exec_cond.notify_all()
+
+    def _close_pool(self) -> None:
+        pool, self._repair_pool = self._repair_pool, None
+        if pool is not None:
+            pool.shutdown(wait=False, cancel_futures=True)
 
     def close_bag(self) -> None:
         with self._bag_lock:
@@ -481,6 +522,7 @@ class RbeChecks:
     def destroy_node(self):
         """Close the interfaces, the bag and the Foxglove server, then the node. Idempotent."""
         self._stop_interfaces()
+        self._close_pool()
         self._close_outputs()
         if self._destroyed:
             return
@@ -722,6 +764,8 @@ class RbeChecks:
             # far (stamp 0: no report answers it), so that it replays alone
             if kind == DESIGN:
                 self._carry(topic, data)
+                with self._exec_cond:
+                    self._exec_slot["design"] = self._asbuilt.design
             else:
                 self._carry(topic, self._measured_poses)
             self._put((header, scene))
@@ -737,12 +781,68 @@ class RbeChecks:
         """Check an as-built scene (or report why there is none) as a whole."""
         result = asbuilt_check(scene, self.check_options())
         if result.error is None:
-            self._publish(result.scene, result.reports[0], header)
-            return
-        # drawn as a state that failed: what could be merged, the blocks at fault highlighted
-        state = AssemblyState() if result.scene is None else \
-            dict_to_message(state_to_dict(result.scene), AssemblyState)
-        self._publish(None, result.error, header, state)
+            report = result.reports[0]
+            self._publish(result.scene, report, header)
+        else:
+            # drawn as a state that failed: what could be merged, the blocks at fault
+            state = AssemblyState() if result.scene is None else \
+                dict_to_message(state_to_dict(result.scene), AssemblyState)
+            report = result.error
+            self._publish(None, report, header, state)
+        with self._exec_cond:
+            self._exec_slot["state"] = (header, scene, report)
+            self._exec_cond.notify()
+
+    # --- plan execution (rbe_ros.io.execution) ----------------------------------------------
+
+    def _execution_settings(self) -> Settings:
+        return Settings(self.get_parameter("lookahead_steps").value,
+                        self.get_parameter("min_margin_g").value)
+
+    def _execute_work(self) -> None:
+        """The execution thread: advance the plan on the newest as-built state checked
+        (a new design first), until the node stops."""
+        while True:
+            with self._exec_cond:
+                while "state" not in self._exec_slot and not self._closing:
+                    self._exec_cond.wait()
+                if self._closing:
+                    return
+                slot, self._exec_slot = self._exec_slot, {}
+            try:
+                if "design" in slot:
+                    self._execution.set_design(slot["design"])
+                self._advance(*slot["state"])
+            except Exception as exc:   # publishing failed (shutdown): say so, go on
+                self.get_logger().error(f"execution not advanced: {type(exc).__name__}: {exc}")
+
+    def _advance(self, header: dict, scene, report: Report) -> None:
+        """Publish (and record) what the as-built state means for the plan: its
+        ExecutionState, and a repaired plan when a step ahead fails (WARN)."""
+        for kind, message in self._execution.advance(
+                scene, report_to_dict(report, header), header, self.check_options(),
+                self._execution_settings(), self._repair):
+            if kind == EXECUTION:
+                data = self._encode_execution(message)
+                self._record(self.execution_topic, data)
+                self._execution_pub.publish(data)
+                continue
+            data = self._encode_update(message)
+            self._record(self.plan_update_topic, data)
+            self._update_pub.publish(data)
+            self.get_logger().warning(
+                f"plan repaired ({message['repair']}) from step {message['changed_step']}: "
+                f"{message['reason']}; new order {' '.join(message['order'])}"
+                if message["feasible"] else
+                f"no repair found: {message['reason']}; {message['message']}")
+
+    def _repair(self, plan: Scene, current: int, options: CheckOptions):
+        """:func:`rbe_ros.io.execution.repair_plan` in a process of its own: a repair that
+        plans holds the GIL for seconds, and the as-built checks must go on meanwhile."""
+        if self._repair_pool is None:
+            self._repair_pool = ProcessPoolExecutor(max_workers=1,
+                                                    mp_context=get_context("spawn"))
+        return self._repair_pool.submit(repair_plan, plan, current, options).result()
 
     def design_message(self, path: str) -> AssemblyState:
         """The design of ``design_file`` as the message a pipeline would send on ~/design

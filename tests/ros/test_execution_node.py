@@ -1,0 +1,228 @@
+"""Executing a planned structure from a simulated camera over DDS (~/poses -> ~/execution,
+~/plan_update): a block lands off so that a later step of the plan would fall; the node says
+which step within 2 s, repairs the rest of the plan, the repaired plan stands at the
+measured poses (re-checked here by a closed form and by ``rbe-ros check``), and the bag
+replays with ``--compare``."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rbe_msgs.msg import BlockPoses, ExecutionState, PlanUpdate
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from scipy.spatial.transform import Rotation
+
+from rbe_client import NodeProcess, wait_until
+from rbe_ros.io.bag import read_bag
+from rbe_ros.io.messages import poses_to_dict
+from rbe_ros.io.scene_json import scene_to_dict
+from rbe_ros.io.testing import assert_bag_replays
+from rbe_ros.ros.convert import dict_to_message, message_to_dict
+from rbe_ros.scene import box_block, make_block, make_scene
+
+NAMESPACE = "/rbe_execution_test"
+RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE)
+LATCHED = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+DENSITY = 2000.0
+#: The pier's top: half-widths (m) in x and y; the plank rests on it, centred.
+PIER = (0.065, 0.15)
+STAMP0 = 70_000
+
+
+def plank(counterweight_height: float):
+    """A plank on a narrow pier, a block to go on its left end, then one on its right end
+    (the counterweight). Left first leans the plank 5 mm inside the pier's edge: near the
+    limit (it leans 60 mm of the 65 mm out). With a counterweight as tall as the left block either order stands at design;
+    a twice as tall one tips the plank right if placed first (so the plan is left, right)."""
+    h = counterweight_height
+    blocks = [box_block("pier", (2 * PIER[0], 2 * PIER[1], 0.5), (0, 0, 0.25), support=True,
+                        density=DENSITY),
+              box_block("plank", (0.8, 0.3, 0.1), (0, 0, 0.55), density=DENSITY),
+              box_block("left", (0.2, 0.3, 0.1), (-0.3, 0, 0.65), density=DENSITY),
+              box_block("right", (0.2, 0.3, h), (0.3, 0, 0.6 + h / 2), density=DENSITY)]
+    return make_scene("plank", blocks, sequence=["plank", "left", "right"])
+
+
+def stands(design, poses: dict, free: list[str]) -> bool:
+    """Closed form (the oracle): the plank and the blocks on it, all free, stand on the pier
+    iff their common centroid lies over the pier's top rectangle (every block a box of one
+    density: centroid = volume-weighted mean of the measured positions)."""
+    volume = {b.id: float(np.prod(np.ptp(b.vertices, axis=0))) for b in design.blocks}
+    weights = np.array([volume[b] for b in free])
+    centre = (weights[:, None] * np.array([poses[b][0] for b in free])).sum(0) / weights.sum()
+    return abs(centre[0]) < PIER[0] and abs(centre[1]) < PIER[1]
+
+
+class Camera:
+    """The cell's side: streams the measured pose of each block as it is placed (0.5 mm
+    noise, seeded) and keeps what comes on ~/execution and ~/plan_update."""
+
+    def __init__(self, context, seed: int):
+        self.node = Node("rbe_camera", context=context)
+        self.poses = self.node.create_publisher(BlockPoses, "/rbe_node/poses", RELIABLE)
+        self.states: list[tuple[float, ExecutionState]] = []
+        self.updates: list[PlanUpdate] = []
+        self.lock = threading.Lock()
+        self.node.create_subscription(ExecutionState, "/rbe_node/execution", self._state,
+                                      LATCHED)
+        self.node.create_subscription(PlanUpdate, "/rbe_node/plan_update", self._update,
+                                      LATCHED)
+        self.executor = SingleThreadedExecutor(context=context)
+        self.executor.add_node(self.node)
+        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self.thread.start()
+        self.rng = np.random.default_rng(seed)
+        self.sent: dict[int, float] = {}        # stamp sec -> time sent
+        self.measured: dict[str, tuple] = {}
+
+    def _state(self, msg):
+        with self.lock:
+            self.states.append((time.monotonic(), msg))
+
+    def _update(self, msg):
+        with self.lock:
+            self.updates.append(msg)
+
+    def ready(self) -> bool:
+        return self.poses.get_subscription_count() >= 1 and \
+            self.node.count_publishers("/rbe_node/execution") >= 1
+
+    def place(self, design, block: str, sec: int, offset=(0.0, 0.0, 0.0), yaw_deg=0.0):
+        """The block lands at its design pose moved by ``offset`` (m) and turned by
+        ``yaw_deg`` about the vertical; measured with 0.5 mm noise in x and y."""
+        b = design.block(block)
+        noise = np.r_[self.rng.normal(0.0, 0.0005, 2), 0.0]
+        q = (Rotation.from_euler("z", yaw_deg, degrees=True) *
+             Rotation.from_quat(b.orientation)).as_quat()
+        self.measured[block] = ((b.position + offset + noise).tolist(), q.tolist())
+        self.sent[sec] = time.monotonic()
+        self.poses.publish(dict_to_message(poses_to_dict(
+            {block: self.measured[block]}, "cell", sec * 1_000_000_000), BlockPoses))
+
+    def state(self, sec: int, last: bool = False):
+        """The (first, or ``last``) ExecutionState answering the poses of ``sec``."""
+        with self.lock:
+            found = [(t, m) for t, m in self.states if m.header.stamp.sec == sec]
+        return (found[-1] if last else found[0]) if found else None
+
+    def close(self):
+        self.executor.shutdown(timeout_sec=5.0)
+        self.thread.join(5.0)
+        self.node.destroy_node()
+
+
+def rbe_check(path, poses: dict, tmp_path, name: str, sequence: bool = False) -> dict:
+    """``rbe-ros check PATH --poses`` (``--sequence``) as a user runs it: its JSON."""
+    file = tmp_path / f"{name}.json"
+    file.write_text(json.dumps({"poses": {b: {"position": p, "orientation": q}
+                                          for b, (p, q) in poses.items()}}))
+    args = ["--poses", str(file)] if poses else []
+    out = subprocess.run([str(Path(sys.executable).with_name("rbe-ros")), "check", str(path),
+                          *args, "--json", *(["--sequence"] if sequence else [])],
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout)
+
+
+@pytest.mark.parametrize("counterweight, orders", [
+    (0.1, {("right", "left")}),                  # a swap saves it
+    (0.2, set()),                                # no order does: only a hold
+], ids=["swap", "hold"])
+def test_block_lands_off_a_later_step_fails_and_the_plan_is_repaired(
+        rclpy_context, tmp_path, counterweight, orders):
+    design = plank(counterweight)
+    path = tmp_path / "planned.json"
+    path.write_text(json.dumps(scene_to_dict(design)))
+    # the plank lands 10 mm left and turned 2 deg: left next would tip it (the oracle, and
+    # `rbe-ros check` on the measured plank with the left block at design)
+    off = {"plank": ([-0.01, 0.0, 0.55],
+                     Rotation.from_euler("z", 2, degrees=True).as_quat().tolist())}
+    at_design = {b: (design.block(b).position.tolist(), [0, 0, 0, 1]) for b in ("left", "right")}
+    assert not stands(design, {**off, **at_design}, ["plank", "left"])
+    assert stands(design, {**off, **at_design}, ["plank", "left", "right"])
+    check = rbe_check(path, {**off, "left": at_design["left"]}, tmp_path, "left_next")
+    assert check["stable"] is False and check["status"] == 1      # TENSION_REQUIRED
+    # which orders of the two blocks left stand without a hold (the oracle)
+    assert {o for o in [("left", "right"), ("right", "left")]
+            if stands(design, {**off, **at_design}, ["plank", o[0]])} == orders
+
+    bag = tmp_path / "bag"
+    proc = NodeProcess(["-p", f"design_file:={path}", "-p", f"mcap_path:={bag}"],
+                       tmp_path / "node.log")
+    camera = Camera(rclpy_context, seed=30)
+    try:
+        wait_until(lambda: proc.proc.poll() is None and camera.ready(), 60.0, "the node")
+        wait_until(lambda: camera.states, 30.0, "the design's execution state")
+        start = camera.states[-1][1]
+        assert (start.active, start.current_step, start.total_steps) == (True, 0, 3)
+        assert start.first_failing_step == -1 and [s.block for s in start.lookahead] == \
+            ["plank", "left", "right"]
+        camera.place(design, "plank", STAMP0, offset=[-0.01, 0.0, 0.0], yaw_deg=2.0)
+        received, failing = wait_until(lambda: camera.state(STAMP0), 30.0, "execution")
+        print("latency", received - camera.sent[STAMP0])
+        assert received - camera.sent[STAMP0] < 2.0
+        assert (failing.current_step, failing.first_failing_step) == (1, 1)
+        assert failing.lookahead[0].block == "left" and not failing.lookahead[0].stable
+        assert "step 1 (left)" in failing.message
+        update = wait_until(lambda: camera.updates, 60.0, "the plan update")[0]
+        assert update.feasible and update.changed_step == 1 and update.order[0] == "plank"
+        assert update.reason.startswith("step 1 (left):")
+        # the repaired plan's execution state: nothing fails ahead any more
+        repaired = wait_until(lambda: len(camera.states) >= 3 and camera.state(STAMP0, True),
+                              30.0, "the repaired plan's state")[1]
+        assert repaired.first_failing_step == -1 and repaired.active
+        order = list(update.order)
+        holds = [message_to_dict(h) for h in update.holds]
+        # the camera follows the repaired plan
+        for k, block in enumerate(order[1:], start=1):
+            camera.place(design, block, STAMP0 + k)
+            got = wait_until(lambda: camera.state(STAMP0 + k, True), 30.0, f"step {k}")[1]
+            assert got.current_step == k + 1 and got.first_failing_step == -1
+    finally:
+        camera.close()
+        assert proc.stop() == 0
+    log = proc.output()
+    assert "Traceback" not in log and "plan repaired" in log
+
+    # every remaining step of the repaired plan stands at the measured poses: a held block
+    # is a support (the plank then rests on the pier and it); the oracle on the free ones
+    measured = camera.measured
+    for k in range(1, len(order)):
+        held = {h["block"] for h in holds if h["from_step"] <= k and
+                (h["until_step"] < 0 or k < h["until_step"])}
+        assert held or stands(design, measured, order[:k + 1]), f"step {k}"
+    if not orders:
+        assert holds, "no order stands: the repair must hold a block"
+    else:
+        assert tuple(order[1:]) in orders or holds
+    # and by `rbe-ros check --sequence` on the repaired plan, its blocks at the measured poses
+    # (--poses would drop the holds: they count the design's steps)
+    repaired_path = tmp_path / "repaired.json"
+    doc = scene_to_dict(replace(design, blocks=tuple(
+        make_block(b.id, b.vertices, b.faces, *measured.get(b.id, (b.position, b.orientation)),
+                   density=DENSITY, support=b.support) for b in design.blocks)))
+    doc["sequence"] = order
+    doc["holds"] = [{"block": h["block"], "from_step": h["from_step"],
+                     **({"until_step": h["until_step"]} if h["until_step"] >= 0 else {})}
+                    for h in holds]
+    repaired_path.write_text(json.dumps(doc))
+    steps = rbe_check(repaired_path, {}, tmp_path, "all", sequence=True)
+    assert [r["stable"] for r in steps["reports"]] == [True] * len(steps["reports"]), steps
+    assert len(steps["reports"]) >= len(order)
+    # the bag: every execution state and the update recorded, and `replay --compare`
+    topics = [m.topic for m in read_bag(bag)]
+    assert topics.count("/rbe_node/plan_update") == 1
+    assert topics.count("/rbe_node/execution") >= len(order) + 2
+    result = assert_bag_replays(bag)
+    assert sum(len(r.execution) for r in result.runs) == topics.count("/rbe_node/execution") + 1

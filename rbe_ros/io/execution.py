@@ -143,21 +143,32 @@ class Execution:
 
     def advance(self, asbuilt: Scene | SceneError, as_built: dict | None, header: dict,
                 options: CheckOptions, settings: Settings,
-                repair: Callable[[Scene, int, CheckOptions], Repair] = repair_plan
+                repair: Callable[[Scene, int, CheckOptions], Repair] = repair_plan,
+                on_output: Callable[[str, dict], None] | None = None
                 ) -> list[tuple[str, dict]]:
         """The outputs of one as-built state (``as_built``: its report dict): an
         ExecutionState, and when a look-ahead step fails a PlanUpdate and the
-        ExecutionState of the repaired plan. The same state again gives the same outputs
-        (a cell sends the same poses at 10 Hz), new headers; never raises."""
+        ExecutionState of the repaired plan; each passed to ``on_output(kind, message)``
+        as soon as it is made (the failing step is sent before the repair starts). The same
+        state again gives the same outputs (a cell sends the same poses at 10 Hz), new
+        headers; never raises."""
+        out: list[tuple[str, dict]] = []
+
+        def emit(kind: str, message: dict) -> None:
+            out.append((kind, message))
+            if on_output is not None:
+                on_output(kind, message)
+
         if self._seen and self._seen[0] is asbuilt and self._seen[1] is self.plan:
-            return [(kind, {**d, "header": header, **(
-                {"as_built": as_built} if kind == EXECUTION and as_built else {})})
-                for kind, d in self._outputs]
+            for kind, d in self._outputs:
+                emit(kind, {**d, "header": header, **(
+                    {"as_built": as_built} if kind == EXECUTION and as_built else {})})
+            return out
         try:
-            out = self._advance(asbuilt, as_built, header, options, settings, repair)
+            self._advance(asbuilt, as_built, header, options, settings, repair, emit)
         except Exception as exc:        # an output, never a crash
-            out = [(EXECUTION, self._refused(header, as_built,
-                                             f"execution failed: {type(exc).__name__}: {exc}"))]
+            emit(EXECUTION, self._refused(header, as_built,
+                                          f"execution failed: {type(exc).__name__}: {exc}"))
         self._seen, self._outputs = (asbuilt, self.plan), out
         return out
 
@@ -170,44 +181,44 @@ class Execution:
         return {**kept, "header": header, "active": False, "message": why,
                 **({"as_built": as_built} if as_built else {})}
 
-    def _advance(self, asbuilt, as_built, header, options, settings, repair) -> list:
+    def _advance(self, asbuilt, as_built, header, options, settings, repair, emit) -> None:
         if self.plan is None or self.error:
-            return [(EXECUTION, self._refused(header, as_built, self.error))]
+            return emit(EXECUTION, self._refused(header, as_built, self.error))
         if isinstance(asbuilt, SceneError):
-            return [(EXECUTION, self._refused(header, as_built,
-                                              f"poses not accepted: {asbuilt}"))]
+            return emit(EXECUTION, self._refused(header, as_built,
+                                                 f"poses not accepted: {asbuilt}"))
         order = self.plan.sequence
         placed = [b.id for b in asbuilt.blocks if not b.support]
         current = next((k for k, b in enumerate(order) if b not in placed), len(order))
         wrong = sorted(set(placed) - set(order[:current]), key=order.index)
         if wrong:
-            return [(EXECUTION, self._refused(
+            return emit(EXECUTION, self._refused(
                 header, as_built, f"block {wrong[0]!r} measured out of order: the plan places "
                 f"it at step {order.index(wrong[0])}, after step {current} "
-                f"({order[current]!r}), which is not measured"))]
+                f"({order[current]!r}), which is not measured"))
         if settings.min_margin_g > 0 and not options.margin_directions:
             options = replace(options, margin_directions=DEFAULT_DIRECTIONS)
-        out = [(EXECUTION, self._state(asbuilt, as_built, header, options, settings, current))]
-        failing = out[0][1]["first_failing_step"]
+        state = self._state(asbuilt, as_built, header, options, settings, current)
+        emit(EXECUTION, state)
+        failing = state["first_failing_step"]
         if failing < 0 or self._repaired is asbuilt:
-            return out
+            return None
         self._repaired = asbuilt
-        step = next(s for s in out[0][1]["lookahead"] if s["step"] == failing)
+        step = next(s for s in state["lookahead"] if s["step"] == failing)
         reason = f"step {failing} ({step['block']}): {_why(step, settings)}"
         found = repair(at_measured(self.plan, asbuilt), current, options)
         changed = next((k for k in range(current, len(order)) if k >= len(found.order)
                         or found.order[k] != order[k]
                         or _held(found.holds, k) != _held(self.plan.holds, k)), current)
-        out.append((PLAN_UPDATE, plan_update_to_dict(
+        emit(PLAN_UPDATE, plan_update_to_dict(
             header, reason=reason, changed_step=changed, feasible=found.feasible,
             repair=found.kind, order=found.order if found.feasible else order,
             holds=found.holds if found.feasible else self.plan.holds,
-            message=found.message)))
+            message=found.message))
         if found.feasible:
             self.plan = replace(self.plan, sequence=found.order, holds=found.holds)
-            out.append((EXECUTION, self._state(asbuilt, as_built, header, options, settings,
-                                               current)))
-        return out
+            emit(EXECUTION, self._state(asbuilt, as_built, header, options, settings, current))
+        return None
 
     def _state(self, asbuilt: Scene, as_built, header, options, settings, current) -> dict:
         reports = look_ahead(at_measured(self.plan, asbuilt), current,

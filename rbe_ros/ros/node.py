@@ -819,14 +819,17 @@ class RbeChecks:
     def _advance(self, header: dict, scene, report: Report) -> None:
         """Publish (and record) what the as-built state means for the plan: its
         ExecutionState, and a repaired plan when a step ahead fails (WARN)."""
-        for kind, message in self._execution.advance(
-                scene, report_to_dict(report, header), header, self.check_options(),
-                self._execution_settings(), self._repair):
-            if kind == EXECUTION:
-                data = self._encode_execution(message)
-                self._record(self.execution_topic, data)
-                self._execution_pub.publish(data)
-                continue
+        self._execution.advance(scene, report_to_dict(report, header), header,
+                                self.check_options(), self._execution_settings(), self._repair,
+                                self._send_execution)
+
+    def _send_execution(self, kind: str, message: dict) -> None:
+        """Record, then publish an ExecutionState or a PlanUpdate (the latter logged)."""
+        if kind == EXECUTION:
+            data = self._encode_execution(message)
+            self._record(self.execution_topic, data)
+            self._execution_pub.publish(data)
+        else:
             data = self._encode_update(message)
             self._record(self.plan_update_topic, data)
             self._update_pub.publish(data)
@@ -839,10 +842,16 @@ class RbeChecks:
     def _repair(self, plan: Scene, current: int, options: CheckOptions):
         """:func:`rbe_ros.io.execution.repair_plan` in a process of its own: a repair that
         plans holds the GIL for seconds, and the as-built checks must go on meanwhile."""
+        return self._pool().submit(repair_plan, plan, current, options).result()
+
+    def _pool(self) -> ProcessPoolExecutor:
+        """The process of repairs (spawned: forking a process with DDS threads is unsafe),
+        started with the node so that the first repair does not wait for its imports."""
         if self._repair_pool is None:
             self._repair_pool = ProcessPoolExecutor(max_workers=1,
                                                     mp_context=get_context("spawn"))
-        return self._repair_pool.submit(repair_plan, plan, current, options).result()
+            self._repair_pool.submit(time.sleep, 0.0)
+        return self._repair_pool
 
     def design_message(self, path: str) -> AssemblyState:
         """The design of ``design_file`` as the message a pipeline would send on ~/design
@@ -965,6 +974,7 @@ class RbeNode(RbeChecks, Node):
         self._record_settings()
         self._start_foxglove()
         self._start_interfaces()
+        self._pool()
         path = self.get_parameter("design_file").value
         if path:
             try:

@@ -277,6 +277,9 @@ class _Planner:
             self.contacts[b].append((a, it.area, n_up >= RESTS_ON))
             self.contacts[a].append((b, it.area, -n_up >= RESTS_ON))
         self.cache: dict = {}
+        # each step's margin (its weakest reported): asked for, or needed by the plan's choice
+        self.margins = bool(options.margin_directions or plan.prefer == "margin"
+                            or plan.min_margin)
         self.insertions: dict = {}              # order -> insertion of its last block
         self.checks = 0
         self.models: collections.Counter = collections.Counter()
@@ -357,7 +360,7 @@ class _Planner:
         held = self._holds(trial, partial.held[-1] if partial.held else ())
         ok = len(held) <= self.plan.max_held and trial.stands(held)
         assembly, report = trial.result(held) if ok else (None, None)
-        if ok:              # every plan reports its weakest step
+        if ok and self.margins:
             margin = trial.margin(held)
             report = replace(report, margin_g=margin.margin_g,
                              margin_direction=margin.direction)
@@ -434,10 +437,12 @@ class _Planner:
                         "(rbe-ros check names why): no build order can end stable",
                         failed_step=n)
         margin = report_margin(self.final, final, self.options.deciding,
-                               self.options.margin_directions or DEFAULT_DIRECTIONS)
-        self.final = replace(self.final, margin_g=margin.margin_g,
-                             margin_direction=margin.direction)
-        if margin.margin_g < self.plan.min_margin:
+                               self.options.margin_directions or DEFAULT_DIRECTIONS) \
+            if self.margins else None
+        if margin is not None:
+            self.final = replace(self.final, margin_g=margin.margin_g,
+                                 margin_direction=margin.direction)
+        if margin is not None and margin.margin_g < self.plan.min_margin:
             return Plan(False, [], [], f"the finished assembly's margin is "
                         f"{margin.margin_g:.4f} g, below the minimum {self.plan.min_margin:g} g: "
                         "no build order can end with it", failed_step=n)

@@ -99,7 +99,7 @@ def repair_plan(plan: Scene, built: Scene, options: CheckOptions = CheckOptions(
         result = fixer.replan(options, min_margin_g, max(time_limit - (time.perf_counter()
                                                                        - start), 1e-3))
     elif result.kind == "replan":
-        result = fixer.failed(fixer.why)
+        result = fixer.failed(f"{fixer.reason}; no hold or swap saves the rest ({fixer.why})")
     result.checks, result.time = runner.checks, time.perf_counter() - start
     return result
 
@@ -148,6 +148,7 @@ class _Fixer:
             self.order, self.held = fixed[0], fixed[1]
             self.kinds.append(fixed[2])
             current = self.plan()
+            self.held = held_by_step(current)       # a release step when one is needed now
             checker = before
         return self.result(steps)
 
@@ -235,8 +236,9 @@ class _Fixer:
         found = plan_sequence(fixed, self.k_max, options, keep_sequence=True,
                               time_limit=time_limit, min_margin=min_margin_g)
         if not found.feasible:
-            return self.failed(f"{self.why}; no hold or swap saves it, and re-planning the "
-                               f"remaining {n - self.placed} blocks failed: {found.message}")
+            return self.failed(f"{self.reason}; no hold or swap saves the rest "
+                               f"({self.why}), and re-planning the remaining "
+                               f"{n - self.placed} blocks failed: {found.message}")
         self.order = list(found.order)
         self.held = [*self.original[1][:self.placed], *found.held[self.placed:]]
         self.kinds = ["replan"]
@@ -247,7 +249,7 @@ class _Fixer:
         steps = runner.scan(plan, self.placed, len(self.held), checker)
         if steps and not steps[-1].passes:
             s = steps[-1]
-            return self.failed(f"{self.why}; the re-planned remainder fails at "
+            return self.failed(f"{self.reason}; the re-planned remainder fails at "
                                f"{where(s.step, s.block)}: {s.message}")
         result = self.result(steps)
         result.kind = "replan"

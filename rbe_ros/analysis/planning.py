@@ -59,6 +59,7 @@ from .assembly import Assembly
 from .holds import StabilityOracle, minimal_holds, release_unneeded
 from .incremental import StepChecker
 from .insertion import block_insertion
+from .margin import DEFAULT_DIRECTIONS, Margin, report_margin
 from .options import CheckOptions
 from .pipeline import check_sequence, slim
 from .steps import gripped, supports_present
@@ -66,6 +67,8 @@ from .verdict import UNEXPLAINED, check
 
 #: How the message of a plan stopped by ``should_stop`` begins (a time limit, a cancel).
 STOPPED = "stopped after"
+#: What ``PlanOptions.prefer`` may be.
+PREFER = ("holds", "margin")
 #: A contact carries a block when its normal into the block points up by at least this
 #: cosine (87 deg from vertical).
 RESTS_ON = 0.05
@@ -84,6 +87,10 @@ class PlanOptions:
     #: compare with)
     full_candidates: bool = False
     time_limit: float = math.inf  # s: then the best partial plan is returned
+    #: which feasible candidate a partial plan keeps: "holds" (fewest hold-steps) or
+    #: "margin" (the largest weakest margin so far, then fewest hold-steps)
+    prefer: str = "holds"
+    min_margin: float = 0.0      # g: a step with a smaller margin does not stand (0: off)
 
     def __post_init__(self):
         for name, low in (("max_held", 0), ("beam", 1), ("candidates", 1)):
@@ -92,6 +99,15 @@ class PlanOptions:
                 raise ValueError(f"{name} must be an integer >= {low}, not {value!r}")
         if not self.time_limit > 0:
             raise ValueError(f"time_limit must be > 0 s, not {self.time_limit!r}")
+        if self.prefer not in PREFER:
+            raise ValueError(f"prefer must be one of {', '.join(PREFER)}, not {self.prefer!r}")
+        if not 0 <= self.min_margin < math.inf:
+            raise ValueError(f"min_margin must be a number >= 0 (g), not {self.min_margin!r}")
+
+    @property
+    def greedy(self) -> bool:
+        """One candidate per step: the first feasible one is the plan's step."""
+        return self.beam == 1 and self.prefer == "holds"
 
 
 @dataclass(frozen=True)
@@ -124,6 +140,8 @@ class Plan:
     checks: int = 0                        # candidate checks spent by the search
     time: float = 0.0                      # s
     models: dict[str, int] = field(default_factory=dict)   # checks answered per model
+    #: the (slim) report of the step with the smallest margin (the first of equals)
+    weakest: Report | None = None
 
     @property
     def max_held(self) -> int:
@@ -179,6 +197,7 @@ class _Trial:
         self.assembly = planner.full.subset(self.present)   # each set of holds from it
         self.free = {b for b in self.present if b in planner.free_set}
         self.reports: dict[frozenset, tuple[Assembly, Report]] = {}
+        self.margins: dict[frozenset, Margin] = {}
 
     def result(self, held) -> tuple[Assembly, Report]:
         key = frozenset(held)
@@ -202,7 +221,21 @@ class _Trial:
         return found
 
     def stands(self, held) -> bool:
-        return self.result(held)[1].stable
+        """Whether the step stands with ``held``, with a margin of at least the plan's
+        ``min_margin`` (when set)."""
+        least = self.planner.plan.min_margin
+        return self.result(held)[1].stable and (not least or self.margin(held).margin_g >= least)
+
+    def margin(self, held) -> Margin:
+        """The margin of the step with ``held`` (the held blocks rigid, as a check's
+        margin), computed once."""
+        key = frozenset(held)
+        if key not in self.margins:
+            assembly, report = self.result(held)
+            self.margins[key] = report_margin(report, assembly, self.options.deciding,
+                                              self.options.margin_directions
+                                              or DEFAULT_DIRECTIONS)
+        return self.margins[key]
 
     def next_hold(self, held) -> str | None:
         """The block to hold next when ``held`` is not enough: the highest the failed check
@@ -244,6 +277,9 @@ class _Planner:
             self.contacts[b].append((a, it.area, n_up >= RESTS_ON))
             self.contacts[a].append((b, it.area, -n_up >= RESTS_ON))
         self.cache: dict = {}
+        # each step's margin (its weakest reported): asked for, or needed by the plan's choice
+        self.margins = bool(options.margin_directions or plan.prefer == "margin"
+                            or plan.min_margin)
         self.insertions: dict = {}              # order -> insertion of its last block
         self.checks = 0
         self.models: collections.Counter = collections.Counter()
@@ -324,6 +360,10 @@ class _Planner:
         held = self._holds(trial, partial.held[-1] if partial.held else ())
         ok = len(held) <= self.plan.max_held and trial.stands(held)
         assembly, report = trial.result(held) if ok else (None, None)
+        if ok and self.margins:
+            margin = trial.margin(held)
+            report = replace(report, margin_g=margin.margin_g,
+                             margin_direction=margin.direction)
         return held, ok, report, assembly
 
     def _holds(self, trial: _Trial, previous) -> tuple[str, ...]:
@@ -396,6 +436,16 @@ class _Planner:
             return Plan(False, [], [], "the finished assembly does not stand without holds "
                         "(rbe-ros check names why): no build order can end stable",
                         failed_step=n)
+        margin = report_margin(self.final, final, self.options.deciding,
+                               self.options.margin_directions or DEFAULT_DIRECTIONS) \
+            if self.margins else None
+        if margin is not None:
+            self.final = replace(self.final, margin_g=margin.margin_g,
+                                 margin_direction=margin.direction)
+        if margin is not None and margin.margin_g < self.plan.min_margin:
+            return Plan(False, [], [], f"the finished assembly's margin is "
+                        f"{margin.margin_g:.4f} g, below the minimum {self.plan.min_margin:g} g: "
+                        "no build order can end with it", failed_step=n)
         beam = [_Partial((), (), (0, 0, 0), (), StepChecker(self.options, explain=False))]
         for k in range(n):
             blocked: dict[str, str] = {}
@@ -418,7 +468,7 @@ class _Planner:
                                     f"with at most {self.plan.max_held} held{why}")
             beam = sorted(children.values(), key=lambda p: (p.score, p.order))[:self.plan.beam]
             self._placed(beam[0], n)
-            if self.pool is not None and self.plan.beam == 1:
+            if self.pool is not None and self.plan.greedy:
                 self._look_ahead(beam[0])
         best = beam[0]
         return self._finish(best, True, -1, f"every step stands with at most "
@@ -441,21 +491,24 @@ class _Planner:
                     if best_rejected is None or len(held) < len(best_rejected[1]):
                         best_rejected = (b, held)
                     continue
-                total, worst, ranks = partial.score
+                total, _, ranks = partial.score[-3:]
                 report = self.step_report(order, held, report, assembly)
                 report = replace(report, solve_time=time.perf_counter() - start)
                 checker = copy.copy(partial.checker)
                 checker.advance(assembly, report)
-                child = _Partial(order, (*partial.held, held),
-                                 (total + len(held), len(held), ranks + rank),
+                score = (total + len(held), len(held), ranks + rank)
+                if self.plan.prefer == "margin":        # the weakest step so far first
+                    score = (-min((r.margin_g for r in (*partial.reports, report)),
+                                  default=0.0), *score)
+                child = _Partial(order, (*partial.held, held), score,
                                  (*partial.reports, slim(report)), checker)
-                if self.plan.beam == 1 and self.on_report is not None:
+                if self.plan.greedy and self.on_report is not None:
                     self.on_report(report)          # greedy: this step is the plan's
                 key = frozenset(order)
                 if key not in children or child.score < children[key].score:
                     children[key] = child
                 found += 1
-                if found >= self.plan.beam:
+                if found >= self.plan.beam and self.plan.prefer == "holds":
                     break
         return children, best_rejected
 
@@ -505,7 +558,7 @@ class _Planner:
             held.append(())                          # release step
             report = replace(self.final, step_index=n, block_placed="")
             reports.append(slim(report))
-            if self.plan.beam == 1 and self.on_report is not None:
+            if self.plan.greedy and self.on_report is not None:
                 self.on_report(report)
         holds = []
         for block in self.free:
@@ -530,11 +583,13 @@ class _Planner:
             # each step's direction, as checked (a given one kept), for a robot to follow
             scene = replace(scene, approach=tuple(
                 r.insertion_direction if r.insertable else None for r in reports[:n]))
-        if self.plan.beam > 1 and self.on_report is not None and scene is not None:
+        if not self.plan.greedy and self.on_report is not None and scene is not None:
             # a beam's steps are the plan's only once it is chosen: its reports are re-made
             check_sequence(scene, self.options, on_step=lambda r, _total: self.on_report(r))
+        weakest = min((r for r in reports if r.margin_g >= 0),
+                      key=lambda r: r.margin_g, default=None)
         return Plan(feasible, order, held, message, failed, scene, reports, self.checks,
-                    models=dict(self.models))
+                    models=dict(self.models), weakest=weakest)
 
 
 def _planned_under(options: CheckOptions) -> tuple[float, float] | None:
@@ -551,8 +606,8 @@ def plan_sequence(scene: Scene, max_held: int = 2, options: CheckOptions = Check
                   progress: Callable[[PlanProgress], None] | None = None,
                   should_stop: Callable[[], bool] | None = None,
                   on_report: Callable[[Report], None] | None = None,
-                  look_ahead: Callable[[Assembly, CheckOptions], LookAhead] | None = None
-                  ) -> Plan:
+                  look_ahead: Callable[[Assembly, CheckOptions], LookAhead] | None = None,
+                  prefer: str = "holds", min_margin: float = 0.0) -> Plan:
     """An insertion order of every free block of ``scene`` in which each step stands with at
     most ``max_held`` blocks held (see the module docstring), or where none was found.
 
@@ -562,11 +617,11 @@ def plan_sequence(scene: Scene, max_held: int = 2, options: CheckOptions = Check
     receives each step's full report as the plan makes it (greedy; a beam's after the
     search). ``look_ahead(assembly, options)``: workers for the full checks of the steps
     ahead (:mod:`rbe_ros.analysis.executors`), closed when the plan is made; the plan is
-    the same with and without."""
+    the same with and without. ``prefer`` and ``min_margin``: :class:`PlanOptions`."""
     start = time.perf_counter()
     planner = _Planner(scene, declared(options, scene),
                        PlanOptions(max_held, beam, candidates, keep_sequence, full_candidates,
-                                   time_limit),
+                                   time_limit, prefer, min_margin),
                        progress, should_stop, on_report)
     if look_ahead is not None and not full_candidates:
         planner.pool = look_ahead(planner.full, planner.options)

@@ -420,7 +420,8 @@ def plan_goal_to_dict(state: dict, limits: PlanLimits) -> dict:
     return {"assembly": state, "max_held": int(limits.max_held),
             "beam": int(limits.beam), "hold_force_max": float(limits.hold_force_max),
             "hold_torque_max": float(limits.hold_torque_max),
-            "time_limit": float(limits.time_limit)}
+            "time_limit": float(limits.time_limit), "prefer": str(limits.prefer),
+            "min_margin": float(limits.min_margin)}
 
 
 def plan_goal_from_dict(d: Mapping) -> tuple[dict, PlanLimits]:
@@ -431,7 +432,8 @@ def plan_goal_from_dict(d: Mapping) -> tuple[dict, PlanLimits]:
         int(d.get("max_held", 0)), int(d.get("beam", 0)) or 1,
         hold_force_max=float(d.get("hold_force_max", 0.0)),
         hold_torque_max=float(d.get("hold_torque_max", 0.0)),
-        time_limit=float(d.get("time_limit", 0.0)))
+        time_limit=float(d.get("time_limit", 0.0)), prefer=str(d.get("prefer", "")) or "holds",
+        min_margin=float(d.get("min_margin", 0.0)))
 
 
 def plan_result_to_dict(plan: Plan, header: dict) -> dict:
@@ -444,7 +446,15 @@ def plan_result_to_dict(plan: Plan, header: dict) -> dict:
             "order": [str(b) for b in plan.order],
             "holds": state.get("holds", []),
             "reports": [report_to_dict(r, header) for r in plan.reports],
-            "failed_step": int(plan.failed_step), "plan": state}
+            "failed_step": int(plan.failed_step), "plan": state, **weakest_step(plan)}
+
+
+def weakest_step(plan: Plan) -> dict:
+    """The PlanSequence result fields of ``plan``'s weakest step (-1: no margin computed)."""
+    w = plan.weakest
+    return {"weakest_step": -1 if w is None else int(w.step_index),
+            "weakest_block": "" if w is None else str(w.block_placed),
+            "weakest_margin_g": NOT_COMPUTED if w is None else float(w.margin_g)}
 
 
 def plan_feedback_to_dict(progress: PlanProgress) -> dict:

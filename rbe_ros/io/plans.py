@@ -30,10 +30,13 @@ class PlanLimits:
     hold_force_max: float = 0.0     # N; <= 0: the options'
     hold_torque_max: float = 0.0    # N m; <= 0: the options'
     time_limit: float = 0.0         # s; <= 0: none
+    prefer: str = "holds"           # "holds" or "margin" (PlanOptions.prefer; "": holds)
+    min_margin: float = 0.0         # g; <= 0: off
 
     def search(self) -> PlanOptions:
         """The planner's search (ValueError naming a limit out of its range)."""
-        return PlanOptions(self.max_held, self.beam, self.candidates, self.keep_sequence)
+        return PlanOptions(self.max_held, self.beam, self.candidates, self.keep_sequence,
+                           prefer=self.prefer or "holds", min_margin=max(self.min_margin, 0.0))
 
 
 def plan_options(options: CheckOptions, limits: PlanLimits) -> CheckOptions:
@@ -85,7 +88,8 @@ def plan_state(read_scene: Callable[[], Scene], limits: PlanLimits,
             validate_scene(scene, options.limits)
         return plan_sequence(scene, search.max_held, plan_options(options, limits),
                              beam=search.beam, candidates=search.candidates,
-                             keep_sequence=search.keep_sequence, progress=progress,
+                             keep_sequence=search.keep_sequence, prefer=search.prefer,
+                             min_margin=search.min_margin, progress=progress,
                              should_stop=stop, **extra)
     except SceneError as exc:
         return _failed(f"invalid input: {exc}")

@@ -466,14 +466,13 @@ def plan_feedback_to_dict(progress: PlanProgress) -> dict:
 
 # --- plan execution (~/execution, ~/plan_update) -----------------------------------------------
 
-def lookahead_step_to_dict(report: Report) -> dict:
-    """An rbe_msgs/LookaheadStep dict of a future step's report (checked with the placed
-    blocks at their measured poses and the rest at design)."""
-    force = max((float(np.linalg.norm(w.force)) for w in report.hold_wrenches), default=0.0)
-    return {"step": int(report.step_index), "block": str(report.block_placed),
-            "stable": bool(report.stable), "status": int(report.status),
-            "insertable": bool(report.insertable), "margin_g": float(report.margin_g),
-            "max_hold_force": force, "message": "" if report.stable else str(report.message)}
+def lookahead_step_to_dict(step) -> dict:
+    """An rbe_msgs/LookaheadStep dict of a step checked ahead
+    (:class:`rbe_ros.analysis.lookahead.StepAhead`)."""
+    return {"step": int(step.step), "block": str(step.block), "stable": bool(step.stable),
+            "status": int(step.status), "insertable": bool(step.insertable),
+            "margin_g": float(step.margin_g), "max_hold_force": float(step.max_hold_force),
+            "message": str(step.message)}
 
 
 def execution_to_dict(header: dict, *, active: bool, current_step: int, total_steps: int,

@@ -87,7 +87,7 @@ from ..io.markers import MARKER_TYPE, run_markers, step_markers
 from ..io.messages import (plan_feedback_to_dict, plan_goal_from_dict, plan_result_to_dict,
                            poses_to_dict, report_header, report_to_dict, state_to_dict)
 from ..io.execution import (EXECUTION, LOOKAHEAD_STEPS, MIN_MARGIN_G, Execution, Settings,
-                            repair_plan)
+                            repair)
 from ..io.plans import plan_state
 from ..io.poses import AsBuilt
 from ..io.replay import (DESIGN, EXECUTION_TYPE, OPTIONS_KEY, PLAN_GOAL_TYPE, PLAN_RESULT_TYPE,
@@ -839,10 +839,10 @@ class RbeChecks:
                 if message["feasible"] else
                 f"no repair found: {message['reason']}; {message['message']}")
 
-    def _repair(self, plan: Scene, current: int, options: CheckOptions):
-        """:func:`rbe_ros.io.execution.repair_plan` in a process of its own: a repair that
-        plans holds the GIL for seconds, and the as-built checks must go on meanwhile."""
-        return self._pool().submit(repair_plan, plan, current, options).result()
+    def _repair(self, plan: Scene, built: Scene, options: CheckOptions, min_margin_g: float):
+        """:func:`rbe_ros.io.execution.repair` in a process of its own: a repair that
+        re-plans holds the GIL for seconds, and the as-built checks must go on meanwhile."""
+        return self._pool().submit(repair, plan, built, options, min_margin_g).result()
 
     def _pool(self) -> ProcessPoolExecutor:
         """The process of repairs (spawned: forking a process with DDS threads is unsafe),

@@ -25,7 +25,7 @@ from rbe_ros.io.messages import poses_to_dict
 from rbe_ros.io.scene_json import scene_to_dict
 from rbe_ros.io.testing import assert_bag_replays
 from rbe_ros.ros.convert import dict_to_message, message_to_dict
-from rbe_ros.scene import box_block, make_block, make_scene
+from rbe_ros.scene import Hold, box_block, make_block, make_scene
 
 NAMESPACE = "/rbe_execution_test"
 RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
@@ -38,18 +38,21 @@ PIER = (0.065, 0.15)
 STAMP0 = 70_000
 
 
-def plank(counterweight_height: float):
+def plank(counterweight_height: float, robots: int = 0):
     """A plank on a narrow pier, a block to go on its left end, then one on its right end
     (the counterweight). Left first leans the plank 5 mm inside the pier's edge: near the
     limit (it leans 60 mm of the 65 mm out). With a counterweight as tall as the left block either order stands at design;
-    a twice as tall one tips the plank right if placed first (so the plan is left, right)."""
+    a twice as tall one tips the plank right if placed first (so the plan is left, right).
+    ``robots`` 1: a robot steadies the plank while it is set down (step 0), so the cell has
+    one robot to hold a block with (K = 1) later too."""
     h = counterweight_height
     blocks = [box_block("pier", (2 * PIER[0], 2 * PIER[1], 0.5), (0, 0, 0.25), support=True,
                         density=DENSITY),
               box_block("plank", (0.8, 0.3, 0.1), (0, 0, 0.55), density=DENSITY),
               box_block("left", (0.2, 0.3, 0.1), (-0.3, 0, 0.65), density=DENSITY),
               box_block("right", (0.2, 0.3, h), (0.3, 0, 0.6 + h / 2), density=DENSITY)]
-    return make_scene("plank", blocks, sequence=["plank", "left", "right"])
+    return make_scene("plank", blocks, sequence=["plank", "left", "right"],
+                      holds=[Hold("plank", 0, 1)] if robots else [])
 
 
 def stands(design, poses: dict, free: list[str]) -> bool:
@@ -133,14 +136,14 @@ def rbe_check(capsys, path, poses: dict, tmp_path, name: str, sequence: bool = F
     return json.loads(capsys.readouterr().out)
 
 
-@pytest.mark.parametrize("counterweight, orders", [
-    # a swap saves it (about 12 s: a node, a repair process, a replay; as the other run)
-    pytest.param(0.1, {("right", "left")}, marks=pytest.mark.long, id="swap"),
-    pytest.param(0.2, set(), id="hold"),         # no order does: only a hold
+@pytest.mark.parametrize("counterweight, robots, orders", [
+    # a swap saves it, no robot free (about 10 s: a node, a repair process, a replay)
+    pytest.param(0.1, 0, {("right", "left")}, marks=pytest.mark.long, id="swap"),
+    pytest.param(0.2, 1, set(), id="hold"),      # no order does: only a hold
 ])
 def test_block_lands_off_a_later_step_fails_and_the_plan_is_repaired(
-        rclpy_context, tmp_path, capsys, counterweight, orders):
-    design = plank(counterweight)
+        rclpy_context, tmp_path, capsys, counterweight, robots, orders):
+    design = plank(counterweight, robots)
     path = tmp_path / "planned.json"
     path.write_text(json.dumps(scene_to_dict(design)))
     # the plank lands 10 mm left and turned 2 deg: left next would tip it (the oracle, and
@@ -175,7 +178,8 @@ def test_block_lands_off_a_later_step_fails_and_the_plan_is_repaired(
         assert "step 1 (left)" in failing.message
         update = wait_until(lambda: camera.updates, 60.0, "the plan update")[0]
         assert update.feasible and update.changed_step == 1 and update.order[0] == "plank"
-        assert update.reason.startswith("step 1 (left):")
+        assert update.reason.startswith("step 1 (left) fails at the measured poses")
+        assert update.repair == ("swap" if orders else "hold")
         # the repaired plan's execution state: nothing fails ahead any more
         repaired = wait_until(lambda: len(camera.states) >= 3 and camera.state(STAMP0, True),
                               30.0, "the repaired plan's state")[1]
@@ -263,8 +267,8 @@ def test_bad_poses_give_a_reason_keep_the_state_and_the_bag(make_node, tmp_path)
     assert by_sec[1]["active"] and by_sec[1]["current_step"] == 1
     wrong = by_sec[2]
     assert not wrong["active"] and wrong["current_step"] == 1 and wrong["message"] == (
-        "block 'right' measured out of order: the plan places it at step 2, after step 1 "
-        "('left'), which is not measured")
+        "measured blocks are not a prefix of the plan's order: 'right' (step 2) is measured "
+        "but 'left' (step 1) is not")
     # the as-built state is checked as measured all the same (the counterweight alone holds)
     assert wrong["as_built"]["status"] == 0 and wrong["as_built"]["num_blocks"] == 3
     ghost = by_sec[3]
@@ -274,9 +278,9 @@ def test_bad_poses_give_a_reason_keep_the_state_and_the_bag(make_node, tmp_path)
     assert ghost["as_built"]["status"] == 5          # INVALID_INPUT; nothing merged
     done = by_sec[4]
     assert done["active"] and done["current_step"] == 3 and done["as_built"]["status"] == 0
-    assert not by_sec[5]["active"] and by_sec[5]["message"].startswith(
-        "the plan does not match the design") and by_sec[5]["message"].endswith(
-        "blocks not in the design: left, right")
+    assert not by_sec[5]["active"] and by_sec[5]["message"] == (
+        "the plan 'world' does not match the design 'cell': blocks 'left', 'right' are in "
+        "only one")
     topics = [m.topic.rsplit("/", 1)[1] for m in read_bag(tmp_path / "bag")]
     assert topics.count("poses") == 4 and topics.count("design") == 2
     assert topics.count("execution") == len(states)

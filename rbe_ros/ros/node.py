@@ -224,8 +224,9 @@ class RbeChecks:
         self._slot: bytes | tuple | None = None
         self._slot_cond = threading.Condition()
         self._dropped = 0
-        # a managed node keeps its topic subscriptions while inactive, so that what arrives
-        # in a pause is counted (in _dropped and the log) instead of lost unseen
+        # a managed node keeps its topic subscriptions while inactive: what arrives in a
+        # pause is recorded, designs and poses merged (an incremental camera's blocks are not
+        # lost), and the newest waits in the slot, checked first at the next activate
         self._paused = False
         self._paused_messages = 0
         self._topics: list = []         # the topic subscriptions, while open
@@ -352,7 +353,8 @@ class RbeChecks:
         if paused:
             self.get_logger().warning(
                 f"{paused} messages on {self.state_topic}, {self.design_topic} or "
-                f"{self.poses_topic} arrived while inactive: ignored (counted in dropped_states)")
+                f"{self.poses_topic} arrived while inactive: designs and poses merged, the "
+                "newest message checked first now (the others counted in dropped_states)")
         self.get_logger().info(
             f"ready: {self.state_topic} -> {self.report_topic}, service "
             f"{self._interfaces[-1].service_name}, "
@@ -667,29 +669,23 @@ class RbeChecks:
     def _on_state(self, data: bytes) -> None:
         """Subscription callback (raw CDR): put the state in the slot for the worker (never
         blocks on a check)."""
-        if not self._counted_in_pause():
-            self._put(data)
-
-    def _counted_in_pause(self) -> bool:
-        """Whether the node is inactive: then a message that arrives is counted as dropped
-        (``dropped_states`` of the next report, /diagnostics), and ignored."""
-        with self._slot_cond:
-            if self._paused:
-                self._paused_messages += 1
-                self._dropped += 1
-                self.health.dropped_count(self._dropped)
-            return self._paused
+        self._put(data)
 
     def _put(self, data: bytes | tuple) -> None:
         """Put a state (CDR) or an as-built state in the slot for the worker; one still
-        waiting there is dropped and counted."""
+        waiting there is dropped and counted. While inactive the newest waits there for the
+        next activate (the robot's first verdict is of its newest state, not of one that
+        waited through the pause)."""
         with self._slot_cond:
             stale, self._slot = self._slot, data
+            paused = self._paused
+            self._paused_messages += paused
             if stale is not None:
                 self._dropped += 1
                 dropped = self._dropped
+                self.health.dropped_count(dropped)
             self._slot_cond.notify()
-        if stale is not None:
+        if stale is not None and not paused:
             stamp = _cdr_stamp(stale) if isinstance(stale, bytes) else _stamp(stale[0])
             self.get_logger().warning(
                 f"overload: state of stamp {stamp} dropped unchecked, a newer one"
@@ -750,9 +746,8 @@ class RbeChecks:
 
     def _on_asbuilt(self, data: bytes, msg_type, topic: str, kind: str) -> None:
         """Record a design or poses message, merge it into the as-built state
-        (:func:`rbe_ros.replay.merge_message`) and put the result in the slot; never raises."""
-        if self._counted_in_pause():
-            return
+        (:func:`rbe_ros.replay.merge_message`) and put the result in the slot, inactive too
+        (merged as an overload's dropped updates are); never raises."""
         try:
             msg = deserialize_message(data, msg_type)
             header = self._received(msg, data, topic)

@@ -45,8 +45,6 @@ from __future__ import annotations
 
 import os
 import math
-from concurrent.futures import ProcessPoolExecutor
-from multiprocessing import get_context
 import signal
 import struct
 import json
@@ -86,9 +84,7 @@ from ..io.foxglove_scene import SceneServer
 from ..io.markers import MARKER_TYPE, run_markers, step_markers
 from ..io.messages import (plan_feedback_to_dict, plan_goal_from_dict, plan_result_to_dict,
                            poses_to_dict, report_header, report_to_dict, state_to_dict)
-from ..io.execution import (EXECUTION, LOOKAHEAD_STEPS, MIN_MARGIN_G, Execution, Settings,
-                            repair)
-from ..io.plans import plan_state
+from ..io.execution import EXECUTION, LOOKAHEAD_STEPS, MIN_MARGIN_G, Execution, Settings
 from ..io.poses import AsBuilt
 from ..io.replay import (DESIGN, EXECUTION_TYPE, OPTIONS_KEY, PLAN_GOAL_TYPE, PLAN_RESULT_TYPE,
                          PLAN_UPDATE_TYPE, POSES, SETTINGS_TYPE, asbuilt_check, merge_message,
@@ -99,6 +95,7 @@ from .convert import dict_to_message, message_to_dict, scene_from_msg
 from .diagnostics import PERIOD_S as DIAGNOSTICS_PERIOD_S
 from .diagnostics import TOPIC as DIAGNOSTICS_TOPIC
 from .diagnostics import NodeHealth
+from .workers import Workers
 
 NODE_NAME = "rbe_node"
 #: At most one INFO line per this many seconds sums up the reports (a line per report at
@@ -242,7 +239,7 @@ class RbeChecks:
         self._exec_slot: dict = {}
         self._exec_cond = threading.Condition()
         self._exec_thread: threading.Thread | None = None
-        self._repair_pool = None
+        self._workers: Workers | None = None    # plans and repairs: processes of their own
 
         self.add_on_set_parameters_callback(self._validate_parameters)
         for name, (value, descriptor) in PARAMETERS.items():
@@ -505,17 +502,18 @@ class RbeChecks:
         with self._exec_cond:
             self._exec_cond.notify_all()
 
-    def _close_pool(self) -> None:
-        pool, self._repair_pool = self._repair_pool, None
-        if pool is not None:
-            pool.shutdown(wait=False, cancel_futures=True)
+    def _close_workers(self) -> None:
+        workers, self._workers = self._workers, None
+        if workers is not None:
+            workers.close()
 
     def close_bag(self) -> None:
         with self._bag_lock:
             self._close_bag_locked()
 
     def _close_outputs(self) -> None:
-        """Close the bag and the Foxglove server. Idempotent."""
+        """Close the bag, the Foxglove server and the worker processes. Idempotent."""
+        self._close_workers()
         self.close_bag()
         server, self.foxglove = self.foxglove, None
         if server is not None:
@@ -524,7 +522,6 @@ class RbeChecks:
     def destroy_node(self):
         """Close the interfaces, the bag and the Foxglove server, then the node. Idempotent."""
         self._stop_interfaces()
-        self._close_pool()
         self._close_outputs()
         if self._destroyed:
             return
@@ -835,18 +832,14 @@ class RbeChecks:
                 f"no repair found: {message['reason']}; {message['message']}")
 
     def _repair(self, plan: Scene, built: Scene, options: CheckOptions, min_margin_g: float):
-        """:func:`rbe_ros.io.execution.repair` in a process of its own: a repair that
-        re-plans holds the GIL for seconds, and the as-built checks must go on meanwhile."""
-        return self._pool().submit(repair, plan, built, options, min_margin_g).result()
+        """The repair in a worker process (:mod:`rbe_ros.ros.workers`)."""
+        return self._pool().repair(plan, built, options, min_margin_g)
 
-    def _pool(self) -> ProcessPoolExecutor:
-        """The process of repairs (spawned: forking a process with DDS threads is unsafe),
-        started with the node so that the first repair does not wait for its imports."""
-        if self._repair_pool is None:
-            self._repair_pool = ProcessPoolExecutor(max_workers=1,
-                                                    mp_context=get_context("spawn"))
-            self._repair_pool.submit(time.sleep, 0.0)
-        return self._repair_pool
+    def _pool(self) -> Workers:
+        """The worker processes, started on first use (the node starts them at once)."""
+        if self._workers is None:
+            self._workers = Workers()
+        return self._workers
 
     def design_message(self, path: str) -> AssemblyState:
         """The design of ``design_file`` as the message a pipeline would send on ~/design
@@ -938,13 +931,12 @@ class RbeChecks:
             goal_handle.publish_feedback(
                 dict_to_message(plan_feedback_to_dict(p), PlanSequence.Feedback))
 
-        def read() -> Scene:
-            return scene_from_msg(goal.assembly, limits=options.limits)
-
         with self._plan_lock:
             start = time.monotonic()
-            options = self.check_options()
-            plan = plan_state(read, limits, options, progress=progress, should_stop=stopped)
+            # in a worker process: the as-built checks keep their pace meanwhile
+            plan = self._pool().plan(serialize_message(goal.assembly), limits,
+                                     self.check_options(), progress=progress,
+                                     should_stop=stopped)
             data = self._encode_plan(plan_result_to_dict(plan, header))
             self._record(self.plan_result_topic, data)
         self.get_logger().info(f"plan of {header['frame_id']} ({len(goal.assembly.blocks)} "

@@ -53,7 +53,6 @@ class RbeLifecycleNode(RbeChecks, LifecycleNode):
             return TransitionCallbackReturn.FAILURE
         self._record_settings()
         self._start_foxglove()
-        self._pool()
         self.get_logger().info("configured")
         return TransitionCallbackReturn.SUCCESS
 

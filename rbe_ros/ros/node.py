@@ -75,7 +75,8 @@ from visualization_msgs.msg import MarkerArray
 from ..analysis.option_spec import BY_PARAM, OPTIONS, Option, from_outer
 from ..analysis.options import CheckOptions
 from ..analysis.pipeline import StateCheck, check_state
-from ..analysis.planning import STOPPED
+from ..analysis.lookahead import check_plan_design
+from ..analysis.planning import STOPPED, Plan
 from ..analysis.steps import sequence_step
 from ..io import cdr
 from ..io.bag import BagWriter, typestore
@@ -231,6 +232,7 @@ class RbeChecks:
         # the design and the poses measured so far (~/design, ~/poses): updated in the
         # callbacks, so that no measurement is lost when its check is dropped under overload
         self._asbuilt = AsBuilt()
+        self._asbuilt_lock = threading.RLock()
         self.foxglove = None
         # ~/execution: the plan under execution, advanced by its own thread from the as-built
         # states the worker checked (the newest; a design never dropped), so that looking
@@ -747,20 +749,23 @@ class RbeChecks:
         (merged as an overload's dropped updates are); never raises."""
         try:
             msg = deserialize_message(data, msg_type)
-            header = self._received(msg, data, topic)
-            try:        # the topic callbacks run one at a time (one exclusive group)
-                scene = merge_message(self._asbuilt, kind, message_to_dict(msg))
-            except SceneError as exc:
-                scene = exc
-            # a later file of a split bag begins with the design and the poses measured so
-            # far (stamp 0: no report answers it), so that it replays alone
-            if kind == DESIGN:
-                self._carry(topic, data)
-                with self._exec_cond:
-                    self._exec_slot["design"] = self._asbuilt.design
-            else:
-                self._carry(topic, self._measured_poses)
-            self._put((header, scene))
+            # recorded in the order merged (a replay merges them so): the topic callbacks
+            # run one at a time, and a plan's design (_adopt) comes from another thread
+            with self._asbuilt_lock:
+                header = self._received(msg, data, topic)
+                try:
+                    scene = merge_message(self._asbuilt, kind, message_to_dict(msg))
+                except SceneError as exc:
+                    scene = exc
+                # a later file of a split bag begins with the design and the poses measured
+                # so far (stamp 0: no report answers it), so that it replays alone
+                if kind == DESIGN:
+                    self._carry(topic, data)
+                    with self._exec_cond:
+                        self._exec_slot["design"] = self._asbuilt.design
+                else:
+                    self._carry(topic, self._measured_poses)
+                self._put((header, scene))
         except Exception as exc:
             self.get_logger().error(f"{topic}: message not handled: {type(exc).__name__}: "
                                     f"{exc}")
@@ -836,7 +841,7 @@ class RbeChecks:
         return self._pool().repair(plan, built, options, min_margin_g)
 
     def _pool(self) -> Workers:
-        """The worker processes, started on first use (the node starts them at once)."""
+        """The worker processes (each spawned at its first use)."""
         if self._workers is None:
             self._workers = Workers()
         return self._workers
@@ -942,6 +947,7 @@ class RbeChecks:
         self.get_logger().info(f"plan of {header['frame_id']} ({len(goal.assembly.blocks)} "
                                f"blocks, at most {limits.max_held} held) in "
                                f"{time.monotonic() - start:.1f} s: {plan.message}")
+        self._adopt(plan, header)
         if not plan.message.startswith(STOPPED) or not stopped():
             goal_handle.succeed()       # planned, infeasible, invalid, or its time limit
         elif goal_handle.is_cancel_requested:
@@ -949,6 +955,30 @@ class RbeChecks:
         else:
             goal_handle.abort()         # preempted by a newer goal, or shutting down
         return deserialize_message(data, PlanSequence.Result)
+
+
+    def _adopt(self, plan: Plan, header: dict) -> None:
+        """A feasible plan of the design (or made with no design yet) becomes the plan
+        ~/execution follows, while no block is measured: it is sent on as the design
+        (recorded, so that a replay executes it too)."""
+        if not plan.feasible or plan.scene is None:
+            return
+        why = ""
+        with self._asbuilt_lock:
+            if self._asbuilt.measured:
+                why = f"{len(self._asbuilt.measured)} blocks are measured already (send a " \
+                      "design with a sequence to start again)"
+            elif self._asbuilt.design is not None:
+                try:
+                    check_plan_design(plan.scene, self._asbuilt.design)
+                except SceneError as exc:
+                    why = str(exc)
+            if not why:
+                self._send_design(dict_to_message(state_to_dict(
+                    plan.scene, header["frame_id"], self.get_clock().now().nanoseconds),
+                    AssemblyState))
+        self.get_logger().info(f"the plan is not executed: {why}" if why else
+                               f"executing the plan: {' '.join(plan.order)}")
 
 
 class RbeNode(RbeChecks, Node):
@@ -961,7 +991,6 @@ class RbeNode(RbeChecks, Node):
         self._record_settings()
         self._start_foxglove()
         self._start_interfaces()
-        self._pool()
         path = self.get_parameter("design_file").value
         if path:
             try:

@@ -5,14 +5,15 @@ rate of the as-built checks a cell waits on. Here they run in a pool of spawned 
 (forking a process with DDS threads is unsafe) at a lower priority (:data:`NICE`), so the
 checks keep their latency while a plan runs; a plan's progress comes back through a queue
 (the action's feedback) and a stop (cancel, a newer goal, shutdown) goes to it through an
-event polled between candidate checks, as in the node's own process before. The pool starts
-with the node, so that the first plan does not wait for the processes' imports.
+event polled between candidate checks, as in the node's own process before. A process is
+spawned at the first plan or repair (its imports take seconds: a node that never plans never
+pays them); like every spawned process, it imports the main module again, so a script that
+makes a node needs the ``if __name__ == "__main__":`` guard.
 """
 from __future__ import annotations
 
 import os
 import queue
-import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -71,10 +72,8 @@ class Workers:
         self._pool = self._start()
 
     def _start(self) -> ProcessPoolExecutor:
-        pool = ProcessPoolExecutor(PROCESSES, mp_context=self._context, initializer=_init,
+        return ProcessPoolExecutor(PROCESSES, mp_context=self._context, initializer=_init,
                                    initargs=(self._progress, self._stop))
-        pool.submit(time.sleep, 0.0)        # one process up now
-        return pool
 
     def _submit(self, fn, *args):
         try:

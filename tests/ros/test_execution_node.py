@@ -136,11 +136,11 @@ def rbe_check(capsys, path, poses: dict, tmp_path, name: str, sequence: bool = F
     return json.loads(capsys.readouterr().out)
 
 
+@pytest.mark.long       # 10-15 s each: a node, its repair process, a replay
 @pytest.mark.parametrize("counterweight, robots, orders", [
-    # a swap saves it, no robot free (about 10 s: a node, a repair process, a replay)
-    pytest.param(0.1, 0, {("right", "left")}, marks=pytest.mark.long, id="swap"),
-    pytest.param(0.2, 1, set(), id="hold"),      # no order does: only a hold
-])
+    (0.1, 0, {("right", "left")}),              # a swap saves it, no robot free
+    (0.2, 1, set()),                            # no order does: only a hold
+], ids=["swap", "hold"])
 def test_block_lands_off_a_later_step_fails_and_the_plan_is_repaired(
         rclpy_context, tmp_path, capsys, counterweight, robots, orders):
     design = plank(counterweight, robots)
@@ -340,3 +340,35 @@ def test_checks_keep_their_latency_while_a_plan_runs(rclpy_context, tmp_path):
                       "median_planning_s": float(np.median(planning)), "ratio": ratio,
                       "steps_planned_meanwhile": running}))
     assert ratio <= 1.2
+
+
+def test_a_plan_of_the_node_is_the_plan_executed(make_node, tmp_path):
+    """A feasible ~/plan result, with nothing measured yet, is the plan ~/execution follows
+    (sent on as the design: recorded, replayed); once blocks are measured a new plan is not
+    taken (the log says why)."""
+    from rclpy.serialization import serialize_message
+
+    from rbe_ros.analysis.planning import plan_sequence
+
+    design = replace(plank(0.1), sequence=())
+    plan = plan_sequence(design, 0)
+    assert plan.feasible and plan.order[0] == "plank"
+    node = make_node(mcap_path=str(tmp_path / "bag"))
+    states: list[dict] = []
+    node._send_execution = (lambda send: lambda kind, m: (states.append(m), send(kind, m)))(
+        node._send_execution)
+    node._adopt(plan, {"frame_id": "cell", "stamp": {"sec": 0, "nanosec": 0}})
+    wait_until(lambda: states, 30.0, "the plan's execution state")
+    assert states[-1]["active"] and states[-1]["current_step"] == 0
+    assert [s["block"] for s in states[-1]["lookahead"]] == plan.order
+    b = design.block("plank")
+    node._on_poses(serialize_message(dict_to_message(poses_to_dict(
+        {"plank": (b.position.tolist(), [0, 0, 0, 1])}, "cell", 10**10), BlockPoses)))
+    state = wait_until(lambda: next((m for m in states
+                                     if m["header"]["stamp"]["sec"] == 10), None), 30.0, "10")
+    assert state["active"] and state["current_step"] == 1 and state["first_failing_step"] == -1
+    node._adopt(plan, {"frame_id": "cell", "stamp": {"sec": 0, "nanosec": 0}})  # not taken
+    node.destroy_node()
+    topics = [m.topic.rsplit("/", 1)[1] for m in read_bag(tmp_path / "bag")]
+    assert topics.count("design") == 1
+    assert_bag_replays(tmp_path / "bag")

@@ -659,7 +659,8 @@ def _run_replay(args) -> int:
                             markers=not args.no_markers, on_run=progress, keep=False)
     except RuntimeError as exc:     # the live node failed or exited
         raise ValueError(str(exc)) from None
-    print(f"replayed {result.states} states ({result.reports} reports"
+    executed = f", {result.executed} plan execution messages" if result.executed else ""
+    print(f"replayed {result.states} states ({result.reports} reports{executed}"
           f"{', live' if args.live else ''}) in {time.monotonic() - started:.1f} s; bag "
           f"written to {result.output}")
     if result.orphan_reports:

@@ -940,6 +940,7 @@ class ReplayResult:
     options: CheckOptions
     states: int = 0                 # runs read
     reports: int = 0                # reports replayed
+    executed: int = 0               # ExecutionStates and PlanUpdates made again (compared)
     recorded: int = 0               # reports recorded (compared)
     difference_count: int = 0
     orphan_reports: int = 0         # reports whose state is not in the bag (a split file)
@@ -1055,6 +1056,7 @@ def replay_bag(path, output=None, *, options: CheckOptions | None = None, compar
             if writer is not None:
                 writer.write(run, reports)
             executed = replay_execution(execution, run, reports, options)
+            result.executed += len(executed)
             found = compare_run(i, run, reports, tolerances=tolerances) + \
                 compare_execution(i, run, executed, tolerances=tolerances) if compare else []
             result.add(i, run, reports, found, keep)

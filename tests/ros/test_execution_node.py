@@ -22,6 +22,7 @@ from rbe_client import NodeProcess, wait_until
 from rbe_ros import cli
 from rbe_ros.io.bag import read_bag
 from rbe_ros.io.messages import poses_to_dict
+from rbe_ros.io.replay import compare_execution
 from rbe_ros.io.scene_json import scene_to_dict
 from rbe_ros.io.testing import assert_bag_replays
 from rbe_ros.ros.convert import dict_to_message, message_to_dict
@@ -284,7 +285,14 @@ def test_bad_poses_give_a_reason_keep_the_state_and_the_bag(make_node, tmp_path)
     topics = [m.topic.rsplit("/", 1)[1] for m in read_bag(tmp_path / "bag")]
     assert topics.count("poses") == 4 and topics.count("design") == 2
     assert topics.count("execution") == len(states)
-    assert_bag_replays(tmp_path / "bag")
+    result = assert_bag_replays(tmp_path / "bag")
+    assert result.executed == len(states)
+    # a recorded state the replay does not make again is a difference
+    run = next(r for r in result.runs if r.execution)
+    kind, recorded = run.execution[0]
+    run.execution[0] = (kind, {**recorded, "current_step": recorded["current_step"] + 1})
+    [found] = compare_execution(0, run, [(kind, recorded)])
+    assert (found.where, found.field) == ("execution", "current_step")
 
 
 @pytest.mark.long
@@ -372,3 +380,4 @@ def test_a_plan_of_the_node_is_the_plan_executed(make_node, tmp_path):
     topics = [m.topic.rsplit("/", 1)[1] for m in read_bag(tmp_path / "bag")]
     assert topics.count("design") == 1
     assert_bag_replays(tmp_path / "bag")
+

@@ -90,7 +90,8 @@ class Execution:
         fails a PlanUpdate and the ExecutionState of the repaired plan; each passed to
         ``on_output(kind, message)`` as soon as it is made (the failing step goes out
         before the repair starts). The same state again gives the same outputs with the new
-        header (a cell sends the same poses at 10 Hz); never raises."""
+        header (a cell sends the same poses at 10 Hz); nothing while no plan was ever given
+        (a node that only checks says nothing on ~/execution); never raises."""
         out: list[tuple[str, dict]] = []
 
         def emit(kind: str, message: dict) -> None:
@@ -98,6 +99,8 @@ class Execution:
             if on_output is not None:
                 on_output(kind, message)
 
+        if self.plan is None and self.error == NO_PLAN:
+            return out
         if self._seen and self._seen[0] is built and self._seen[1] is self.plan:
             for kind, message in self._outputs:
                 emit(kind, {**message, "header": header})

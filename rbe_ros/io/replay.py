@@ -201,8 +201,8 @@ class RunReader:
     as its reports are in, so only the runs still waiting for a report are held (the node
     answers a state within a check's time). Reports whose state is not in the bag (one
     file of a split bag: the state was in the file before) are counted in
-    :attr:`orphan_reports` and skipped. :attr:`total`: the number of runs (after the first
-    pass)."""
+    :attr:`orphan_reports` and skipped (their execution states too, not counted).
+    :attr:`total`: the number of runs (after the first pass)."""
 
     def __init__(self, path):
         self.path = Path(path)
@@ -241,11 +241,14 @@ class RunReader:
             owners.append(owner)
             if owner >= 0:
                 counts[owner] += 1
+            elif m.msgtype == REPORT_TYPE:
+                self.orphan_reports += 1
         return owners, counts
 
     def __iter__(self) -> Iterator[Run]:
+        self.orphan_reports = 0
         owners, counts = self._owners()
-        self.total, self.orphan_reports = len(counts), owners.count(-1)
+        self.total = len(counts)
         pending: dict[int, Run] = {}
         created, done = 0, 0        # runs read, runs yielded
         reports = 0                 # reports read
@@ -739,7 +742,11 @@ def replay_execution(tracker: Execution, run: Run, reports: list[dict],
         return []
     run_options, frame_id = run_settings(run, options)
     header = report_header(run.state.get("header"), frame_id)
-    return tracker.advance(_asbuilt(run), reports[0] if reports else None, header, run_options,
+    # the report of a split bag's file may be in the file before: then the one recorded
+    # with the execution state (the report itself is compared where it is)
+    as_built = reports[0] if reports else next(
+        (m["as_built"] for kind, m in run.execution if kind == EXECUTION), None)
+    return tracker.advance(_asbuilt(run), as_built, header, run_options,
                            Settings.of((run.settings or {}).get("execution")))
 
 

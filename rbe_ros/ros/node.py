@@ -74,7 +74,7 @@ from visualization_msgs.msg import MarkerArray
 
 from ..analysis.option_spec import BY_PARAM, OPTIONS, Option, from_outer
 from ..analysis.options import CheckOptions
-from ..analysis.pipeline import StateCheck, check_state
+from ..analysis.pipeline import StateCheck, check_state, slim
 from ..analysis.lookahead import check_plan_design
 from ..analysis.planning import STOPPED, Plan
 from ..analysis.steps import sequence_step
@@ -215,7 +215,8 @@ class RbeChecks:
         self._interfaces: list = []     # subscriptions and service, while open
         self._bag = None
         self._bag_lock = threading.Lock()
-        self._later_topics: dict[str, tuple[str, bool]] = {}   # bag topics not added yet
+        # bag topics not added yet: type, latched, whether a file may begin with one
+        self._later_topics: dict[str, tuple[str, bool, bool]] = {}
         # Overload: the subscription callback only puts the state in this one slot (a newer
         # state replaces a waiting one, counted in _dropped); the worker thread checks it.
         # CDR of the newest unchecked state, or an as-built state: (header, scene or error)
@@ -436,12 +437,13 @@ class RbeChecks:
         # added with their first message: a bag of states alone has only their topics
         self.settings_topic = f"{self.get_fully_qualified_name()}/settings"
         self._bag.add_topic(self.settings_topic, SETTINGS_TYPE, transient_local=True)
-        self._later_topics = {self.design_topic: ("rbe_msgs/msg/AssemblyState", True),
-                              self.poses_topic: ("rbe_msgs/msg/BlockPoses", False),
-                              self.plan_goal_topic: (PLAN_GOAL_TYPE, False),
-                              self.plan_result_topic: (PLAN_RESULT_TYPE, False),
-                              self.execution_topic: (EXECUTION_TYPE, True),
-                              self.plan_update_topic: (PLAN_UPDATE_TYPE, True)}
+        # an execution state or plan update stays in the file of its poses, as a report
+        self._later_topics = {self.design_topic: ("rbe_msgs/msg/AssemblyState", True, True),
+                              self.poses_topic: ("rbe_msgs/msg/BlockPoses", False, True),
+                              self.plan_goal_topic: (PLAN_GOAL_TYPE, False, True),
+                              self.plan_result_topic: (PLAN_RESULT_TYPE, False, True),
+                              self.execution_topic: (EXECUTION_TYPE, True, False),
+                              self.plan_update_topic: (PLAN_UPDATE_TYPE, True, False)}
         self.bag_path = path
         self.get_logger().info(f"recording states and reports to {path}")
 
@@ -456,8 +458,8 @@ class RbeChecks:
                 return
             try:
                 if topic in self._later_topics:
-                    msgtype, latched = self._later_topics.pop(topic)
-                    self._bag.add_topic(topic, msgtype, transient_local=latched)
+                    msgtype, latched, splits = self._later_topics.pop(topic)
+                    self._bag.add_topic(topic, msgtype, transient_local=latched, splits=splits)
                 self._bag.write(topic, data, stamp)
                 self.health.recorded(len(data))
             except Exception as exc:  # a full disk must not stop the checks
@@ -816,7 +818,7 @@ class RbeChecks:
     def _advance(self, header: dict, scene, report: Report) -> None:
         """Publish (and record) what the as-built state means for the plan: its
         ExecutionState, and a repaired plan when a step ahead fails (WARN)."""
-        self._execution.advance(scene, report_to_dict(report, header), header,
+        self._execution.advance(scene, report_to_dict(slim(report), header), header,
                                 self.check_options(), self._execution_settings(), self._repair,
                                 self._send_execution)
 
@@ -958,17 +960,17 @@ class RbeChecks:
 
 
     def _adopt(self, plan: Plan, header: dict) -> None:
-        """A feasible plan of the design (or made with no design yet) becomes the plan
-        ~/execution follows, while no block is measured: it is sent on as the design
-        (recorded, so that a replay executes it too)."""
-        if not plan.feasible or plan.scene is None:
+        """A feasible plan of the design becomes the plan ~/execution follows while no block
+        is measured: it is sent on as the design (recorded, so that a replay executes it
+        too). Without a design nothing happens (a node asked only to plan stays silent)."""
+        if not plan.feasible or plan.scene is None or self._asbuilt.design is None:
             return
         why = ""
         with self._asbuilt_lock:
             if self._asbuilt.measured:
                 why = f"{len(self._asbuilt.measured)} blocks are measured already (send a " \
                       "design with a sequence to start again)"
-            elif self._asbuilt.design is not None:
+            else:
                 try:
                     check_plan_design(plan.scene, self._asbuilt.design)
                 except SceneError as exc:

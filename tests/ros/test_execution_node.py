@@ -351,20 +351,26 @@ def test_checks_keep_their_latency_while_a_plan_runs(rclpy_context, tmp_path):
 
 
 def test_a_plan_of_the_node_is_the_plan_executed(make_node, tmp_path):
-    """A feasible ~/plan result, with nothing measured yet, is the plan ~/execution follows
-    (sent on as the design: recorded, replayed); once blocks are measured a new plan is not
-    taken (the log says why)."""
+    """A feasible ~/plan result of the design, with nothing measured yet, is the plan
+    ~/execution follows (sent on as the design: recorded, replayed); without a design, or
+    once blocks are measured, a plan is not taken."""
     from rclpy.serialization import serialize_message
 
+    from rbe_msgs.msg import AssemblyState
     from rbe_ros.analysis.planning import plan_sequence
+    from rbe_ros.io.messages import scene_from_state_dict, state_to_dict
 
-    design = replace(plank(0.1), sequence=())
+    # as the node has them: the design and the goal's assembly both came as messages
+    design = scene_from_state_dict(state_to_dict(replace(plank(0.1), sequence=())))
     plan = plan_sequence(design, 0)
     assert plan.feasible and plan.order[0] == "plank"
     node = make_node(mcap_path=str(tmp_path / "bag"))
     states: list[dict] = []
     node._send_execution = (lambda send: lambda kind, m: (states.append(m), send(kind, m)))(
         node._send_execution)
+    node._adopt(plan, {"frame_id": "cell", "stamp": {"sec": 0, "nanosec": 0}})   # no design
+    node._on_design(serialize_message(dict_to_message(state_to_dict(design, "cell", 10**9),
+                                                      AssemblyState)))
     node._adopt(plan, {"frame_id": "cell", "stamp": {"sec": 0, "nanosec": 0}})
     wait_until(lambda: states, 30.0, "the plan's execution state")
     assert states[-1]["active"] and states[-1]["current_step"] == 0
@@ -378,6 +384,6 @@ def test_a_plan_of_the_node_is_the_plan_executed(make_node, tmp_path):
     node._adopt(plan, {"frame_id": "cell", "stamp": {"sec": 0, "nanosec": 0}})  # not taken
     node.destroy_node()
     topics = [m.topic.rsplit("/", 1)[1] for m in read_bag(tmp_path / "bag")]
-    assert topics.count("design") == 1
+    assert topics.count("design") == 2                   # the design, then the plan of it
     assert_bag_replays(tmp_path / "bag")
 

@@ -25,7 +25,15 @@ Interfaces (relative to the node, e.g. ``/rbe_node/report``):
   and each step's report as result. Cancellable between candidate checks (the result is the
   best partial plan, status CANCELED); a newer goal preempts a running one (ABORTED, "stopped
   after K of N blocks"); plans run one at a time. A goal that cannot be planned (invalid
-  input) SUCCEEDS with ``feasible`` false and the reason, as an infeasible plan does.
+  input) SUCCEEDS with ``feasible`` false and the reason, as an infeasible plan does. Plans
+  (and repairs) run in worker processes (:mod:`rbe_ros.ros.workers`), so the checks keep
+  their pace meanwhile;
+* publishes ``~/execution`` (rbe_msgs/ExecutionState) and ``~/plan_update``
+  (rbe_msgs/PlanUpdate), both latched: the plan under execution (a design with a sequence, or
+  a ~/plan result of the design) after each design or poses message checked, the steps
+  ahead at the measured poses, and a repaired plan when one of them fails
+  (:mod:`rbe_ros.io.execution`, its own thread; parameters ``lookahead_steps``,
+  ``min_margin_g``).
 
 Bad input never stops the node: a state that cannot be checked (outside the limits of
 :class:`rbe_ros.scene.ValidationLimits`, ``max_blocks`` among them) gives a report with status

@@ -26,83 +26,118 @@ from rbe_ros import generators  # noqa: E402
 from rbe_ros.analysis.lookahead import look_ahead  # noqa: E402
 from rbe_ros.analysis.planning import plan_sequence  # noqa: E402
 from rbe_ros.analysis.repair import repair_plan  # noqa: E402
+from rbe_ros.io.inputs import load_design  # noqa: E402
 from rbe_ros.io.poses import scene_at_poses  # noqa: E402
 
 UNCERTAINTY = (0.005, 3.5)
+DOME527 = ROOT / "tests" / "data" / "compas_assembly" / "dome_assembly.json.gz"
 #: (block placed k steps before half-built, radial shift in m, tilt in deg about the
-#: block's meridian tangent)
-DEVIATIONS = [(k, shift, tilt) for k in (1, 2, 3) for shift in (0.004, -0.004)
-              for tilt in (3.0, -3.0)]
+#: block's horizontal tangent or its radial axis)
+DEVIATIONS = [(k, shift, tilt, axis) for k in (1, 2, 3) for shift in (0.004, -0.004)
+              for tilt in (3.0, -3.0) for axis in ("tangent", "radial")]
+#: The 14 x 10 dome of docs/SCALING.md, and the same 140 blocks at 0.6 of its thickness
+DOMES = (("14 x 10 dome", {}), ("14 x 10 dome, 0.6 of the thickness",
+                                {"t_base": 0.3, "t_oculus": 0.15}))
 
 
-def deviated(block, shift: float, tilt: float):
+def deviated(block, shift: float, tilt: float, axis: str):
     """(position, orientation) of ``block`` moved ``shift`` m radially (horizontal) and
-    turned ``tilt`` deg about the horizontal tangent through its centroid."""
+    turned ``tilt`` deg about its horizontal tangent or its radial axis."""
     c = np.asarray(block.position, dtype=float)
     radial = np.array([c[0], c[1], 0.0]) / (np.hypot(c[0], c[1]) or 1.0)
     tangent = np.cross([0.0, 0.0, 1.0], radial)
-    turn = Rotation.from_rotvec(np.radians(tilt) * tangent)
+    turn = Rotation.from_rotvec(np.radians(tilt) * (tangent if axis == "tangent" else radial))
     q = (turn * Rotation.from_quat(block.orientation)).as_quat()
     return (c + shift * radial).tolist(), q.tolist()
 
 
-def main() -> int:
-    scene = replace(generators.dome(), pose_uncertainty=UNCERTAINTY)
+def one_dome(name: str, scene, window: int = 0) -> list[str]:
+    """The section of docs/REPAIR.md of one dome; ``window`` > 0: deviations looked for and
+    repaired within the next ``window`` steps only (a node's look-ahead)."""
     start = time.perf_counter()
     plan = plan_sequence(scene, 2)
     planned = plan.scene
     plan_time = time.perf_counter() - start
     half = len(plan.order) // 2
-    print(f"plan: {plan_time:.1f} s, feasible {plan.feasible}; half-built {half}", flush=True)
+    print(f"{name}: plan {plan_time:.1f} s, feasible {plan.feasible}; half-built {half}",
+          flush=True)
+    lines = [f"## {name}", "", f"`plan --max-held 2` ({plan_time:.1f} s, feasible "
+             f"{plan.feasible}; pose uncertainty {UNCERTAINTY[0] * 1e3:g} mm / "
+             f"{UNCERTAINTY[1]:g} deg declared), built to half ({half} of {len(plan.order)} "
+             "blocks placed at design), one of the last three placed blocks measured 4 mm "
+             "off radially and turned 3 deg about its tangent or radial axis (24 deviations, "
+             "in a fixed order).", ""]
+    if not plan.feasible:
+        return lines + [f"No plan: {plan.message}", ""]
     design = {b: (planned.block(b).position.tolist(), planned.block(b).orientation.tolist())
               for b in plan.order[:half]}
-    chosen = None
-    for k, shift, tilt in DEVIATIONS:
+    chosen, tried = None, 0
+    for k, shift, tilt, axis in DEVIATIONS:
         block = plan.order[half - k]
-        poses = {**design, block: deviated(planned.block(block), shift, tilt)}
-        built = scene_at_poses(planned, poses)
-        ahead = look_ahead(planned, built, lookahead_steps=0, until_failure=True)
-        print(f"  {block} {shift * 1e3:+.0f} mm {tilt:+.0f} deg: first failing step "
-              f"{ahead.first_failing_step} ({ahead.time:.1f} s)", flush=True)
+        built = scene_at_poses(planned, {**design, block: deviated(planned.block(block), shift,
+                                                                   tilt, axis)})
+        ahead = look_ahead(planned, built, lookahead_steps=window, until_failure=True)
+        tried += 1
+        print(f"  {block} {shift * 1e3:+.0f} mm {tilt:+.0f} deg about its {axis}: first "
+              f"failing step {ahead.first_failing_step} ({ahead.time:.1f} s)", flush=True)
         if ahead.first_failing_step >= half and ahead.as_built.stable:
-            chosen = (block, shift, tilt, built, ahead)
+            chosen = (f"{block} {shift * 1e3:+.0f} mm, {tilt:+.0f} deg about its {axis}",
+                      built, ahead)
             break
-    lines = ["# Repair time", "", "Made by `make bench-repair` (benchmarks/repair.py); machine: "
-             f"{machine_summary()}.", ""]
     if chosen is None:
-        lines += ["None of the deviations tried made a later step fail: nothing to repair."]
-        (ROOT / "docs" / "REPAIR.md").write_text("\n".join(lines) + "\n")
-        return 1
-    block, shift, tilt, built, ahead = chosen
-    start = time.perf_counter()
-    repaired = repair_plan(planned, built)
-    repair_time = time.perf_counter() - start
-    print(f"repair: {repair_time:.2f} s: {repaired.kind}: {repaired.message}", flush=True)
+        return lines + [f"None of the {tried} deviations makes a step of the rest fail (each "
+                        "checked " + (f"over the next {window} steps" if window else
+                                      "to the end of the plan") + "): the rest of the plan "
+                        "stands as it is, nothing to repair.", ""]
+    what, built, ahead = chosen
+    timed = {}
+    for steps in ((window,) if window else (0, 10)):
+        start = time.perf_counter()
+        timed[steps] = repair_plan(planned, built, lookahead_steps=steps)
+        timed[steps].time = time.perf_counter() - start
+        print(f"  repair (window {steps}): {timed[steps].time:.2f} s: "
+              f"{timed[steps].message}", flush=True)
     fixed = replace(built, sequence=tuple(plan.order[:half]), holds=())
     start = time.perf_counter()
     again = plan_sequence(fixed, 2, keep_sequence=True)
     replan_time = time.perf_counter() - start
-    print(f"re-plan: {replan_time:.2f} s, feasible {again.feasible}", flush=True)
-    ratio = repair_time / replan_time
-    lines += [
-        f"The 14 x 10 dome (140 blocks, 126 to place), `plan --max-held 2` with the pose "
-        f"uncertainty {UNCERTAINTY[0] * 1e3:g} mm / {UNCERTAINTY[1]:g} deg declared "
-        f"({plan_time:.1f} s), built to half ({half} blocks placed at design); block "
-        f"{block} measured {shift * 1e3:+.0f} mm radially and {tilt:+.0f} deg about its "
-        f"meridian tangent: the plan's step {ahead.first_failing_step} then fails "
-        f"({ahead.message}).", "",
-        "| | time s | result |", "|---|---|---|",
-        f"| repair (`rbe-ros repair`) | {repair_time:.2f} | {repaired.kind}, feasible "
-        f"{repaired.feasible}, changed step {repaired.changed_step}, {repaired.checks} "
-        "states checked |",
-        f"| re-planning the remainder from scratch (`plan --keep-sequence`, the placed "
-        f"blocks as prefix) | {replan_time:.2f} | feasible {again.feasible} |", "",
-        f"Ratio repair / re-plan: **{ratio:.2f}** (bar: 0.2); repair time bar 2 s: "
-        f"{'met' if repair_time <= 2 else 'NOT met'}; ratio bar: "
-        f"{'met' if ratio <= 0.2 else 'NOT met'}.", "",
-        f"Repair message: {repaired.message}", "",
-        "The 527-block as-built dome at half-built is not measured here (its plan alone "
-        "takes minutes on this machine, docs/SCALING.md).", ""]
+    print(f"  re-plan: {replan_time:.2f} s, feasible {again.feasible}", flush=True)
+    lines += [f"Deviation: {what} (the first of the list that fails a later step; "
+              f"{tried} tried): {ahead.message}", "",
+              "| | time s | ratio to re-planning | result |", "|---|---|---|---|"]
+    for window, r in timed.items():
+        which = "every remaining step" if not window else f"the next {window} steps"
+        lines.append(f"| repair, {which} checked | {r.time:.2f} | "
+                     f"{r.time / replan_time:.2f} | {r.kind}, feasible {r.feasible}, changed "
+                     f"step {r.changed_step}, {r.checks} states checked |")
+    lines += [f"| re-planning the remainder from scratch (the placed blocks a fixed prefix) | "
+              f"{replan_time:.2f} | 1 | feasible {again.feasible} |", ""]
+    for steps, r in timed.items():
+        which = "every remaining step" if not steps else f"the next {steps} steps"
+        lines.append(f"- {which} checked: {r.time:.2f} s, {r.time / replan_time:.2f} x "
+                     "re-planning.")
+    return lines + [""]
+
+
+def main() -> int:
+    lines = ["# Repair time", "", "Made by `make bench-repair` (benchmarks/repair.py); machine: "
+             f"{machine_summary()}; times of one run, on a machine shared with other work "
+             "(compare the ratios).", ""]
+    if "--dome527" in sys.argv:
+        # its re-check to the end costs minutes (docs/SCALING.md): a node's window only
+        scene, _ = load_design(DOME527)
+        lines = one_dome("compas_assembly's 527-block dome (as built, 5 mm / 3.5 deg "
+                         "declared)", replace(scene, pose_uncertainty=UNCERTAINTY), window=10)
+        (ROOT / "docs" / "REPAIR_527.md").write_text("\n".join(lines))
+        return 0
+    for name, params in DOMES:
+        lines += one_dome(name, replace(generators.dome(**params),
+                                        pose_uncertainty=UNCERTAINTY))
+    lines += ["compas_assembly's 527-block dome: `benchmarks/repair.py --dome527` "
+              "(docs/REPAIR_527.md, appended below when made).", ""]
+    extra = ROOT / "docs" / "REPAIR_527.md"
+    if extra.exists():
+        lines += [extra.read_text()]
     (ROOT / "docs" / "REPAIR.md").write_text("\n".join(lines))
     return 0
 

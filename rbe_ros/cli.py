@@ -278,6 +278,9 @@ def build_parser() -> argparse.ArgumentParser:
     _min_margin_argument(repair)
     repair.add_argument("--no-replan", action="store_true",
                         help="hold and swap repairs only, no re-planning of the remainder")
+    repair.add_argument("--lookahead-steps", type=int, default=0, metavar="N",
+                        help="check and repair only the next N steps (a node's look-ahead "
+                        "window; default 0: every remaining step)")
     _solver_arguments(repair)
     repair.set_defaults(run=_run_repair)
 
@@ -592,7 +595,7 @@ def _run_repair(args) -> int:
         raise ValueError(f"--min-margin must be >= 0, not {args.min_margin:g}")
     result = repair_plan(plan, built, options, max_held=args.max_held,
                          min_margin_g=args.min_margin, time_limit=limit,
-                         replan=not args.no_replan)
+                         replan=not args.no_replan, lookahead_steps=args.lookahead_steps)
     if args.output and result.scene is not None:
         out_path = Path(args.output)
         out_path.parent.mkdir(parents=True, exist_ok=True)

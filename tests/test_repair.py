@@ -207,3 +207,13 @@ def test_min_margin_is_honoured_at_every_step(tmp_path, capsys):
     assert all(r["stable"] and r["margin_g"] >= 0.13 for r in reports)
     code, out, _ = run(capsys, "plan", arch, "--max-held", "2", "--min-margin", "0.3")
     assert code == 1 and "below the minimum 0.3 g" in out
+
+
+def test_a_window_checks_and_repairs_the_next_steps_only(files, capsys):
+    _, plan, measured = files
+    code, out, _ = run(capsys, "repair", plan, "--poses", measured, "--lookahead-steps", "1",
+                       "--json")
+    result = json.loads(out)
+    assert code == 0 and result["repair"] == "swap" and result["order"] == ["a", "c", "b"]
+    assert [s["step"] for s in result["steps"]] == [1]
+    assert "steps 1 to 1 (the look-ahead) pass" in result["message"]

@@ -39,6 +39,12 @@ every trial whole instead (to compare with).
 
 The finished assembly must stand with nothing held; if the last step holds blocks, a release
 step follows (its report: the finished assembly's check).
+
+``prefer`` "margin": every feasible candidate among the first ``candidates`` is a child,
+ranked by the weakest margin of its plan so far (largest first), then as above.
+``min_margin`` > 0: a step stands only with a margin of at least that (the hold search
+holds more until it does). With either, or when the options ask for margins, every step's
+margin is computed (about one whole solve per direction) and the plan names its weakest step.
 """
 from __future__ import annotations
 

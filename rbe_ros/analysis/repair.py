@@ -68,13 +68,16 @@ class _Stop(Exception):
 
 def repair_plan(plan: Scene, built: Scene, options: CheckOptions = CheckOptions(), *,
                 max_held: int | None = None, min_margin_g: float = 0.0,
-                time_limit: float = math.inf, replan: bool = True) -> Repair:
+                time_limit: float = math.inf, replan: bool = True,
+                lookahead_steps: int = 0) -> Repair:
     """Repair the rest of ``plan`` from the as-built scene ``built`` (the design's supports
     and the measured blocks, a prefix of the plan's order; :func:`rbe_ros.io.poses.
     scene_at_poses`), see the module docstring. ``max_held``: K (None: the plan's largest
     number of blocks held at a step); ``min_margin_g`` > 0: a step with a smaller margin
     fails; ``time_limit`` s bounds the repair (then not feasible, "stopped"); ``replan``
-    False: hold and swap only.
+    False: hold and swap only. ``lookahead_steps`` > 0: only that many steps past the
+    as-built state are checked and repaired (a node's look-ahead window: the steps beyond
+    are the plan's, checked as the build reaches them); 0: every remaining step.
 
     Raises SceneError for bad input (as :func:`rbe_ros.analysis.lookahead.look_ahead`)."""
     start = time.perf_counter()
@@ -90,7 +93,9 @@ def repair_plan(plan: Scene, built: Scene, options: CheckOptions = CheckOptions(
         return time.perf_counter() - start > time_limit
 
     runner = StepRunner(scene, options, placed, min_margin_g, out_of_time)
-    fixer = _Fixer(runner, scene, placed, k_max, order, held)
+    if lookahead_steps < 0:
+        raise SceneError(f"lookahead_steps must be >= 0, not {lookahead_steps}")
+    fixer = _Fixer(runner, scene, placed, k_max, order, held, lookahead_steps)
     try:
         result = fixer.run()
     except TimeoutError as exc:
@@ -108,8 +113,9 @@ class _Fixer:
     """The scan of the remaining steps with hold and swap repairs (one repair's state)."""
 
     def __init__(self, runner: StepRunner, scene: Scene, placed: int, k_max: int,
-                 order: list[str], held: list[tuple[str, ...]]):
+                 order: list[str], held: list[tuple[str, ...]], window: int = 0):
         self.runner, self.scene, self.placed, self.k_max = runner, scene, placed, k_max
+        self.window = window
         self.original = (list(order), [tuple(h) for h in held])
         self.order, self.held = list(order), list(held)
         self.reason = ""          # the first failure found
@@ -131,7 +137,7 @@ class _Fixer:
                 return self.failed(self.why, reason=self.why, replan=False)
         steps: list[StepAhead] = []
         k = self.placed
-        while k < len(self.held):
+        while k < self.stop():
             before = runner.fork(checker)
             step = runner.ahead(current, k, checker)
             if step.passes:
@@ -151,6 +157,16 @@ class _Fixer:
             self.held = held_by_step(current)       # a release step when one is needed now
             checker = before
         return self.result(steps)
+
+    def stop(self) -> int:
+        """One past the last step checked: the end, or the window's."""
+        return len(self.held) if not self.window else min(len(self.held),
+                                                          self.placed + self.window)
+
+    def passed(self) -> str:
+        """Which steps were checked and pass."""
+        return ("every remaining step passes" if self.stop() == len(self.held) else
+                f"steps {self.placed} to {self.stop() - 1} (the look-ahead) pass")
 
     def _hold(self, step: StepAhead, before) -> tuple | None:
         """(order, held, "hold") with one more block held at ``step``, or None."""
@@ -209,12 +225,12 @@ class _Fixer:
         plan = self.plan()
         changed = self.changed_step()
         if changed < 0:
-            kind, message = "none", "every remaining step passes at the measured poses as planned"
+            kind, message = "none", f"{self.passed()} at the measured poses as planned"
         else:
             kind = max(self.kinds, key=KINDS.index)
             fixes = ", ".join(dict.fromkeys(self.kinds))
-            message = (f"{self.reason}; repaired ({fixes}) from step {changed}: every "
-                       "remaining step passes at the measured poses")
+            message = (f"{self.reason}; repaired ({fixes}) from step {changed}: "
+                       f"{self.passed()} at the measured poses")
         return Repair(True, changed >= 0, list(plan.sequence), held_by_step(plan), plan.holds,
                       changed, kind, message, self.reason, plan, steps, self.placed)
 
@@ -246,6 +262,7 @@ class _Fixer:
         checker = runner.fork(runner.checker)
         plan = self.plan()
         self.held = held_by_step(plan)
+        self.window = 0                 # a new remainder: every step of it checked
         steps = runner.scan(plan, self.placed, len(self.held), checker)
         if steps and not steps[-1].passes:
             s = steps[-1]

@@ -28,8 +28,6 @@ LOOKAHEAD_STEPS = DEFAULT_LOOKAHEAD
 MIN_MARGIN_G = 0.0
 #: Kinds of output of one as-built state, in order: an ExecutionState, a PlanUpdate.
 EXECUTION, PLAN_UPDATE = "execution", "plan_update"
-#: How a repair is made: ``repair(plan, built, options, min_margin_g)``.
-Repairer = Callable[[Scene, Scene, CheckOptions, float], Repair]
 
 
 @dataclass(frozen=True)
@@ -46,10 +44,15 @@ class Settings:
                    float(recorded.get("min_margin_g", MIN_MARGIN_G)))
 
 
-def repair(plan: Scene, built: Scene, options: CheckOptions, min_margin_g: float) -> Repair:
-    """The core's repair with the node's settings (a function of its own: the node runs it
-    in another process)."""
-    return repair_plan(plan, built, options, min_margin_g=min_margin_g)
+#: How a repair is made: ``repair(plan, built, options, settings)``.
+Repairer = Callable[[Scene, Scene, CheckOptions, Settings], Repair]
+
+
+def repair(plan: Scene, built: Scene, options: CheckOptions, settings: Settings) -> Repair:
+    """The core's repair with the node's settings: within its look-ahead window, its
+    minimum margin (a function of its own: the node runs it in another process)."""
+    return repair_plan(plan, built, options, min_margin_g=settings.min_margin_g,
+                       lookahead_steps=settings.lookahead_steps)
 
 
 NO_PLAN = "no plan: set design_file to a planned scene, or send a design with a sequence"
@@ -136,7 +139,7 @@ class Execution:
         if state["first_failing_step"] < 0 or self._repaired is built:
             return None
         self._repaired = built          # tried once per as-built state
-        found = repairer(self.plan, built, options, settings.min_margin_g)
+        found = repairer(self.plan, built, options, settings)
         emit(PLAN_UPDATE, plan_update_to_dict(
             header, reason=found.reason or state["message"], changed_step=found.changed_step,
             feasible=found.feasible, repair=found.kind, order=found.order, holds=found.holds,

@@ -846,9 +846,9 @@ class RbeChecks:
                 if message["feasible"] else
                 f"no repair found: {message['reason']}; {message['message']}")
 
-    def _repair(self, plan: Scene, built: Scene, options: CheckOptions, min_margin_g: float):
+    def _repair(self, plan: Scene, built: Scene, options: CheckOptions, settings: Settings):
         """The repair in a worker process (:mod:`rbe_ros.ros.workers`)."""
-        return self._pool().repair(plan, built, options, min_margin_g)
+        return self._pool().repair(plan, built, options, settings)
 
     def _pool(self) -> Workers:
         """The worker processes (each spawned at its first use)."""

@@ -25,7 +25,7 @@ from rclpy.serialization import deserialize_message
 from ..analysis.options import CheckOptions
 from ..analysis.planning import Plan, PlanProgress
 from ..analysis.repair import Repair
-from ..io.execution import repair
+from ..io.execution import Settings, repair
 from ..io.plans import PlanLimits, plan_state
 from ..scene import Scene
 from .convert import scene_from_msg
@@ -106,9 +106,9 @@ class Workers:
         return future.result()
 
     def repair(self, plan: Scene, built: Scene, options: CheckOptions,
-               min_margin_g: float) -> Repair:
+               settings: Settings) -> Repair:
         """:func:`rbe_ros.io.execution.repair` in a worker."""
-        return self._submit(repair, plan, built, options, min_margin_g).result()
+        return self._submit(repair, plan, built, options, settings).result()
 
     def close(self) -> None:
         self._stop.set()

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 
+from ..io.execution import Execution
 from ..io.poses import AsBuilt
 from ..scene import SceneError
 from .node import NODE_NAME, ConfigurationError, RbeChecks, spin
@@ -47,6 +48,7 @@ class RbeLifecycleNode(RbeChecks, LifecycleNode):
             self._open_bag()
             self._design = self.design_message(path) if path else None
             self._asbuilt = AsBuilt()
+            self._execution = Execution()
         except (ConfigurationError, SceneError, ValueError) as exc:
             self.close_bag()
             self.get_logger().error(f"configure failed: {exc}")

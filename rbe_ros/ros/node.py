@@ -247,6 +247,8 @@ class RbeChecks:
         # states the worker checked (the newest; a design never dropped), so that looking
         # ahead and repairing never hold up the as-built checks; repairs run in a process
         self._execution = Execution()
+        self._designs = 0               # designs merged; the one the execution follows
+        self._exec_design = 0
         self._exec_slot: dict = {}
         self._exec_cond = threading.Condition()
         self._exec_thread: threading.Thread | None = None
@@ -771,11 +773,12 @@ class RbeChecks:
                 # so far (stamp 0: no report answers it), so that it replays alone
                 if kind == DESIGN:
                     self._carry(topic, data)
+                    self._designs += 1
                     with self._exec_cond:
-                        self._exec_slot["design"] = self._asbuilt.design
+                        self._exec_slot["design"] = (self._designs, self._asbuilt.design)
                 else:
                     self._carry(topic, self._measured_poses)
-                self._put((header, scene))
+                self._put((header, scene, self._designs))
         except Exception as exc:
             self.get_logger().error(f"{topic}: message not handled: {type(exc).__name__}: "
                                     f"{exc}")
@@ -784,8 +787,9 @@ class RbeChecks:
         """The poses measured so far as one BlockPoses dict (stamp 0)."""
         return poses_to_dict(self._asbuilt.measured, self.get_parameter("frame_id").value)
 
-    def _check_asbuilt(self, header: dict, scene) -> None:
-        """Check an as-built scene (or report why there is none) as a whole."""
+    def _check_asbuilt(self, header: dict, scene, design: int) -> None:
+        """Check an as-built scene (or report why there is none) as a whole, then hand it
+        to the plan's execution (``design``: the number of the design it was merged on)."""
         result = asbuilt_check(scene, self.check_options())
         if result.error is None:
             report = result.reports[0]
@@ -797,7 +801,7 @@ class RbeChecks:
             report = result.error
             self._publish(None, report, header, state)
         with self._exec_cond:
-            self._exec_slot["state"] = (header, scene, report)
+            self._exec_slot["state"] = (header, scene, report, design)
             self._exec_cond.notify()
 
     # --- plan execution (rbe_ros.io.execution) ----------------------------------------------
@@ -818,8 +822,11 @@ class RbeChecks:
                 slot, self._exec_slot = self._exec_slot, {}
             try:
                 if "design" in slot:
-                    self._execution.set_design(slot["design"])
-                self._advance(*slot["state"])
+                    self._exec_design, design = slot["design"]
+                    self._execution.set_design(design)
+                header, scene, report, design = slot["state"]
+                if design == self._exec_design:    # not of a design replaced since
+                    self._advance(header, scene, report)
             except Exception as exc:   # publishing failed (shutdown): say so, go on
                 self.get_logger().error(f"execution not advanced: {type(exc).__name__}: {exc}")
 

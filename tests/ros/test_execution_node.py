@@ -387,3 +387,34 @@ def test_a_plan_of_the_node_is_the_plan_executed(make_node, tmp_path):
     assert topics.count("design") == 2                   # the design, then the plan of it
     assert_bag_replays(tmp_path / "bag")
 
+
+
+def test_a_step_ahead_below_min_margin_g_is_repaired(make_node, tmp_path):
+    """min_margin_g: a step ahead that stands with less margin fails, and the plan is
+    repaired. The left block's step tips the plank at 0.0714 g: the closed form of tipping
+    about the pier's edge, the centroid 5 mm inside it and 70 mm above its top."""
+    design = plank(0.2, robots=1)
+    path = tmp_path / "planned.json"
+    path.write_text(json.dumps(scene_to_dict(design)))
+    states: list[tuple[str, dict]] = []
+    node = make_node(design_file=str(path), mcap_path=str(tmp_path / "bag"), min_margin_g=0.1)
+    node._send_execution = (lambda send: lambda kind, m: (states.append((kind, m)),
+                                                          send(kind, m)))(node._send_execution)
+    node._send_design(node.design_message(str(path)))   # as at start, now observed
+    wait_until(lambda: len(states) >= 3, 60.0, "the design's state, update and state")
+    node.destroy_node()
+    (_, first), (kind, update), (_, repaired) = states[:3]
+    volume = {"plank": 0.8 * 0.3 * 0.1, "left": 0.2 * 0.3 * 0.1}
+    x = (volume["left"] * -0.3) / sum(volume.values())          # centroid over the pier
+    z = (volume["plank"] * 0.05 + volume["left"] * 0.15) / sum(volume.values())
+    left = first["lookahead"][1]
+    assert left["block"] == "left" and left["stable"]
+    assert left["margin_g"] == pytest.approx((PIER[0] + x) / z, rel=1e-4)    # 0.0714 g
+    assert first["first_failing_step"] == 1 and "below the minimum 0.1 g" in first["message"]
+    assert kind == "plan_update" and update["feasible"] and update["repair"] == "hold"
+    # the robot that set the plank down keeps it (or holds the left block) at step 1
+    assert any(h["from_step"] <= 1 and (h["until_step"] < 0 or h["until_step"] > 1)
+               for h in update["holds"]), update
+    assert repaired["first_failing_step"] == -1
+    assert all(s["margin_g"] >= 0.1 for s in repaired["lookahead"])
+    assert_bag_replays(tmp_path / "bag")

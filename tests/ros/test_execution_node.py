@@ -34,26 +34,35 @@ RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
 LATCHED = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 DENSITY = 2000.0
-#: The pier's top: half-widths (m) in x and y; the plank rests on it, centred.
-PIER = (0.065, 0.15)
 STAMP0 = 70_000
 
 
-def plank(counterweight_height: float, robots: int = 0):
-    """A plank on a narrow pier, a block to go on its left end, then one on its right end
-    (the counterweight). Left first leans the plank 5 mm inside the pier's edge: near the
-    limit (it leans 60 mm of the 65 mm out). With a counterweight as tall as the left block either order stands at design;
-    a twice as tall one tips the plank right if placed first (so the plan is left, right).
-    ``robots`` 1: a robot steadies the plank while it is set down (step 0), so the cell has
-    one robot to hold a block with (K = 1) later too."""
+def plank(counterweight_height: float, robots: int = 0, mid: bool = False):
+    """A plank on a narrow pier (0.3 m deep), a block to go on its left end, then one on its
+    right end (the counterweight). Left first leans the plank 5 mm inside the pier's edge:
+    near the limit (its centroid 60 mm out, the edge at 65 mm). With a counterweight as tall
+    as the left block either order stands at design; a twice as tall one tips the plank
+    right if placed first (so the plan is left, right). ``mid``: a block placed first in the
+    middle of the plank, the pier narrower to keep left first 3.5 mm inside its edge (the
+    step that an offset plank fails is then one step further ahead). ``robots`` 1: a robot
+    steadies the plank while it is set down (step 0), so the cell has one robot to hold a
+    block with (K = 1) later too."""
     h = counterweight_height
-    blocks = [box_block("pier", (2 * PIER[0], 2 * PIER[1], 0.5), (0, 0, 0.25), support=True,
-                        density=DENSITY),
+    blocks = [box_block("pier", (0.116 if mid else 0.13, 0.3, 0.5), (0, 0, 0.25),
+                        support=True, density=DENSITY),
               box_block("plank", (0.8, 0.3, 0.1), (0, 0, 0.55), density=DENSITY),
+              *([box_block("mid", (0.1, 0.3, 0.1), (0, 0, 0.65), density=DENSITY)]
+                if mid else []),
               box_block("left", (0.2, 0.3, 0.1), (-0.3, 0, 0.65), density=DENSITY),
               box_block("right", (0.2, 0.3, h), (0.3, 0, 0.6 + h / 2), density=DENSITY)]
-    return make_scene("plank", blocks, sequence=["plank", "left", "right"],
+    return make_scene("plank", blocks,
+                      sequence=["plank", *(["mid"] if mid else []), "left", "right"],
                       holds=[Hold("plank", 0, 1)] if robots else [])
+
+
+def pier(design) -> np.ndarray:
+    """The half-widths (m) in x and y of the pier's top (centred on the origin)."""
+    return np.ptp(design.block("pier").vertices, axis=0)[:2] / 2
 
 
 def stands(design, poses: dict, free: list[str]) -> bool:
@@ -63,7 +72,7 @@ def stands(design, poses: dict, free: list[str]) -> bool:
     volume = {b.id: float(np.prod(np.ptp(b.vertices, axis=0))) for b in design.blocks}
     weights = np.array([volume[b] for b in free])
     centre = (weights[:, None] * np.array([poses[b][0] for b in free])).sum(0) / weights.sum()
-    return abs(centre[0]) < PIER[0] and abs(centre[1]) < PIER[1]
+    return bool(np.all(np.abs(centre[:2]) < pier(design)))
 
 
 class Camera:
@@ -144,21 +153,27 @@ def rbe_check(capsys, path, poses: dict, tmp_path, name: str, sequence: bool = F
 ], ids=["swap", "hold"])
 def test_block_lands_off_a_later_step_fails_and_the_plan_is_repaired(
         rclpy_context, tmp_path, capsys, counterweight, robots, orders):
-    design = plank(counterweight, robots)
+    design = plank(counterweight, robots, mid=True)
     path = tmp_path / "planned.json"
     path.write_text(json.dumps(scene_to_dict(design)))
-    # the plank lands 10 mm left and turned 2 deg: left next would tip it (the oracle, and
-    # `rbe-ros check` on the measured plank with the left block at design)
+    # the plank lands 10 mm left and turned 2 deg: the middle block next stands, the left
+    # block after it would tip the plank (the oracle, and `rbe-ros check` on the measured
+    # plank with the others at design)
     off = {"plank": ([-0.01, 0.0, 0.55],
                      Rotation.from_euler("z", 2, degrees=True).as_quat().tolist())}
-    at_design = {b: (design.block(b).position.tolist(), [0, 0, 0, 1]) for b in ("left", "right")}
-    assert not stands(design, {**off, **at_design}, ["plank", "left"])
-    assert stands(design, {**off, **at_design}, ["plank", "left", "right"])
-    check = rbe_check(capsys, path, {**off, "left": at_design["left"]}, tmp_path, "left_next")
+    at_design = {b: (design.block(b).position.tolist(), [0, 0, 0, 1])
+                 for b in ("mid", "left", "right")}
+    assert stands(design, {**off, **at_design}, ["plank", "mid"])
+    assert not stands(design, {**off, **at_design}, ["plank", "mid", "left"])
+    assert stands(design, {**off, **at_design}, ["plank", "mid", "left", "right"])
+    assert stands(design, at_design | {"plank": ([0, 0, 0.55], [0, 0, 0, 1])},
+                  ["plank", "mid", "left"])                      # as designed it stands
+    check = rbe_check(capsys, path, {**off, "mid": at_design["mid"], "left": at_design["left"]},
+                      tmp_path, "left_next")
     assert check["stable"] is False and check["status"] == 1      # TENSION_REQUIRED
     # which orders of the two blocks left stand without a hold (the oracle)
     assert {o for o in [("left", "right"), ("right", "left")]
-            if stands(design, {**off, **at_design}, ["plank", o[0]])} == orders
+            if stands(design, {**off, **at_design}, ["plank", "mid", o[0]])} == orders
 
     bag = tmp_path / "bag"
     proc = NodeProcess(["-p", f"design_file:={path}", "-p", f"mcap_path:={bag}"],
@@ -168,18 +183,21 @@ def test_block_lands_off_a_later_step_fails_and_the_plan_is_repaired(
         wait_until(lambda: proc.proc.poll() is None and camera.ready(), 60.0, "the node")
         wait_until(lambda: camera.states, 30.0, "the design's execution state")
         start = camera.states[-1][1]
-        assert (start.active, start.current_step, start.total_steps) == (True, 0, 3)
+        assert (start.active, start.current_step, start.total_steps) == (True, 0, 4)
         assert start.first_failing_step == -1 and [s.block for s in start.lookahead] == \
-            ["plank", "left", "right"]
+            ["plank", "mid", "left", "right"]
         camera.place(design, "plank", STAMP0, offset=[-0.01, 0.0, 0.0], yaw_deg=2.0)
         received, failing = wait_until(lambda: camera.state(STAMP0), 30.0, "execution")
         assert received - camera.sent[STAMP0] < 2.0
-        assert (failing.current_step, failing.first_failing_step) == (1, 1)
-        assert failing.lookahead[0].block == "left" and not failing.lookahead[0].stable
-        assert "step 1 (left)" in failing.message
+        # the step after next fails: the look-ahead says so now
+        assert (failing.current_step, failing.first_failing_step) == (1, 2)
+        assert [(s.block, s.stable) for s in failing.lookahead[:2]] == \
+            [("mid", True), ("left", False)]
+        assert "step 2 (left)" in failing.message
         update = wait_until(lambda: camera.updates, 60.0, "the plan update")[0]
-        assert update.feasible and update.changed_step == 1 and update.order[0] == "plank"
-        assert update.reason.startswith("step 1 (left) fails at the measured poses")
+        assert update.feasible and update.changed_step == 2
+        assert list(update.order[:2]) == ["plank", "mid"]
+        assert update.reason.startswith("step 2 (left) fails at the measured poses")
         assert update.repair == ("swap" if orders else "hold")
         # the repaired plan's execution state: nothing fails ahead any more
         repaired = wait_until(lambda: len(camera.states) >= 3 and camera.state(STAMP0, True),
@@ -208,7 +226,7 @@ def test_block_lands_off_a_later_step_fails_and_the_plan_is_repaired(
     if not orders:
         assert holds, "no order stands: the repair must hold a block"
     else:
-        assert tuple(order[1:]) in orders or holds
+        assert tuple(order[2:]) in orders or holds
     # and by `rbe-ros check --sequence` on the repaired plan, its blocks at the measured poses
     # (--poses would drop the holds: they count the design's steps)
     repaired_path = tmp_path / "repaired.json"
@@ -409,7 +427,7 @@ def test_a_step_ahead_below_min_margin_g_is_repaired(make_node, tmp_path):
     z = (volume["plank"] * 0.05 + volume["left"] * 0.15) / sum(volume.values())
     left = first["lookahead"][1]
     assert left["block"] == "left" and left["stable"]
-    assert left["margin_g"] == pytest.approx((PIER[0] + x) / z, rel=1e-4)    # 0.0714 g
+    assert left["margin_g"] == pytest.approx((pier(design)[0] + x) / z, rel=1e-4)  # 0.0714 g
     assert first["first_failing_step"] == 1 and "below the minimum 0.1 g" in first["message"]
     assert kind == "plan_update" and update["feasible"] and update["repair"] == "hold"
     # the robot that set the plank down keeps it (or holds the left block) at step 1

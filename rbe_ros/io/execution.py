@@ -65,7 +65,8 @@ class Execution:
         self.plan: Scene | None = None
         self.error = NO_PLAN
         self.last: dict | None = None       # the last ExecutionState of accepted poses
-        self._seen: tuple = ()              # (as-built scene, plan) of the last outputs
+        # (as-built scene, plan, settings, options) of the last outputs
+        self._seen: tuple = ()
         self._outputs: list[tuple[str, dict]] = []
         self._repaired = None               # the as-built scene a repair was last tried at
 
@@ -104,7 +105,9 @@ class Execution:
 
         if self.plan is None and self.error == NO_PLAN:
             return out
-        if self._seen and self._seen[0] is built and self._seen[1] is self.plan:
+        seen = (built, self.plan, settings, options)
+        if self._seen and all(a is b or a == b for a, b in zip(self._seen[2:], seen[2:])) \
+                and self._seen[0] is built and self._seen[1] is self.plan:
             for kind, message in self._outputs:
                 emit(kind, {**message, "header": header})
             return out
@@ -113,7 +116,7 @@ class Execution:
         except Exception as exc:        # an answer, never a crash
             emit(EXECUTION, self._refused(header, as_built,
                                           f"execution failed: {type(exc).__name__}: {exc}"))
-        self._seen, self._outputs = (built, self.plan), out
+        self._seen, self._outputs = seen, out
         return out
 
     def _refused(self, header: dict, as_built: dict | None, why: str) -> dict:

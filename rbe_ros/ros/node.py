@@ -351,6 +351,9 @@ class RbeChecks:
             for action, name, execute in ((CheckSequence, "~/check_sequence",
                                            self._execute_sequence),
                                           (PlanSequence, "~/plan", self._execute_plan))]
+        with self._slot_cond, self._exec_cond:
+            if self._slot is not None:      # a newer state waits: its execution comes next
+                self._exec_slot.pop("state", None)
         self._worker = threading.Thread(target=self._work, name="rbe_state_worker", daemon=True)
         self._worker.start()
         self._exec_thread = threading.Thread(target=self._execute_work, name="rbe_execution",

@@ -376,6 +376,8 @@ def test_a_plan_of_the_node_is_the_plan_executed(make_node, tmp_path):
 
     from rbe_msgs.msg import AssemblyState
     from rbe_ros.analysis.planning import plan_sequence
+    from rclpy.parameter import Parameter
+
     from rbe_ros.io.messages import scene_from_state_dict, state_to_dict
 
     # as the node has them: the design and the goal's assembly both came as messages
@@ -399,6 +401,14 @@ def test_a_plan_of_the_node_is_the_plan_executed(make_node, tmp_path):
     state = wait_until(lambda: next((m for m in states
                                      if m["header"]["stamp"]["sec"] == 10), None), 30.0, "10")
     assert state["active"] and state["current_step"] == 1 and state["first_failing_step"] == -1
+    assert [s["block"] for s in state["lookahead"]] == plan.order[1:]
+    # a run-time change of lookahead_steps (recorded with the settings: replayed so)
+    assert node.set_parameters([Parameter("lookahead_steps", value=1)])[0].successful
+    node._on_poses(serialize_message(dict_to_message(poses_to_dict(
+        {"plank": (b.position.tolist(), [0, 0, 0, 1])}, "cell", 11 * 10**9), BlockPoses)))
+    state = wait_until(lambda: next((m for m in states
+                                     if m["header"]["stamp"]["sec"] == 11), None), 30.0, "11")
+    assert [s["block"] for s in state["lookahead"]] == plan.order[1:2]
     node._adopt(plan, {"frame_id": "cell", "stamp": {"sec": 0, "nanosec": 0}})  # not taken
     node.destroy_node()
     topics = [m.topic.rsplit("/", 1)[1] for m in read_bag(tmp_path / "bag")]

@@ -71,7 +71,7 @@ def one_dome(name: str, scene, window: int = 0) -> list[str]:
         return lines + [f"No plan: {plan.message}", ""]
     design = {b: (planned.block(b).position.tolist(), planned.block(b).orientation.tolist())
               for b in plan.order[:half]}
-    chosen, tried = None, 0
+    chosen, first, tried = None, None, 0
     for k, shift, tilt, axis in DEVIATIONS:
         block = plan.order[half - k]
         built = scene_at_poses(planned, {**design, block: deviated(planned.block(block), shift,
@@ -80,16 +80,20 @@ def one_dome(name: str, scene, window: int = 0) -> list[str]:
         tried += 1
         print(f"  {block} {shift * 1e3:+.0f} mm {tilt:+.0f} deg about its {axis}: first "
               f"failing step {ahead.first_failing_step} ({ahead.time:.1f} s)", flush=True)
+        found = (f"{block} {shift * 1e3:+.0f} mm, {tilt:+.0f} deg about its {axis}", built,
+                 ahead)
+        first = first or found
         if ahead.first_failing_step >= half and ahead.as_built.stable:
-            chosen = (f"{block} {shift * 1e3:+.0f} mm, {tilt:+.0f} deg about its {axis}",
-                      built, ahead)
+            chosen = found
             break
     if chosen is None:
-        return lines + [f"None of the {tried} deviations makes a step of the rest fail (each "
-                        "checked " + (f"over the next {window} steps" if window else
-                                      "to the end of the plan") + "): the rest of the plan "
-                        "stands as it is, nothing to repair.", ""]
-    what, built, ahead = chosen
+        lines += [f"None of the {tried} deviations makes a step of the rest fail (each "
+                  "checked " + (f"over the next {window} steps" if window else
+                                "to the end of the plan") + "): the rest of the plan stands "
+                  "as it is. The repair of the first deviation (nothing to change: its cost "
+                  "is the re-check of the steps, which every repair makes) against "
+                  "re-planning the remainder:", ""]
+    what, built, ahead = chosen or first
     timed = {}
     for steps in ((window,) if window else (0, 10)):
         start = time.perf_counter()
@@ -102,9 +106,10 @@ def one_dome(name: str, scene, window: int = 0) -> list[str]:
     again = plan_sequence(fixed, 2, keep_sequence=True)
     replan_time = time.perf_counter() - start
     print(f"  re-plan: {replan_time:.2f} s, feasible {again.feasible}", flush=True)
-    lines += [f"Deviation: {what} (the first of the list that fails a later step; "
-              f"{tried} tried): {ahead.message}", "",
-              "| | time s | ratio to re-planning | result |", "|---|---|---|---|"]
+    if chosen is not None:
+        lines += [f"Deviation: {what} (the first of the list that fails a later step; "
+                  f"{tried} tried): {ahead.message}", ""]
+    lines += ["| | time s | ratio to re-planning | result |", "|---|---|---|---|"]
     for window, r in timed.items():
         which = "every remaining step" if not window else f"the next {window} steps"
         lines.append(f"| repair, {which} checked | {r.time:.2f} | "

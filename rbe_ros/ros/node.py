@@ -827,6 +827,8 @@ class RbeChecks:
                 if "design" in slot:
                     self._exec_design, design = slot["design"]
                     self._execution.set_design(design)
+                    if self._execution.plan is not None:
+                        self._pool().warm()     # a repair may come: its process ready
                 header, scene, report, design = slot["state"]
                 if design == self._exec_design:    # not of a design replaced since
                     self._advance(header, scene, report)

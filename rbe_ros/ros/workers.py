@@ -6,14 +6,16 @@ rate of the as-built checks a cell waits on. Here they run in a pool of spawned 
 checks keep their latency while a plan runs; a plan's progress comes back through a queue
 (the action's feedback) and a stop (cancel, a newer goal, shutdown) goes to it through an
 event polled between candidate checks, as in the node's own process before. A process is
-spawned at the first plan or repair (its imports take seconds: a node that never plans never
-pays them); like every spawned process, it imports the main module again, so a script that
-makes a node needs the ``if __name__ == "__main__":`` guard.
+spawned at the first plan or repair, or when a plan to execute comes (its imports take
+seconds: a node that never plans never pays them); like every spawned process, it imports
+the main module again, so a script that makes a node needs the ``if __name__ ==
+"__main__":`` guard.
 """
 from __future__ import annotations
 
 import os
 import queue
+import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -104,6 +106,11 @@ class Workers:
             if should_stop():
                 self._stop.set()
         return future.result()
+
+    def warm(self) -> None:
+        """Spawn a process now (a plan to execute came: its first repair need not wait for
+        the imports)."""
+        self._submit(time.sleep, 0.0)
 
     def repair(self, plan: Scene, built: Scene, options: CheckOptions,
                settings: Settings) -> Repair:

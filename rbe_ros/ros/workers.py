@@ -118,8 +118,12 @@ class Workers:
         return self._submit(repair, plan, built, options, settings).result()
 
     def close(self) -> None:
+        """Stop the processes now (a plan or repair running is not waited for) and the
+        pool's thread with them (left running, it fails at the interpreter's exit)."""
         self._stop.set()
-        self._pool.shutdown(wait=False, cancel_futures=True)
+        for process in list((getattr(self._pool, "_processes", None) or {}).values()):
+            process.terminate()
+        self._pool.shutdown(wait=True, cancel_futures=True)
 
 
 __all__ = ["NICE", "PROCESSES", "Workers"]

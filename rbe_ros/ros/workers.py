@@ -35,7 +35,7 @@ from .convert import scene_from_msg
 #: Processes: a plan and a repair at the same time.
 PROCESSES = 2
 #: Niceness added to the worker processes: the node's checks come first.
-NICE = 10
+NICE = 19
 #: How often a running plan's progress and stop are looked at, s.
 POLL_S = 0.05
 

@@ -152,6 +152,19 @@ bench-insertion: setup
 bench-replay: setup
 	nice -n 10 $(PY) benchmarks/replay_session.py --doc docs/SESSIONS.md
 
+# Repair time on the 140-block dome half-built, one block measured off, against re-planning
+# the remainder from scratch (one run): docs/REPAIR.md (a few minutes).
+.PHONY: bench-repair
+bench-repair: setup
+	nice -n 10 $(PY) benchmarks/repair.py
+
+# plan --prefer margin against the default on the 7-voussoir arch and the 8 x 5 and 14 x 10
+# domes (weakest step, hold-steps): docs/PREFER_MARGIN.md (many minutes: every candidate's
+# margin).
+.PHONY: bench-prefer
+bench-prefer: setup
+	nice -n 10 $(PY) benchmarks/prefer_margin.py
+
 .PHONY: bench-margin
 bench-margin: ray
 	$(PY) benchmarks/margin.py

@@ -25,7 +25,8 @@ from .analysis.friction import minimum_friction
 from .analysis.grips import validate_cell
 from .analysis.option_spec import BY_PATH, OPTIONS, from_outer
 from .analysis.options import CheckOptions
-from .analysis.planning import BACKUP_BLOCK_STATES, MIN_BACKUP
+from .analysis.planning import BACKUP_BLOCK_STATES, MIN_BACKUP, PREFER
+from .analysis.repair import repair_plan
 from .analysis.pipeline import check_scene, check_sequence, first_failing_step, slim
 from .analysis.executors import CheckPool, ProcessPool, ray_checks, ray_cluster
 from .analysis.perturb import PoseNoise
@@ -46,7 +47,8 @@ from .io.replay import (PLAN, REPORT_TOPIC, STATE_TOPIC, Run, RunReader, bag_opt
                         default_output, offline_reports, read_runs, replay_bag, step_stamps,
                         write_runs)
 from .io.plan_export import plan_export, read_timeline
-from .io.plan_output import ProgressLines, ReportLines, step_summary
+from .io.plan_output import (ProgressLines, ReportLines, repair_json, repair_text, step_summary,
+                              weakest_json, weakest_line)
 from .io.table import format_table
 from .io.view import ViewRun, checked_runs, write_html
 from .io.scene_json import load_scene, read_json, scene_to_dict
@@ -123,6 +125,12 @@ def node_keys(text: str) -> tuple[str, ...]:
     if not all(keys):
         raise ValueError(text)
     return keys
+
+
+def _min_margin_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--min-margin", type=float, default=0.0, metavar="G",
+                        help="a step whose stability margin (share of g, as check --margin) is "
+                        "below G does not stand (default 0: off)")
 
 
 def _executor_arguments(parser: argparse.ArgumentParser, what: str, ray_more: str) -> None:
@@ -258,6 +266,11 @@ def build_parser() -> argparse.ArgumentParser:
                       "blocks to place) more")
     plan.add_argument("--keep-sequence", action="store_true",
                       help="the scene's sequence is a fixed prefix of the order")
+    plan.add_argument("--prefer", choices=PREFER, default="holds",
+                      help="which feasible candidate a step keeps: holds (default: fewest "
+                      "hold-steps, the first that fits) or margin (of the first --candidates, "
+                      "the largest weakest margin so far, then fewest hold-steps)")
+    _min_margin_argument(plan)
     plan.add_argument("-o", "--output", metavar="SCENE",
                       help="write the planned scene (sequence and holds) as JSON")
     plan.add_argument("--json", action="store_true", help="print one JSON object: the plan "
@@ -271,6 +284,26 @@ def build_parser() -> argparse.ArgumentParser:
                       "checks, to compare with)")
     _solver_arguments(plan)
     plan.set_defaults(run=_run_plan)
+
+    repair = sub.add_parser("repair", help="repair the rest of a plan from measured poses of "
+                            "the blocks placed so far (README: Building from measurements)")
+    repair.add_argument("scene", metavar="PLANNED.json",
+                        help="the plan: a planned scene (rbe-ros plan -o), sequence and holds")
+    repair.add_argument("--json", action="store_true", help="print one JSON object")
+    repair.add_argument("-o", "--output", metavar="REPAIRED.json",
+                        help="write the repaired plan (the placed blocks at their measured "
+                        "poses) as a scene file; check it with check --sequence")
+    repair.add_argument("--max-held", type=int, default=None, metavar="K",
+                        help="blocks that may be held at a step (default: the plan's largest "
+                        "number held at a step)")
+    _min_margin_argument(repair)
+    repair.add_argument("--no-replan", action="store_true",
+                        help="hold and swap repairs only, no re-planning of the remainder")
+    repair.add_argument("--lookahead-steps", type=int, default=0, metavar="N",
+                        help="check and repair only the next N steps (a node's look-ahead "
+                        "window; default 0: every remaining step)")
+    _solver_arguments(repair)
+    repair.set_defaults(run=_run_repair)
 
     robust = sub.add_parser("robust", help="probability that the assembly (or each step) "
                             "stands under Gaussian placement error (Monte Carlo)")
@@ -583,7 +616,8 @@ def _run_plan(args) -> int:
     limit = options.solve.time_limit
     limits = PlanLimits(args.max_held, args.beam, args.candidates, args.keep_sequence,
                         time_limit=limit if math.isfinite(limit) else 0.0,
-                        search_budget=args.search_budget, cell=cell)
+                        search_budget=args.search_budget, cell=cell, prefer=args.prefer,
+                        min_margin=args.min_margin)
     limits.search()                 # a limit out of range: an error of the command line
     options = replace(options, solve=replace(options.solve, time_limit=math.inf))
     reports = ReportLines(args.reports) if args.reports else None
@@ -609,6 +643,8 @@ def _run_plan(args) -> int:
                "search_backups": plan.backups,
                "holds": scene_to_dict(plan.scene).get("holds", []) if plan.scene else [],
                "search_checks": plan.checks, "models": plan.models, "time": plan.time,
+               "prefer": args.prefer, "min_margin": args.min_margin,
+               "weakest_step": weakest_json(plan.weakest),
                "steps": [step_summary(r) for r in plan.reports]}
         if plan.timeline is not None:
             out["robots"] = list(plan.timeline.robots)
@@ -618,6 +654,7 @@ def _run_plan(args) -> int:
         verdict = "feasible" if plan.feasible else f"NOT feasible (step {plan.failed_step})"
         print(f"plan: {verdict}: {plan.message}")
         print(f"order: {', '.join(plan.order)}")
+        print(weakest_line(plan.weakest))
         if plan.reports:
             print(format_table(plan.reports))
         if plan.timeline is not None:
@@ -638,6 +675,36 @@ def _view_run(k: int, run: Run) -> ViewRun:
     if timeline and str(run.state.get("cell", "")).strip():
         view = replace(view, cell=parse_cell(run.state["cell"]), timeline=timeline)
     return view
+
+
+def _run_repair(args) -> int:
+    if not args.poses:
+        raise ValueError("repair needs --poses MEASURED.json: the poses of the blocks placed")
+    if args.interfaces != "detected":
+        raise ValueError("repair detects the interfaces at the measured poses (not "
+                         "--interfaces stored or compare)")
+    options = _options(args)
+    plan, _ = load_design(args.scene, args.density, supports=args.supports)
+    built = scene_at_poses(plan, load_poses(args.poses))
+    limit = options.solve.time_limit
+    options = replace(options, solve=replace(options.solve, time_limit=math.inf))
+    if args.min_margin < 0:
+        raise ValueError(f"--min-margin must be >= 0, not {args.min_margin:g}")
+    result = repair_plan(plan, built, options, max_held=args.max_held,
+                         min_margin_g=args.min_margin, time_limit=limit,
+                         replan=not args.no_replan, lookahead_steps=args.lookahead_steps)
+    if args.output and result.scene is not None:
+        out_path = Path(args.output)
+        out_path.parent.mkdir(parents=True, exist_ok=True)
+        out_path.write_text(json.dumps(scene_to_dict(result.scene)))
+    if args.json:
+        print(json.dumps(repair_json(result), indent=1))
+    else:
+        print(repair_text(result))
+        if args.output:
+            print(f"repaired plan written to {args.output}" if result.scene is not None
+                  else "no repaired plan: nothing written")
+    return 0 if result.feasible else 1
 
 
 def _run_view(args) -> int:
@@ -696,7 +763,8 @@ def _run_replay(args) -> int:
                             markers=not args.no_markers, on_run=progress, keep=False)
     except RuntimeError as exc:     # the live node failed or exited
         raise ValueError(str(exc)) from None
-    print(f"replayed {result.states} states ({result.reports} reports"
+    executed = f", {result.executed} plan execution messages" if result.executed else ""
+    print(f"replayed {result.states} states ({result.reports} reports{executed}"
           f"{', live' if args.live else ''}) in {time.monotonic() - started:.1f} s; bag "
           f"written to {result.output}")
     if result.orphan_reports:

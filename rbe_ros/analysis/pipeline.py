@@ -135,13 +135,14 @@ def insertion_fields(placed: Placed | None, options: CheckOptions) -> dict:
 
 
 def _completed(report: Report, assembly: Assembly, held, options: CheckOptions,
-               placed: Placed | None = None) -> Report:
+               placed: Placed | None = None, *, tolerance: bool = True) -> Report:
     """The verdict of ``assembly`` completed in one place, each part in its stage of the
     time budget: the near contacts and whether the verdict is sensitive to the contact
-    tolerance (why, in the message), the blocks held, the suggested holds, the margin, and
-    from where the placed block can arrive (a block that cannot: why, in the message)."""
+    tolerance (why, in the message; ``tolerance`` False: not asked, one or two solves saved
+    for a state not built yet), the blocks held, the suggested holds, the margin, and from
+    where the placed block can arrive (a block that cannot: why, in the message)."""
     with stage("sensitivity"):
-        near, sensitive = sensitivity(report, assembly, options)
+        near, sensitive = sensitivity(report, assembly, options) if tolerance else ((), "")
     with stage("hold search"):
         suggested = suggested_holds(report, assembly, options)
     with stage("margin"):

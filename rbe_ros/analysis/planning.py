@@ -68,6 +68,12 @@ For a robot cell (``cell``), a candidate that stands must also be one its robots
 (:class:`rbe_ros.analysis.timeline.CellCheck`: a free robot that can grip each block the step
 takes, every state between its actions standing with the robots' grips and payloads), and
 the plan carries the timeline of their actions.
+``prefer`` "margin": every feasible candidate (of the first ``candidates``) of a partial plan is
+made before the search goes on, and they are tried by the weakest margin of their plan so far
+(largest first), then as above.
+``min_margin`` > 0: a step stands only with a margin of at least that (the hold search
+holds more until it does). With either, or when the options ask for margins, every step's
+margin is computed (about one whole solve per direction) and the plan names its weakest step.
 """
 from __future__ import annotations
 
@@ -90,6 +96,7 @@ from .assembly import Assembly
 from .holds import StabilityOracle, minimal_holds, release_unneeded
 from .incremental import StepChecker
 from .insertion import block_insertion
+from .margin import DEFAULT_DIRECTIONS, Margin, report_margin
 from .options import CheckOptions
 from .pipeline import check_sequence, slim
 from .steps import gripped, supports_present
@@ -109,6 +116,8 @@ RECENT = 10
 #: Partial plans of the search's path (the deepest) that keep their step's forces for the
 #: incremental checks of their children.
 KEPT = 3
+#: What ``PlanOptions.prefer`` may be.
+PREFER = ("holds", "margin")
 #: A contact carries a block when its normal into the block points up by at least this
 #: cosine (87 deg from vertical).
 RESTS_ON = 0.05
@@ -132,6 +141,10 @@ class PlanOptions:
     #: states the search may check (a state: a partial plan and the block it places, checked
     #: for its holds); 0: the first descent, then :func:`backup_budget` states more
     search_budget: int = 0
+    #: which feasible candidate a partial plan keeps: "holds" (fewest hold-steps) or
+    #: "margin" (the largest weakest margin so far, then fewest hold-steps)
+    prefer: str = "holds"
+    min_margin: float = 0.0      # g: a step with a smaller margin does not stand (0: off)
 
     def __post_init__(self):
         for name, low in (("max_held", 0), ("beam", 1), ("candidates", 0),
@@ -141,6 +154,15 @@ class PlanOptions:
                 raise ValueError(f"{name} must be an integer >= {low}, not {value!r}")
         if not self.time_limit > 0:
             raise ValueError(f"time_limit must be > 0 s, not {self.time_limit!r}")
+        if self.prefer not in PREFER:
+            raise ValueError(f"prefer must be one of {', '.join(PREFER)}, not {self.prefer!r}")
+        if not 0 <= self.min_margin < math.inf:
+            raise ValueError(f"min_margin must be a number >= 0 (g), not {self.min_margin!r}")
+
+    @property
+    def greedy(self) -> bool:
+        """One candidate per step: the first feasible one is the plan's step."""
+        return self.beam == 1 and self.prefer == "holds"
 
 
 def backup_budget(blocks: int) -> int:
@@ -213,6 +235,8 @@ class Plan:
     #: the capacity ("force", "torque", N and N m; "force_max", "torque_max")
     failure: dict = field(default_factory=dict)
     timeline: Timeline | None = None       # planned for a cell: the robots' actions
+    #: the (slim) report of the step with the smallest margin (the first of equals)
+    weakest: Report | None = None
 
     @property
     def max_held(self) -> int:
@@ -307,6 +331,7 @@ class _Trial:
         self.assembly = planner.full.subset(self.present)   # each set of holds from it
         self.free = {b for b in self.present if b in planner.free_set}
         self.reports: dict[frozenset, tuple[Assembly, Report]] = {}
+        self.margins: dict[frozenset, Margin] = {}
 
     def result(self, held) -> tuple[Assembly, Report]:
         key = frozenset(held)
@@ -330,7 +355,21 @@ class _Trial:
         return found
 
     def stands(self, held) -> bool:
-        return self.result(held)[1].stable
+        """Whether the step stands with ``held``, with a margin of at least the plan's
+        ``min_margin`` (when set)."""
+        least = self.planner.plan.min_margin
+        return self.result(held)[1].stable and (not least or self.margin(held).margin_g >= least)
+
+    def margin(self, held) -> Margin:
+        """The margin of the step with ``held`` (the held blocks rigid, as a check's
+        margin), computed once."""
+        key = frozenset(held)
+        if key not in self.margins:
+            assembly, report = self.result(held)
+            self.margins[key] = report_margin(report, assembly, self.options.deciding,
+                                              self.options.margin_directions
+                                              or DEFAULT_DIRECTIONS)
+        return self.margins[key]
 
     def next_hold(self, held) -> str | None:
         """The block to hold next when ``held`` is not enough: the highest the failed check
@@ -372,6 +411,9 @@ class _Planner:
             self.contacts[b].append((a, it.area, n_up >= RESTS_ON))
             self.contacts[a].append((b, it.area, -n_up >= RESTS_ON))
         self.cache: dict = {}
+        # each step's margin (its weakest reported): asked for, or needed by the plan's choice
+        self.margins = bool(options.margin_directions or plan.prefer == "margin"
+                            or plan.min_margin)
         self.insertions: dict = {}              # order -> insertion of its last block
         # a cell's robots: who grips what, and the hand-over states (analysis/timeline.py)
         self.cell_check = (CellCheck(cell, self.full, self.base, options, self.position)
@@ -478,7 +520,11 @@ class _Planner:
             # it stands with its holds, the cell cannot do it; a robot's state depends on the
             # order, not only on the set placed: no proof
             return TrialResult(held, False, proven=False, refusal=why)
-        return TrialResult(held, True, *trial.result(held)[::-1])
+        assembly, report = trial.result(held)
+        if self.margins:
+            margin = trial.margin(held)
+            report = replace(report, margin_g=margin.margin_g, margin_direction=margin.direction)
+        return TrialResult(held, True, report, assembly)
 
     def _holds(self, trial: _Trial, previous) -> tuple[tuple[str, ...], bool]:
         """The holds of ``trial``'s step as a robot would keep them (the module docstring):
@@ -556,6 +602,15 @@ class _Planner:
                        num_blocks=len(assembly.blocks), **extra)
 
     def expand(self, partial: _Partial, failure: _Failure) -> Iterator[_Partial]:
+        """The feasible children of ``partial`` in the order the search tries them: rank order,
+        lazily (:meth:`feasible`); with ``prefer`` "margin" all of them first, then by their
+        score (the weakest margin so far, largest first)."""
+        children = self.feasible(partial, failure)
+        if self.plan.prefer == "margin":
+            return iter(sorted(children, key=lambda p: (p.score, p.order)))
+        return children
+
+    def feasible(self, partial: _Partial, failure: _Failure) -> Iterator[_Partial]:
         """The feasible children of ``partial`` in rank order: its candidates
         (:meth:`candidates`) each tried (:meth:`trial`), lazily, as the search asks for the
         next. A candidate whose state is known dead (the memo) is skipped unchecked; each
@@ -585,7 +640,7 @@ class _Planner:
                start: float) -> _Partial:
         """The partial plan ``order`` that ``found`` extends ``partial`` to (its report
         streamed when it is the path's next step)."""
-        total, worst, ranks = partial.score
+        total, _, ranks = partial.score[-3:]
         report = self.step_report(order, found.held, found.report, found.assembly)
         report = replace(report, solve_time=time.perf_counter() - start)
         checker = copy.copy(partial.checker)
@@ -593,8 +648,11 @@ class _Planner:
         if self.streaming and len(partial.order) == self.streamed:
             self.on_report(report)          # the next step of the path: streamed
             self.streamed += 1
-        return _Partial(order, (*partial.held, found.held),
-                        (total + len(found.held), len(found.held), ranks + rank),
+        score = (total + len(found.held), len(found.held), ranks + rank)
+        if self.plan.prefer == "margin":        # the weakest step so far first
+            score = (-min((r.margin_g for r in (*partial.reports, report)), default=0.0),
+                     *score)
+        return _Partial(order, (*partial.held, found.held), score,
                         (*partial.reports, slim(report)), checker)
 
     def run(self) -> Plan:
@@ -607,9 +665,19 @@ class _Planner:
             return Plan(False, [], [], "the finished assembly does not stand without holds "
                         "(rbe-ros check names why): no build order can end stable",
                         failed_step=n, outcome=NO_PLAN)
+        margin = report_margin(self.final, final, self.options.deciding,
+                               self.options.margin_directions or DEFAULT_DIRECTIONS) \
+            if self.margins else None
+        if margin is not None:
+            self.final = replace(self.final, margin_g=margin.margin_g,
+                                 margin_direction=margin.direction)
+        if margin is not None and margin.margin_g < self.plan.min_margin:
+            return Plan(False, [], [], f"the finished assembly's margin is "
+                        f"{margin.margin_g:.4f} g, below the minimum {self.plan.min_margin:g} g: "
+                        "no build order can end with it", failed_step=n, outcome=NO_PLAN)
         root = _Partial((), (), (0, 0, 0), (), StepChecker(self.options, explain=False))
         self.top = self.deepest = root
-        self.streaming = self.on_report is not None and self.plan.beam == 1
+        self.streaming = self.on_report is not None and self.plan.greedy
         return self._beam(root) if self.plan.beam > 1 else self._depth_first(root)
 
     def _depth_first(self, root: _Partial) -> Plan:
@@ -695,7 +763,7 @@ class _Planner:
         """The search went down to ``partial``: its look-ahead, progress."""
         k = len(partial.order)
         self.top = partial
-        if self.plan.beam == 1:
+        if self.plan.greedy:
             self.insertions = {o: f for o, f in self.insertions.items() if len(o) > k}
             if self.pool is not None:
                 self._look_ahead(partial)
@@ -859,8 +927,10 @@ class _Planner:
             # is chosen: their reports are re-made (those streamed before stay)
             check_sequence(scene, self.options, on_step=lambda r, _total: (
                 self.on_report(r) if r.step_index >= self.streamed else None))
+        weakest = min((r for r in reports if r.margin_g >= 0),
+                      key=lambda r: r.margin_g, default=None)
         return Plan(feasible, order, held, message, failed, scene, reports, self.checks,
-                    models=dict(self.models), outcome=outcome, states=self.states,
+                    models=dict(self.models), weakest=weakest, outcome=outcome, states=self.states,
                     backups=self.backups, failure=failure or {})
 
 
@@ -897,7 +967,8 @@ def plan_sequence(scene: Scene, max_held: int = 2, options: CheckOptions = Check
                   should_stop: Callable[[], bool] | None = None,
                   on_report: Callable[[Report], None] | None = None,
                   look_ahead: Callable[[Assembly, CheckOptions], LookAhead] | None = None,
-                  cell: Cell | None = None) -> Plan:
+                  cell: Cell | None = None, prefer: str = "holds",
+                  min_margin: float = 0.0) -> Plan:
     """An insertion order of every free block of ``scene`` in which each step stands with at
     most ``max_held`` blocks held (see the module docstring), or where none was found.
 
@@ -913,11 +984,12 @@ def plan_sequence(scene: Scene, max_held: int = 2, options: CheckOptions = Check
     (:mod:`rbe_ros.analysis.executors`), closed when the plan is made; the plan is the same
     with and without. ``cell``: plan for its robots (at most as many busy as it has, each grip
     within reach, the hand-over states standing) and make the timeline of their actions,
-    every state checked (:mod:`rbe_ros.analysis.timeline`)."""
+    every state checked (:mod:`rbe_ros.analysis.timeline`). ``prefer`` and ``min_margin``:
+    :class:`PlanOptions`."""
     start = time.perf_counter()
     planner = _Planner(scene, declared(options, scene),
                        PlanOptions(max_held, beam, candidates, keep_sequence, full_candidates,
-                                   time_limit, search_budget),
+                                   time_limit, search_budget, prefer, min_margin),
                        progress, should_stop, on_report, cell)
     if look_ahead is not None and not full_candidates:
         planner.pool = look_ahead(planner.full, planner.options)

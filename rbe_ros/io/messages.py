@@ -422,7 +422,8 @@ def plan_goal_to_dict(state: dict, limits: PlanLimits) -> dict:
             "beam": int(limits.beam), "hold_force_max": float(limits.hold_force_max),
             "hold_torque_max": float(limits.hold_torque_max),
             "time_limit": float(limits.time_limit),
-            "search_budget": int(limits.search_budget), "cell": str(limits.cell)}
+            "search_budget": int(limits.search_budget), "cell": str(limits.cell),
+            "prefer": str(limits.prefer), "min_margin": float(limits.min_margin)}
 
 
 def plan_goal_from_dict(d: Mapping) -> tuple[dict, PlanLimits]:
@@ -434,7 +435,8 @@ def plan_goal_from_dict(d: Mapping) -> tuple[dict, PlanLimits]:
         hold_force_max=float(d.get("hold_force_max", 0.0)),
         hold_torque_max=float(d.get("hold_torque_max", 0.0)),
         time_limit=float(d.get("time_limit", 0.0)),
-        search_budget=int(d.get("search_budget", 0)), cell=str(d.get("cell", "") or ""))
+        search_budget=int(d.get("search_budget", 0)), cell=str(d.get("cell", "") or ""),
+        prefer=str(d.get("prefer", "")) or "holds", min_margin=float(d.get("min_margin", 0.0)))
 
 
 def plan_result_to_dict(plan: Plan, header: dict) -> dict:
@@ -449,7 +451,8 @@ def plan_result_to_dict(plan: Plan, header: dict) -> dict:
             "reports": [report_to_dict(r, header) for r in plan.reports],
             "failed_step": int(plan.failed_step), "plan": state,
             "timeline": timeline_to_dicts(plan.timeline, header),
-            "robots": list(plan.timeline.robots) if plan.timeline is not None else []}
+            "robots": list(plan.timeline.robots) if plan.timeline is not None else [],
+            **weakest_step(plan)}
 
 
 def _pose_stamped(header: dict, frame=None) -> dict:
@@ -488,6 +491,14 @@ def timeline_to_dicts(timeline: Timeline | None, header: dict) -> list[dict]:
     return out
 
 
+def weakest_step(plan: Plan) -> dict:
+    """The PlanSequence result fields of ``plan``'s weakest step (-1: no margin computed)."""
+    w = plan.weakest
+    return {"weakest_step": -1 if w is None else int(w.step_index),
+            "weakest_block": "" if w is None else str(w.block_placed),
+            "weakest_margin_g": NOT_COMPUTED if w is None else float(w.margin_g)}
+
+
 def plan_feedback_to_dict(progress: PlanProgress) -> dict:
     """An rbe_msgs/action/PlanSequence feedback dict of a plan's progress."""
     return {"placed": int(progress.placed), "total": int(progress.total),
@@ -496,8 +507,40 @@ def plan_feedback_to_dict(progress: PlanProgress) -> dict:
             "checks": int(progress.checks), "remaining": float(progress.estimate)}
 
 
-__all__ = ["SOLID_PRIMITIVE_BOX", "header_dict", "header_stamp_ns", "json_safe",
-           "plan_feedback_to_dict", "plan_goal_from_dict", "plan_goal_to_dict",
-           "plan_result_to_dict", "poses_from_dict", "poses_to_dict", "report_from_dict",
-           "report_header", "report_json", "report_to_dict", "scene_from_state_dict",
-           "state_to_dict", "timeline_to_dicts"]
+# --- plan execution (~/execution, ~/plan_update) -----------------------------------------------
+
+def lookahead_step_to_dict(step) -> dict:
+    """An rbe_msgs/LookaheadStep dict of a step checked ahead
+    (:class:`rbe_ros.analysis.lookahead.StepAhead`)."""
+    return {"step": int(step.step), "block": str(step.block), "stable": bool(step.stable),
+            "status": int(step.status), "insertable": bool(step.insertable),
+            "margin_g": float(step.margin_g), "max_hold_force": float(step.max_hold_force),
+            "message": str(step.message)}
+
+
+def execution_to_dict(header: dict, *, active: bool, current_step: int, total_steps: int,
+                      as_built: dict | None, lookahead: list[dict], first_failing_step: int,
+                      message: str) -> dict:
+    """An rbe_msgs/ExecutionState dict (``as_built``: a StabilityReport dict, None: empty)."""
+    return {"header": header, "active": bool(active), "current_step": int(current_step),
+            "total_steps": int(total_steps),
+            "as_built": as_built if as_built is not None else report_to_dict(
+                Report(Status.INVALID_INPUT, ""), header),
+            "lookahead": list(lookahead), "first_failing_step": int(first_failing_step),
+            "message": str(message)}
+
+
+def plan_update_to_dict(header: dict, *, reason: str, changed_step: int, feasible: bool,
+                        repair: str, order, holds, message: str) -> dict:
+    """An rbe_msgs/PlanUpdate dict: the repaired plan (whole order, holds by step)."""
+    return {"header": header, "reason": str(reason), "changed_step": int(changed_step),
+            "feasible": bool(feasible), "repair": str(repair),
+            "order": [str(b) for b in order], "holds": [_hold_to_dict(h) for h in holds],
+            "timeline": [], "message": str(message)}
+
+
+__all__ = ["SOLID_PRIMITIVE_BOX", "execution_to_dict", "header_dict", "header_stamp_ns",
+           "json_safe", "lookahead_step_to_dict", "plan_feedback_to_dict", "plan_goal_from_dict",
+           "plan_goal_to_dict", "plan_result_to_dict", "plan_update_to_dict", "poses_from_dict",
+           "poses_to_dict", "report_from_dict", "report_header", "report_json", "report_to_dict",
+           "scene_from_state_dict", "state_to_dict", "timeline_to_dicts"]

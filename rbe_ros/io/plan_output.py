@@ -9,8 +9,10 @@ import time
 from typing import IO
 
 from ..analysis.planning import PlanProgress
+from ..analysis.repair import Repair
 from ..rbe.result import Report
 from .messages import json_safe, report_json
+from .scene_json import scene_to_dict
 
 #: Seconds between two progress lines (the first and the last step are always printed).
 PROGRESS_EVERY = 2.0
@@ -30,6 +32,52 @@ def step_summary(report: Report) -> dict:
                                          "grip_point": w.grip_point.tolist(),
                                          "utilisation": w.utilisation}
                                         for w in report.hold_wrenches]})
+
+
+def weakest_json(report: Report | None) -> dict:
+    """A plan's weakest step for ``--json``: step, block, margin_g, direction (step -1 and
+    margin_g -1 when no margin was computed)."""
+    if report is None:
+        return {"step": -1, "block": "", "margin_g": -1.0, "direction": [0.0, 0.0, 0.0]}
+    return json_safe({"step": report.step_index, "block": report.block_placed,
+                      "margin_g": report.margin_g,
+                      "direction": [float(x) for x in report.margin_direction]})
+
+
+def weakest_line(report: Report | None) -> str:
+    """A plan's weakest step as a line of text."""
+    if report is None:
+        return ("weakest step: not computed (--margin, --prefer margin or --min-margin "
+                "compute every step's margin)")
+    d = ", ".join(f"{x:.2f}" for x in report.margin_direction)
+    return (f"weakest step: {report.step_index} ({report.block_placed or 'release'}), margin "
+            f"{report.margin_g:.4f} g, body force towards ({d})")
+
+
+def repair_json(result: Repair) -> dict:
+    """``rbe-ros repair --json``: the repaired plan (order, holds), whether it is feasible
+    and changed, the kind of repair and the step it changes, and the remaining steps."""
+    holds = scene_to_dict(result.scene).get("holds", []) if result.scene is not None else \
+        [{"block": h.block, "from_step": h.from_step, "until_step": h.until_step}
+         for h in result.holds]
+    return json_safe({"feasible": result.feasible, "changed": result.changed,
+                      "order": result.order, "holds": holds, "message": result.message,
+                      "repair": result.kind, "changed_step": result.changed_step,
+                      "reason": result.reason, "placed": result.placed,
+                      "held": [list(h) for h in result.held], "checks": result.checks,
+                      "time": result.time,
+                      "steps": [step_summary(s.report) for s in result.steps]})
+
+
+def repair_text(result: Repair) -> str:
+    """``rbe-ros repair``'s lines: the verdict, the change, the order from the as-built
+    state."""
+    head = ("repair: NOT feasible" if not result.feasible
+            else f"repair: {result.kind}, from step {result.changed_step}" if result.changed
+            else "repair: none needed")
+    rest = result.order[result.placed:]
+    return (f"{head}: {result.message}\n{result.placed} blocks placed; order from step "
+            f"{result.placed}: {', '.join(rest)}")
 
 
 class ProgressLines:

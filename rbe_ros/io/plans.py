@@ -38,11 +38,14 @@ class PlanLimits:
     time_limit: float = 0.0         # s; <= 0: none
     search_budget: int = 0          # states checked; <= 0: the default (planning.backup_budget)
     cell: str = ""                  # the robot cell, JSON or YAML text; "": none
+    prefer: str = "holds"           # "holds" or "margin" (PlanOptions.prefer; "": holds)
+    min_margin: float = 0.0         # g; <= 0: off
 
     def search(self) -> PlanOptions:
         """The planner's search (ValueError naming a limit out of its range)."""
         return PlanOptions(self.max_held, self.beam, self.candidates, self.keep_sequence,
-                           search_budget=max(self.search_budget, 0))
+                           search_budget=max(self.search_budget, 0),
+                           prefer=self.prefer or "holds", min_margin=max(self.min_margin, 0.0))
 
 
 def plan_options(options: CheckOptions, limits: PlanLimits) -> CheckOptions:
@@ -120,7 +123,8 @@ def plan_state(read_scene: Callable[[], Scene], limits: PlanLimits,
                              search_budget=search.search_budget,
                              # also the planner's own, for its progress to show what is left
                              time_limit=limits.time_limit if limits.time_limit > 0
-                             else math.inf, progress=progress,
+                             else math.inf, prefer=search.prefer,
+                             min_margin=search.min_margin, progress=progress,
                              should_stop=stop, **extra)
     except SceneError as exc:
         return _failed(f"invalid input: {exc}")

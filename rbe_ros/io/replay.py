@@ -65,6 +65,7 @@ from .messages import (header_stamp_ns, plan_goal_from_dict, plan_result_to_dict
                        poses_from_dict, report_header, report_to_dict, scene_from_state_dict,
                        state_to_dict)
 from .plans import plan_state
+from .execution import EXECUTION, PLAN_UPDATE, Execution, Settings
 from .poses import AsBuilt
 
 OPTIONS_KEY = "rbe_ros.check_options"
@@ -79,6 +80,11 @@ REPORT_TYPE = "rbe_msgs/msg/StabilityReport"
 #: A ~/plan goal and its result, as the node records them (topics ~/plan/goal, ~/plan/result).
 PLAN_GOAL_TYPE = "rbe_msgs/action/PlanSequence_Goal"
 PLAN_RESULT_TYPE = "rbe_msgs/action/PlanSequence_Result"
+#: A plan under execution (~/execution) and its repairs (~/plan_update), answers to a design
+#: or poses message like its report (the same header stamp).
+EXECUTION_TYPE = "rbe_msgs/msg/ExecutionState"
+PLAN_UPDATE_TYPE = "rbe_msgs/msg/PlanUpdate"
+_ANSWER_TYPES = {REPORT_TYPE: REPORT_TYPE, EXECUTION_TYPE: EXECUTION, PLAN_UPDATE_TYPE: PLAN_UPDATE}
 #: Topics of bags written here: the names rbe_node uses (node name rbe_node).
 STATE_TOPIC = "/rbe_node/assembly"
 REPORT_TOPIC = "/rbe_node/report"
@@ -100,6 +106,14 @@ IGNORED = frozenset({"solve_time", "dropped_states"})
 
 
 # --- check options <-> JSON ------------------------------------------------------------------
+
+def settings_dict(options: CheckOptions, frame_id: str, execution: Settings) -> dict:
+    """What the node records on ~/settings: its check options, frame_id and execution
+    parameters."""
+    return {"options": json.loads(options_to_json(options)), "frame_id": frame_id,
+            "execution": {"lookahead_steps": execution.lookahead_steps,
+                          "min_margin_g": execution.min_margin_g}}
+
 
 def bag_options(path) -> CheckOptions:
     """The check options recorded in the bag at ``path``, else the defaults."""
@@ -123,6 +137,9 @@ class Run:
     settings: dict | None = None    # the node's settings when it got the state (~/settings)
     #: a design or poses run: the as-built scene after it (or why there is none)
     asbuilt: Scene | SceneError | None = None
+    #: a design or poses run: what the node made of it for the plan it executes, in order:
+    #: (EXECUTION, an ExecutionState dict) or (PLAN_UPDATE, a PlanUpdate dict)
+    execution: list[tuple[str, dict]] = field(default_factory=list)
 
     @property
     def header(self) -> dict:
@@ -184,8 +201,8 @@ class RunReader:
     as its reports are in, so only the runs still waiting for a report are held (the node
     answers a state within a check's time). Reports whose state is not in the bag (one
     file of a split bag: the state was in the file before) are counted in
-    :attr:`orphan_reports` and skipped. :attr:`total`: the number of runs (after the first
-    pass)."""
+    :attr:`orphan_reports` and skipped (their execution states too, not counted).
+    :attr:`total`: the number of runs (after the first pass)."""
 
     def __init__(self, path):
         self.path = Path(path)
@@ -198,8 +215,8 @@ class RunReader:
         owners: list[int] = []
         by_key: dict[tuple[int, int], list[tuple[int, int]]] = {}
         plans: dict[tuple[int, int], list[int]] = {}
-        for m in read_raw(self.path, {STATE_TYPE, POSES_TYPE, REPORT_TYPE, PLAN_GOAL_TYPE,
-                                      PLAN_RESULT_TYPE}):
+        for m in read_raw(self.path, {STATE_TYPE, POSES_TYPE, PLAN_GOAL_TYPE, PLAN_RESULT_TYPE,
+                                      *_ANSWER_TYPES}):
             if m.msgtype == PLAN_GOAL_TYPE:     # a goal: its assembly's header comes first
                 plans.setdefault(_stamp_key(m.raw), []).append(len(counts))
                 counts.append(0)
@@ -214,7 +231,7 @@ class RunReader:
                     counts[owner] += 1
                 continue
             key = _stamp_key(m.raw)
-            if m.msgtype != REPORT_TYPE:
+            if m.msgtype not in _ANSWER_TYPES:
                 by_key.setdefault(key, []).append((len(counts), m.stamp_ns))
                 counts.append(0)
                 continue
@@ -224,11 +241,14 @@ class RunReader:
             owners.append(owner)
             if owner >= 0:
                 counts[owner] += 1
+            elif m.msgtype == REPORT_TYPE:
+                self.orphan_reports += 1
         return owners, counts
 
     def __iter__(self) -> Iterator[Run]:
+        self.orphan_reports = 0
         owners, counts = self._owners()
-        self.total, self.orphan_reports = len(counts), owners.count(-1)
+        self.total = len(counts)
         pending: dict[int, Run] = {}
         created, done = 0, 0        # runs read, runs yielded
         reports = 0                 # reports read
@@ -237,8 +257,8 @@ class RunReader:
         # per topic: the last message's CDR after the stamp, its dict and as-built scene
         last: dict[str, tuple[bytes, dict, Scene | SceneError | None]] = {}
         repeats = report_repeats()      # a report again but for stamp, time, drops: not read
-        for m in read_raw(self.path, {STATE_TYPE, POSES_TYPE, REPORT_TYPE, SETTINGS_TYPE,
-                                      PLAN_GOAL_TYPE, PLAN_RESULT_TYPE}):
+        for m in read_raw(self.path, {STATE_TYPE, POSES_TYPE, SETTINGS_TYPE, PLAN_GOAL_TYPE,
+                                      PLAN_RESULT_TYPE, *_ANSWER_TYPES}):
             if m.msgtype == SETTINGS_TYPE:
                 if m.topic.endswith("/settings"):
                     settings = json.loads(m.message().data["data"])
@@ -247,6 +267,11 @@ class RunReader:
                 pending[created] = Run(m.message().data, m.stamp_ns, m.topic, kind=PLAN,
                                        settings=settings)
                 created += 1
+            elif m.msgtype in (EXECUTION_TYPE, PLAN_UPDATE_TYPE):
+                owner, reports = owners[reports], reports + 1
+                if owner >= 0:
+                    pending[owner].execution.append((_ANSWER_TYPES[m.msgtype],
+                                                     m.message().data))
             elif m.msgtype in (REPORT_TYPE, PLAN_RESULT_TYPE):
                 owner, reports = owners[reports], reports + 1
                 if owner < 0:
@@ -277,7 +302,8 @@ class RunReader:
                 else:
                     last[m.topic] = (m.raw[12:], run.state, run.asbuilt)
                 pending[created], created = run, created + 1
-            while done in pending and len(pending[done].reports) == counts[done]:
+            while done in pending and \
+                    len(pending[done].reports) + len(pending[done].execution) == counts[done]:
                 yield pending.pop(done)
                 done += 1
         for k in sorted(pending):       # (a bag that changed between the passes)
@@ -709,6 +735,70 @@ def compare_run(index: int, run: Run, replayed: list[dict], *,
     return out
 
 
+def replay_execution(tracker: Execution, run: Run, reports: list[dict],
+                     options: CheckOptions = CheckOptions()) -> list[tuple[str, dict]]:
+    """What the node's plan execution made of ``run`` (``reports``: its as-built report),
+    again, from ``tracker`` (the plan as the runs before left it): a design sets the plan;
+    a design or poses run the node answered on ~/execution is advanced as the node did."""
+    if run.kind == DESIGN:
+        try:
+            design = scene_from_state_dict(run.state)
+        except SceneError:
+            design = None
+        tracker.set_design(design)
+    if run.kind not in (DESIGN, POSES) or not run.execution:
+        return []
+    run_options, frame_id = run_settings(run, options)
+    header = report_header(run.state.get("header"), frame_id)
+    # the report of a split bag's file may be in the file before: then the one recorded
+    # with the execution state (the report itself is compared where it is)
+    as_built = reports[0] if reports else next(
+        (m["as_built"] for kind, m in run.execution if kind == EXECUTION), None)
+    return tracker.advance(_asbuilt(run), as_built, header, run_options,
+                           Settings.of((run.settings or {}).get("execution")))
+
+
+_EXECUTION_EXACT = ("active", "current_step", "total_steps", "first_failing_step")
+_LOOKAHEAD_EXACT = ("step", "block", "stable", "status", "insertable")
+_UPDATE_EXACT = ("changed_step", "feasible", "repair", "order", "holds")
+
+
+def compare_execution(index: int, run: Run, replayed: list[tuple[str, dict]], *,
+                      tolerances: Tolerances = Tolerances()) -> list[Difference]:
+    """Differences between the ExecutionStates and PlanUpdates recorded for ``run`` and
+    ``replayed``: steps, verdicts, orders and holds exactly, messages as reports' are,
+    margins and hold forces within the tolerances."""
+    c = _Comparer(index, -1, "", 1.0, tolerances)
+    kinds = [k for k, _ in run.execution], [k for k, _ in replayed]
+    if kinds[0] != kinds[1]:
+        c.diff("execution", "messages", kinds[0], kinds[1])
+        return c.out
+    for (kind, a), (_, b) in zip(run.execution, replayed):
+        if kind == PLAN_UPDATE:
+            for name in _UPDATE_EXACT:
+                c.exact("plan_update", name, a[name], b[name])
+            c.message(a["reason"], b["reason"])
+            c.message(a["message"], b["message"])
+            continue
+        for name in _EXECUTION_EXACT:
+            c.exact("execution", name, a[name], b[name])
+        c.exact("execution", "as_built.status", a["as_built"]["status"],
+                b["as_built"]["status"])
+        c.message(a["message"], b["message"])
+        if len(a["lookahead"]) != len(b["lookahead"]):
+            c.diff("execution", "lookahead (count)", len(a["lookahead"]), len(b["lookahead"]))
+            continue
+        for x, y in zip(a["lookahead"], b["lookahead"]):
+            where = f"lookahead step {x['step']}"
+            for name in _LOOKAHEAD_EXACT:
+                c.exact(where, name, x[name], y[name])
+            c.number(where, "margin_g", x["margin_g"], y["margin_g"], tolerances.ratio)
+            c.number(where, "max_hold_force", x["max_hold_force"], y["max_hold_force"],
+                     tolerances.force * max(1.0, abs(float(x["max_hold_force"]))))
+            c.message(x["message"], y["message"])
+    return c.out
+
+
 def _equal(recorded: dict, replayed: dict) -> bool:
     """Whether two report dicts are equal in every compared field (then no tolerance
     matters; the usual case, and the field by field comparison is what costs)."""
@@ -865,6 +955,7 @@ class ReplayResult:
     options: CheckOptions
     states: int = 0                 # runs read
     reports: int = 0                # reports replayed
+    executed: int = 0               # ExecutionStates and PlanUpdates made again (compared)
     recorded: int = 0               # reports recorded (compared)
     difference_count: int = 0
     orphan_reports: int = 0         # reports whose state is not in the bag (a split file)
@@ -974,11 +1065,15 @@ def replay_bag(path, output=None, *, options: CheckOptions | None = None, compar
     result = ReplayResult([], [], [], out if write else None, options)
     writer = RunWriter(out, options, markers=markers) if write else None
     pairs = recheck(runs, options, on_run)
+    execution = Execution()         # the plan the node executed, as the runs leave it
     try:
         for i, (run, reports) in enumerate(pairs):
             if writer is not None:
                 writer.write(run, reports)
-            found = compare_run(i, run, reports, tolerances=tolerances) if compare else []
+            executed = replay_execution(execution, run, reports, options)
+            result.executed += len(executed)
+            found = compare_run(i, run, reports, tolerances=tolerances) + \
+                compare_execution(i, run, executed, tolerances=tolerances) if compare else []
             result.add(i, run, reports, found, keep)
     finally:
         getattr(pairs, "close", lambda: None)()
@@ -991,7 +1086,9 @@ def replay_bag(path, output=None, *, options: CheckOptions | None = None, compar
 __all__ = ["DESIGN", "Difference", "KEPT_DIFFERENCES", "OPTIONS_KEY", "PLAN", "POSES",
            "ReplayResult", "Run", "RunReader", "RunWriter", "STATE", "Tolerances",
            "asbuilt_check", "asbuilt_scenes", "bag_options", "compare_plan", "compare_report",
-           "compare_run", "compare_runs", "default_output", "free_weights", "merge_message",
+           "compare_execution", "compare_run", "compare_runs", "default_output", "free_weights",
+           "merge_message",
            "offline_reports", "options_from_json", "options_to_json", "read_runs", "record_bag",
-           "replay_bag", "replay_plan", "replay_run", "report_repeats", "run_settings",
-           "SETTINGS_TYPE", "state_reports", "step_stamps", "stopped_at", "write_runs"]
+           "replay_bag", "replay_execution", "replay_plan", "replay_run", "report_repeats",
+           "run_settings", "SETTINGS_TYPE", "settings_dict", "state_reports", "step_stamps",
+           "stopped_at", "write_runs"]

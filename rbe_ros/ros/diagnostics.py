@@ -7,7 +7,8 @@ unexpected error (the node goes on, but a log is lost or a report is not a verdi
 message "inactive", while a managed node is inactive (nothing is checked; what arrives is
 counted as dropped); WARN when states were dropped under overload since the last message, or
 the last report had no verdict (SOLVER_FAILED: a solver failure, the time limit, a
-superseded sequence); STALE, message "stale", when no input has been checked for
+superseded sequence) or its verdict was INFEASIBLE (no admissible forces: the assembly the
+cell sees would fall); STALE, message "stale", when no input has been checked for
 :data:`STALE_AFTER_S`; OK otherwise.
 """
 from __future__ import annotations
@@ -24,6 +25,8 @@ TOPIC = "/diagnostics"
 PERIOD_S = 1.0
 #: No report for this long: the cell's view of the assembly is not being checked.
 STALE_AFTER_S = 10.0
+#: Last statuses that make the node WARN: no verdict, or a verdict that the assembly falls.
+_WARN_STATUSES = (Status.SOLVER_FAILED.name, Status.INFEASIBLE.name)
 
 
 @dataclass
@@ -33,6 +36,7 @@ class NodeHealth:
     checks: int = 0                 # reports published
     last_duration_s: float = 0.0    # of the last report's check
     last_status: str = ""
+    last_message: str = ""
     dropped: int = 0                # states dropped unchecked so far
     bag_bytes: int = 0              # message bytes written to the bag
     last_error: str = ""
@@ -48,6 +52,7 @@ class NodeHealth:
             self.last_report_at = time.monotonic()
             self.last_duration_s = report.solve_time
             self.last_status = report.status.name
+            self.last_message = report.message
             self.dropped = max(self.dropped, report.dropped_states)
             if report.status == Status.SOLVER_FAILED:
                 self.last_error = report.message
@@ -81,10 +86,12 @@ class NodeHealth:
                 level, summary = DiagnosticStatus.ERROR, f"error: {self.last_error}"
             elif not self.active:
                 level, summary = DiagnosticStatus.STALE, "inactive: nothing is checked"
-            elif newly_dropped or self.last_status == Status.SOLVER_FAILED.name:
+            elif newly_dropped or self.last_status in _WARN_STATUSES:
                 level = DiagnosticStatus.WARN
                 summary = "states dropped under overload" if newly_dropped else \
-                    f"last check without a verdict: {self.last_error}"
+                    f"last check without a verdict: {self.last_error}" \
+                    if self.last_status == Status.SOLVER_FAILED.name else \
+                    f"last verdict {self.last_status}: {self.last_message}"
             elif (idle := time.monotonic() - self.last_report_at) > STALE_AFTER_S:
                 level, summary = DiagnosticStatus.STALE, \
                     f"stale: no input checked for {idle:.0f} s"

@@ -13,8 +13,10 @@ system brings the checks up only once the rest is ready:
   checks (a running check ends after its current step, a running plan at its next candidate
   check), but keeps the design and the poses measured so
   far (the next activate goes on from them) and the topic subscriptions: what arrives while
-  inactive is ignored and counted (``dropped_states`` of the next report, /diagnostics, a
-  warning at activate);
+  inactive is recorded, designs and poses are merged into the as-built state (an incremental
+  camera's blocks measured in a pause are not lost), and the newest message is checked first
+  at the next activate, the others counted as dropped (``dropped_states``, /diagnostics, a
+  warning at activate), as under overload;
 * cleanup: the bag is closed, the design and measured poses forgotten; shutdown: everything
   is closed.
 
@@ -25,6 +27,7 @@ from __future__ import annotations
 
 from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 
+from ..io.execution import Execution
 from ..io.poses import AsBuilt
 from ..scene import SceneError
 from .node import NODE_NAME, ConfigurationError, RbeChecks, spin
@@ -45,6 +48,7 @@ class RbeLifecycleNode(RbeChecks, LifecycleNode):
             self._open_bag()
             self._design = self.design_message(path) if path else None
             self._asbuilt = AsBuilt()
+            self._execution = Execution()
         except (ConfigurationError, SceneError, ValueError) as exc:
             self.close_bag()
             self.get_logger().error(f"configure failed: {exc}")

@@ -25,7 +25,15 @@ Interfaces (relative to the node, e.g. ``/rbe_node/report``):
   and each step's report as result. Cancellable between candidate checks (the result is the
   best partial plan, status CANCELED); a newer goal preempts a running one (ABORTED, "stopped
   after K of N blocks"); plans run one at a time. A goal that cannot be planned (invalid
-  input) SUCCEEDS with ``feasible`` false and the reason, as an infeasible plan does.
+  input) SUCCEEDS with ``feasible`` false and the reason, as an infeasible plan does. Plans
+  (and repairs) run in worker processes (:mod:`rbe_ros.ros.workers`), so the checks keep
+  their pace meanwhile;
+* publishes ``~/execution`` (rbe_msgs/ExecutionState) and ``~/plan_update``
+  (rbe_msgs/PlanUpdate), both latched: the plan under execution (a design with a sequence, or
+  a ~/plan result of the design) after each design or poses message checked, the steps
+  ahead at the measured poses, and a repaired plan when one of them fails
+  (:mod:`rbe_ros.io.execution`, its own thread; parameters ``lookahead_steps``,
+  ``min_margin_g``).
 
 Bad input never stops the node: a state that cannot be checked (outside the limits of
 :class:`rbe_ros.scene.ValidationLimits`, ``max_blocks`` among them) gives a report with status
@@ -62,19 +70,21 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallb
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
 from rclpy.signals import SignalHandlerOptions
 from rbe_msgs.action import CheckSequence, PlanSequence
-from rbe_msgs.msg import AssemblyState, BlockPoses, StabilityReport
+from rbe_msgs.msg import AssemblyState, BlockPoses, ExecutionState, PlanUpdate, StabilityReport
 from rbe_msgs.srv import CheckAssembly
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
 from ..analysis.option_spec import BY_PARAM, OPTIONS, Option, from_outer
 from ..analysis.options import CheckOptions
-from ..analysis.pipeline import StateCheck, check_state
-from ..analysis.planning import STOPPED
+from ..analysis.pipeline import StateCheck, check_state, slim
+from ..analysis.lookahead import check_plan_design
+from ..analysis.planning import STOPPED, Plan
 from ..analysis.steps import sequence_step
 from ..io import cdr, lmgc90
 from ..io.bag import BagWriter, typestore
@@ -85,9 +95,11 @@ from ..io.messages import (plan_feedback_to_dict, plan_goal_from_dict, plan_resu
                            poses_to_dict, report_header, report_to_dict, state_to_dict)
 from ..io.cell_file import read_cell
 from ..io.plans import INVALID_CELL, plan_state
+from ..io.execution import EXECUTION, LOOKAHEAD_STEPS, MIN_MARGIN_G, Execution, Settings
 from ..io.poses import AsBuilt
-from ..io.replay import (DESIGN, OPTIONS_KEY, PLAN_GOAL_TYPE, PLAN_RESULT_TYPE, POSES,
-                         SETTINGS_TYPE, asbuilt_check, merge_message, options_to_json)
+from ..io.replay import (DESIGN, EXECUTION_TYPE, OPTIONS_KEY, PLAN_GOAL_TYPE, PLAN_RESULT_TYPE,
+                         PLAN_UPDATE_TYPE, POSES, SETTINGS_TYPE, asbuilt_check, merge_message,
+                         options_to_json, settings_dict)
 from ..rbe.result import Report, Status
 from ..cell import CellError, cell_to_dict
 from ..scene import Scene, SceneError
@@ -95,6 +107,7 @@ from .convert import dict_to_message, message_to_dict, scene_from_msg
 from .diagnostics import PERIOD_S as DIAGNOSTICS_PERIOD_S
 from .diagnostics import TOPIC as DIAGNOSTICS_TOPIC
 from .diagnostics import NodeHealth
+from .workers import Workers
 
 NODE_NAME = "rbe_node"
 #: At most one INFO line per this many seconds sums up the reports (a line per report at
@@ -181,6 +194,14 @@ PARAMETERS = {
     "max_bag_duration_s": _double(
         0.0, 1e7, "with mcap_path: begin the next file of the bag when one spans this many "
         "seconds; 0: no split by duration", read_only=True),
+    "lookahead_steps": (LOOKAHEAD_STEPS, ParameterDescriptor(
+        type=ParameterType.PARAMETER_INTEGER,
+        description="~/execution: the next this many steps of the plan are checked with the "
+        "placed blocks at their measured poses and the rest at design; 0: to the end",
+        integer_range=[IntegerRange(from_value=0, to_value=100000, step=1)])),
+    "min_margin_g": _double(
+        MIN_MARGIN_G, 10.0, "~/execution: a look-ahead step whose stability margin (share of "
+        "g) is below this fails, and the plan is repaired; 0: off"),
 }
 
 #: How often a report's markers held back by ``marker_rate_hz`` are looked at.
@@ -207,15 +228,17 @@ class RbeChecks:
         self._interfaces: list = []     # subscriptions and service, while open
         self._bag = None
         self._bag_lock = threading.Lock()
-        self._later_topics: dict[str, tuple[str, bool]] = {}   # bag topics not added yet
+        # bag topics not added yet: type, latched, whether a file may begin with one
+        self._later_topics: dict[str, tuple[str, bool, bool]] = {}
         # Overload: the subscription callback only puts the state in this one slot (a newer
         # state replaces a waiting one, counted in _dropped); the worker thread checks it.
         # CDR of the newest unchecked state, or an as-built state: (header, scene or error)
         self._slot: bytes | tuple | None = None
         self._slot_cond = threading.Condition()
         self._dropped = 0
-        # a managed node keeps its topic subscriptions while inactive, so that what arrives
-        # in a pause is counted (in _dropped and the log) instead of lost unseen
+        # a managed node keeps its topic subscriptions while inactive: what arrives in a
+        # pause is recorded, designs and poses merged (an incremental camera's blocks are not
+        # lost), and the newest waits in the slot, checked first at the next activate
         self._paused = False
         self._paused_messages = 0
         self._topics: list = []         # the topic subscriptions, while open
@@ -223,11 +246,22 @@ class RbeChecks:
         # the design and the poses measured so far (~/design, ~/poses): updated in the
         # callbacks, so that no measurement is lost when its check is dropped under overload
         self._asbuilt = AsBuilt()
+        self._asbuilt_lock = threading.RLock()
         self.foxglove = None
+        # ~/execution: the plan under execution, advanced by its own thread from the as-built
+        # states the worker checked (the newest; a design never dropped), so that looking
+        # ahead and repairing never hold up the as-built checks; repairs run in a process
+        self._execution = Execution()
+        self._designs = 0               # designs merged; the one the execution follows
+        self._exec_design = 0
+        self._exec_slot: dict = {}
+        self._exec_cond = threading.Condition()
+        self._exec_thread: threading.Thread | None = None
+        self._workers: Workers | None = None    # plans and repairs: processes of their own
 
         self.add_on_set_parameters_callback(self._validate_parameters)
         for name, (value, descriptor) in PARAMETERS.items():
-            self.declare_parameter(name, value, descriptor)
+            self._declare(name, value, descriptor)
 
         # States on the topic are checked in order; the service has its own group so that a
         # long sequence on the topic does not block it; action callbacks are reentrant so a
@@ -241,6 +275,10 @@ class RbeChecks:
         self._encode_report = cdr.encoder(typestore(), "rbe_msgs/msg/StabilityReport")
         self._encode_markers = cdr.encoder(typestore(), MARKER_TYPE)
         self._encode_plan = cdr.encoder(typestore(), PLAN_RESULT_TYPE)
+        self._encode_execution = cdr.encoder(typestore(), EXECUTION_TYPE)
+        self._encode_update = cdr.encoder(typestore(), PLAN_UPDATE_TYPE)
+        self._execution_pub = self.create_publisher(ExecutionState, "~/execution", LATCHED_QOS)
+        self._update_pub = self.create_publisher(PlanUpdate, "~/plan_update", LATCHED_QOS)
         self._report_pub = self.create_publisher(StabilityReport, "~/report", LATCHED_QOS)
         self._marker_pub = self.create_publisher(MarkerArray, "~/markers", LATCHED_QOS)
 
@@ -258,6 +296,8 @@ class RbeChecks:
         self.marker_topic = self._marker_pub.topic_name
         self.plan_goal_topic = self.resolve_topic_name("~/plan/goal")
         self.plan_result_topic = self.resolve_topic_name("~/plan/result")
+        self.execution_topic = self._execution_pub.topic_name
+        self.plan_update_topic = self._update_pub.topic_name
         # marker_rate_hz: the markers of the newest report held back, sent when their time
         # comes (polled while one waits)
         self._marker_lock = threading.Lock()
@@ -272,6 +312,16 @@ class RbeChecks:
         self._log_counts: dict[str, int] = {}
         self._log_since = time.monotonic() - LOG_SUMMARY_S     # the first report: a line
         self._last_verdict = None
+
+    def _declare(self, name: str, value, descriptor: ParameterDescriptor) -> None:
+        """Declare a parameter; an integer given for a float one (``-p
+        max_bag_duration_s:=120``: the launch line cannot say 120.0) is taken as that float,
+        not refused with a FATAL at start."""
+        given = self._parameter_overrides.get(name)
+        if descriptor.type == ParameterType.PARAMETER_DOUBLE and given is not None and \
+                given.type_ == Parameter.Type.INTEGER:
+            self._parameter_overrides[name] = Parameter(name, value=float(given.value))
+        self.declare_parameter(name, value, descriptor)
 
     def _start_foxglove(self) -> None:
         if self.get_parameter("foxglove_port").value:
@@ -306,8 +356,14 @@ class RbeChecks:
             for action, name, execute in ((CheckSequence, "~/check_sequence",
                                            self._execute_sequence),
                                           (PlanSequence, "~/plan", self._execute_plan))]
+        with self._slot_cond, self._exec_cond:
+            if self._slot is not None:      # a newer state waits: its execution comes next
+                self._exec_slot.pop("state", None)
         self._worker = threading.Thread(target=self._work, name="rbe_state_worker", daemon=True)
         self._worker.start()
+        self._exec_thread = threading.Thread(target=self._execute_work, name="rbe_execution",
+                                             daemon=True)
+        self._exec_thread.start()
         with self._slot_cond:
             self._paused, paused = False, self._paused_messages
             self._paused_messages = 0
@@ -315,7 +371,8 @@ class RbeChecks:
         if paused:
             self.get_logger().warning(
                 f"{paused} messages on {self.state_topic}, {self.design_topic} or "
-                f"{self.poses_topic} arrived while inactive: ignored (counted in dropped_states)")
+                f"{self.poses_topic} arrived while inactive: designs and poses merged, the "
+                "newest message checked first now (the others counted in dropped_states)")
         self.get_logger().info(
             f"ready: {self.state_topic} -> {self.report_topic}, service "
             f"{self._interfaces[-1].service_name}, "
@@ -330,11 +387,13 @@ class RbeChecks:
             self._paused = pause
         self.health.set_active(False)
         self.stop()
-        worker, self._worker = self._worker, None
-        if worker is not None and worker is not threading.current_thread():
-            worker.join(timeout=10.0)
-            if worker.is_alive():
-                self.get_logger().warning("the state worker is still checking; closing anyway")
+        for name in ("_worker", "_exec_thread"):
+            worker = getattr(self, name)
+            setattr(self, name, None)
+            if worker is not None and worker is not threading.current_thread():
+                worker.join(timeout=10.0)
+                if worker.is_alive():
+                    self.get_logger().warning(f"{worker.name} is still working; closing anyway")
         for service in self._interfaces:
             self.destroy_service(service)
         self._interfaces = []
@@ -396,10 +455,13 @@ class RbeChecks:
         # added with their first message: a bag of states alone has only their topics
         self.settings_topic = f"{self.get_fully_qualified_name()}/settings"
         self._bag.add_topic(self.settings_topic, SETTINGS_TYPE, transient_local=True)
-        self._later_topics = {self.design_topic: ("rbe_msgs/msg/AssemblyState", True),
-                              self.poses_topic: ("rbe_msgs/msg/BlockPoses", False),
-                              self.plan_goal_topic: (PLAN_GOAL_TYPE, False),
-                              self.plan_result_topic: (PLAN_RESULT_TYPE, False)}
+        # an execution state or plan update stays in the file of its poses, as a report
+        self._later_topics = {self.design_topic: ("rbe_msgs/msg/AssemblyState", True, True),
+                              self.poses_topic: ("rbe_msgs/msg/BlockPoses", False, True),
+                              self.plan_goal_topic: (PLAN_GOAL_TYPE, False, True),
+                              self.plan_result_topic: (PLAN_RESULT_TYPE, False, True),
+                              self.execution_topic: (EXECUTION_TYPE, True, False),
+                              self.plan_update_topic: (PLAN_UPDATE_TYPE, True, False)}
         self.bag_path = path
         self.get_logger().info(f"recording states and reports to {path}")
 
@@ -414,8 +476,8 @@ class RbeChecks:
                 return
             try:
                 if topic in self._later_topics:
-                    msgtype, latched = self._later_topics.pop(topic)
-                    self._bag.add_topic(topic, msgtype, transient_local=latched)
+                    msgtype, latched, splits = self._later_topics.pop(topic)
+                    self._bag.add_topic(topic, msgtype, transient_local=latched, splits=splits)
                 self._bag.write(topic, data, stamp)
                 self.health.recorded(len(data))
             except Exception as exc:  # a full disk must not stop the checks
@@ -435,8 +497,8 @@ class RbeChecks:
         parameter change), so that a replay checks each state with what it was checked with."""
         if self._bag is None:
             return
-        settings = {"options": json.loads(options_to_json(self.check_options())),
-                    "frame_id": self.get_parameter("frame_id").value}
+        settings = settings_dict(self.check_options(), self.get_parameter("frame_id").value,
+                                 self._execution_settings())
         data = serialize_message(String(data=json.dumps(settings, sort_keys=True)))
         self._record(self.settings_topic, data)
         self._carry(self.settings_topic, data)
@@ -459,13 +521,21 @@ class RbeChecks:
         self._closing = True
         with self._slot_cond:
             self._slot_cond.notify_all()
+        with self._exec_cond:
+            self._exec_cond.notify_all()
+
+    def _close_workers(self) -> None:
+        workers, self._workers = self._workers, None
+        if workers is not None:
+            workers.close()
 
     def close_bag(self) -> None:
         with self._bag_lock:
             self._close_bag_locked()
 
     def _close_outputs(self) -> None:
-        """Close the bag and the Foxglove server. Idempotent."""
+        """Close the bag, the Foxglove server and the worker processes. Idempotent."""
+        self._close_workers()
         self.close_bag()
         server, self.foxglove = self.foxglove, None
         if server is not None:
@@ -636,29 +706,23 @@ class RbeChecks:
     def _on_state(self, data: bytes) -> None:
         """Subscription callback (raw CDR): put the state in the slot for the worker (never
         blocks on a check)."""
-        if not self._counted_in_pause():
-            self._put(data)
-
-    def _counted_in_pause(self) -> bool:
-        """Whether the node is inactive: then a message that arrives is counted as dropped
-        (``dropped_states`` of the next report, /diagnostics), and ignored."""
-        with self._slot_cond:
-            if self._paused:
-                self._paused_messages += 1
-                self._dropped += 1
-                self.health.dropped_count(self._dropped)
-            return self._paused
+        self._put(data)
 
     def _put(self, data: bytes | tuple) -> None:
         """Put a state (CDR) or an as-built state in the slot for the worker; one still
-        waiting there is dropped and counted."""
+        waiting there is dropped and counted. While inactive the newest waits there for the
+        next activate (the robot's first verdict is of its newest state, not of one that
+        waited through the pause)."""
         with self._slot_cond:
             stale, self._slot = self._slot, data
+            paused = self._paused
+            self._paused_messages += paused
             if stale is not None:
                 self._dropped += 1
                 dropped = self._dropped
+                self.health.dropped_count(dropped)
             self._slot_cond.notify()
-        if stale is not None:
+        if stale is not None and not paused:
             stamp = _cdr_stamp(stale) if isinstance(stale, bytes) else _stamp(stale[0])
             self.get_logger().warning(
                 f"overload: state of stamp {stamp} dropped unchecked, a newer one"
@@ -719,23 +783,28 @@ class RbeChecks:
 
     def _on_asbuilt(self, data: bytes, msg_type, topic: str, kind: str) -> None:
         """Record a design or poses message, merge it into the as-built state
-        (:func:`rbe_ros.replay.merge_message`) and put the result in the slot; never raises."""
-        if self._counted_in_pause():
-            return
+        (:func:`rbe_ros.replay.merge_message`) and put the result in the slot, inactive too
+        (merged as an overload's dropped updates are); never raises."""
         try:
             msg = deserialize_message(data, msg_type)
-            header = self._received(msg, data, topic)
-            try:        # the topic callbacks run one at a time (one exclusive group)
-                scene = merge_message(self._asbuilt, kind, message_to_dict(msg))
-            except SceneError as exc:
-                scene = exc
-            # a later file of a split bag begins with the design and the poses measured so
-            # far (stamp 0: no report answers it), so that it replays alone
-            if kind == DESIGN:
-                self._carry(topic, data)
-            else:
-                self._carry(topic, self._measured_poses)
-            self._put((header, scene))
+            # recorded in the order merged (a replay merges them so): the topic callbacks
+            # run one at a time, and a plan's design (_adopt) comes from another thread
+            with self._asbuilt_lock:
+                header = self._received(msg, data, topic)
+                try:
+                    scene = merge_message(self._asbuilt, kind, message_to_dict(msg))
+                except SceneError as exc:
+                    scene = exc
+                # a later file of a split bag begins with the design and the poses measured
+                # so far (stamp 0: no report answers it), so that it replays alone
+                if kind == DESIGN:
+                    self._carry(topic, data)
+                    self._designs += 1
+                    with self._exec_cond:
+                        self._exec_slot["design"] = (self._designs, self._asbuilt.design)
+                else:
+                    self._carry(topic, self._measured_poses)
+                self._put((header, scene, self._designs))
         except Exception as exc:
             self.get_logger().error(f"{topic}: message not handled: {type(exc).__name__}: "
                                     f"{exc}")
@@ -744,16 +813,83 @@ class RbeChecks:
         """The poses measured so far as one BlockPoses dict (stamp 0)."""
         return poses_to_dict(self._asbuilt.measured, self.get_parameter("frame_id").value)
 
-    def _check_asbuilt(self, header: dict, scene) -> None:
-        """Check an as-built scene (or report why there is none) as a whole."""
+    def _check_asbuilt(self, header: dict, scene, design: int) -> None:
+        """Check an as-built scene (or report why there is none) as a whole, then hand it
+        to the plan's execution (``design``: the number of the design it was merged on)."""
         result = asbuilt_check(scene, self.check_options())
         if result.error is None:
-            self._publish(result.scene, result.reports[0], header)
-            return
-        # drawn as a state that failed: what could be merged, the blocks at fault highlighted
-        state = AssemblyState() if result.scene is None else \
-            dict_to_message(state_to_dict(result.scene), AssemblyState)
-        self._publish(None, result.error, header, state)
+            report = result.reports[0]
+            self._publish(result.scene, report, header)
+        else:
+            # drawn as a state that failed: what could be merged, the blocks at fault
+            state = AssemblyState() if result.scene is None else \
+                dict_to_message(state_to_dict(result.scene), AssemblyState)
+            report = result.error
+            self._publish(None, report, header, state)
+        with self._exec_cond:
+            self._exec_slot["state"] = (header, scene, report, design)
+            self._exec_cond.notify()
+
+    # --- plan execution (rbe_ros.io.execution) ----------------------------------------------
+
+    def _execution_settings(self) -> Settings:
+        return Settings(self.get_parameter("lookahead_steps").value,
+                        self.get_parameter("min_margin_g").value)
+
+    def _execute_work(self) -> None:
+        """The execution thread: advance the plan on the newest as-built state checked
+        (a new design first), until the node stops."""
+        while True:
+            with self._exec_cond:
+                while "state" not in self._exec_slot and not self._closing:
+                    self._exec_cond.wait()
+                if self._closing:
+                    return
+                slot, self._exec_slot = self._exec_slot, {}
+            try:
+                if "design" in slot:
+                    self._exec_design, design = slot["design"]
+                    self._execution.set_design(design)
+                    if self._execution.plan is not None:
+                        self._pool().warm()     # a repair may come: its process ready
+                header, scene, report, design = slot["state"]
+                if design == self._exec_design:    # not of a design replaced since
+                    self._advance(header, scene, report)
+            except Exception as exc:   # publishing failed (shutdown): say so, go on
+                self.get_logger().error(f"execution not advanced: {type(exc).__name__}: {exc}")
+
+    def _advance(self, header: dict, scene, report: Report) -> None:
+        """Publish (and record) what the as-built state means for the plan: its
+        ExecutionState, and a repaired plan when a step ahead fails (WARN)."""
+        self._execution.advance(scene, report_to_dict(slim(report), header), header,
+                                self.check_options(), self._execution_settings(), self._repair,
+                                self._send_execution)
+
+    def _send_execution(self, kind: str, message: dict) -> None:
+        """Record, then publish an ExecutionState or a PlanUpdate (the latter logged)."""
+        if kind == EXECUTION:
+            data = self._encode_execution(message)
+            self._record(self.execution_topic, data)
+            self._execution_pub.publish(data)
+        else:
+            data = self._encode_update(message)
+            self._record(self.plan_update_topic, data)
+            self._update_pub.publish(data)
+            self.get_logger().warning(
+                f"plan repaired ({message['repair']}) from step {message['changed_step']}: "
+                f"{message['reason']}; new order {' '.join(message['order'])}"
+                if message["feasible"] else
+                f"no repair found: {message['reason']}; {message['message']}")
+
+    def _repair(self, plan: Scene, built: Scene, options: CheckOptions, settings: Settings):
+        """The repair in a worker process (:mod:`rbe_ros.ros.workers`)."""
+        return self._pool().repair(plan, built, options, settings)
+
+    def _pool(self) -> Workers:
+        """The worker processes (each spawned at its first use)."""
+        if self._workers is None:
+            self._workers = Workers()
+        return self._workers
 
     def design_message(self, path: str) -> AssemblyState:
         """The design of ``design_file`` as the message a pipeline would send on ~/design
@@ -856,19 +992,21 @@ class RbeChecks:
             goal_handle.publish_feedback(
                 dict_to_message(plan_feedback_to_dict(p), PlanSequence.Feedback))
 
-        def read() -> Scene:
-            return scene_from_msg(goal.assembly, limits=options.limits)
-
         with self._plan_lock:
             start = time.monotonic()
-            options = self.check_options()
-            plan = plan_state(read, limits, options, progress=progress, should_stop=stopped)
+            # in a worker process: the as-built checks keep their pace meanwhile
+            plan = self._pool().plan(serialize_message(goal.assembly), limits,
+                                     self.check_options(), progress=progress,
+                                     should_stop=stopped)
             data = self._encode_plan(plan_result_to_dict(plan, header))
             self._record(self.plan_result_topic, data)
         self.get_logger().info(f"plan of {header['frame_id']} ({len(goal.assembly.blocks)} "
                                f"blocks, at most {limits.max_held} held) in "
                                f"{time.monotonic() - start:.1f} s: {plan.message}")
-        if plan.message.startswith(INVALID_CELL):
+        invalid_cell = plan.message.startswith(INVALID_CELL)
+        if not invalid_cell:
+            self._adopt(plan, header)
+        if invalid_cell:
             goal_handle.abort()         # a cell the plan cannot use: the reason in the result
         elif not plan.message.startswith(STOPPED) or not stopped():
             goal_handle.succeed()       # planned, infeasible, invalid, or its time limit
@@ -877,6 +1015,30 @@ class RbeChecks:
         else:
             goal_handle.abort()         # preempted by a newer goal, or shutting down
         return deserialize_message(data, PlanSequence.Result)
+
+
+    def _adopt(self, plan: Plan, header: dict) -> None:
+        """A feasible plan of the design becomes the plan ~/execution follows while no block
+        is measured: it is sent on as the design (recorded, so that a replay executes it
+        too). Without a design nothing happens (a node asked only to plan stays silent)."""
+        if not plan.feasible or plan.scene is None or self._asbuilt.design is None:
+            return
+        why = ""
+        with self._asbuilt_lock:
+            if self._asbuilt.measured:
+                why = f"{len(self._asbuilt.measured)} blocks are measured already (send a " \
+                      "design with a sequence to start again)"
+            else:
+                try:
+                    check_plan_design(plan.scene, self._asbuilt.design)
+                except SceneError as exc:
+                    why = str(exc)
+            if not why:
+                self._send_design(dict_to_message(state_to_dict(
+                    plan.scene, header["frame_id"], self.get_clock().now().nanoseconds),
+                    AssemblyState))
+        self.get_logger().info(f"the plan is not executed: {why}" if why else
+                               f"executing the plan: {' '.join(plan.order)}")
 
 
 class RbeNode(RbeChecks, Node):
@@ -963,7 +1125,7 @@ def spin(node_class, args=None) -> None:
             executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except ParameterException as exc:  # e.g. -p friction_coefficient:=1 (an integer)
+    except ParameterException as exc:  # e.g. -p friction_coefficient:=high
         rclpy.logging.get_logger(NODE_NAME).fatal(f"bad parameter: {exc}")
         raise SystemExit(2) from None
     except ConfigurationError as exc:

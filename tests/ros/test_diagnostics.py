@@ -120,3 +120,21 @@ def test_stale_when_nothing_checked_for_a_while_and_inactive_first():
     assert level()[0] == DiagnosticStatus.STALE
     health.set_active(True)
     assert level() == (DiagnosticStatus.OK, "ok")      # the pause's drops are not overload
+
+
+def test_warn_while_the_last_verdict_is_infeasible():
+    """A supervisor watching /diagnostics learns that the assembly the cell sees would fall:
+    WARN while the last verdict is INFEASIBLE, OK again once a verdict stands."""
+    health = NodeHealth()
+    health.set_active(True)
+
+    def level() -> tuple[int, str]:
+        status = health.message("rbe_node", Time()).status[0]
+        return status.level, status.message
+
+    health.reported(Report(Status.INFEASIBLE, "not connected: b3"))
+    assert level() == (DiagnosticStatus.WARN, "last verdict INFEASIBLE: not connected: b3")
+    health.reported(Report(Status.FRICTION_EXCEEDED, "friction needed 0.7"))
+    assert level() == (DiagnosticStatus.OK, "ok")      # a verdict with forces: not an alarm
+    health.reported(Report(Status.STABLE, "stands"))
+    assert level() == (DiagnosticStatus.OK, "ok")

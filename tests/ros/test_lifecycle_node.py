@@ -153,18 +153,24 @@ def test_measured_poses_survive_deactivate_activate_and_the_pause_is_counted(rcl
         pipeline.design.publish(dict_to_message(state_to_dict(design, "wall", 10**9 * 100),
                                                 AssemblyState))
         wait_until(lambda: pipeline.report(100), 60.0, "the design's report")
-        for k, bid in enumerate(order):                  # one at a time: none superseded
+        built = order[:-3]                              # the last course waits
+        for k, bid in enumerate(built):                 # one at a time: none superseded
             send(101 + k, [bid])
             wait_until(lambda: pipeline.report(101 + k), 60.0, f"the report of {bid}")
-        before = pipeline.report(100 + len(order))
-        assert before.status == StabilityReport.STABLE and before.num_blocks == 1 + len(order)
+        before = pipeline.report(100 + len(built))
+        assert before.status == StabilityReport.STABLE and before.num_blocks == 1 + len(built)
         assert life.transition(Transition.TRANSITION_DEACTIVATE)
         assert seen(DiagnosticStatus.STALE, "inactive")
-        for k in range(5):                              # ignored, counted
-            send(200 + k, order[:1])
-        # counted as they come (the dropped count of /diagnostics), before the activate
-        assert seen(DiagnosticStatus.STALE, "inactive", before.dropped_states + 5)
+        # an incremental camera goes on in the pause: the last course's bricks, one a
+        # message, then the first brick again twice; merged, not checked
+        for k, bids in enumerate([[b] for b in order[-3:]] + [order[:1]] * 2):
+            send(200 + k, bids)
+        # each superseded as it comes (the dropped count of /diagnostics), the newest waits
+        assert seen(DiagnosticStatus.STALE, "inactive", before.dropped_states + 4)
+        assert not pipeline.report(204)
         assert life.transition(Transition.TRANSITION_ACTIVATE)
+        # the newest first, with every brick measured in the pause: the whole wall stands
+        paused = wait_until(lambda: pipeline.report(204), 60.0, "the newest after activate")
         assert seen(DiagnosticStatus.OK, "ok")
         send(300, order[-1:])                           # the last brick measured again
         after = wait_until(lambda: pipeline.report(300), 60.0, "the report after activate")
@@ -176,12 +182,15 @@ def test_measured_poses_survive_deactivate_activate_and_the_pause_is_counted(rcl
     assert "Traceback" not in out, out
     # every brick still measured: the wall stands on the footing, as the core computes it
     assert after.status == StabilityReport.STABLE and after.num_blocks == 1 + len(order)
+    assert paused.status == StabilityReport.STABLE and paused.num_blocks == 1 + len(order)
+    assert [r.header.stamp.sec for r in pipeline.reports if r.header.stamp.sec >= 200] == \
+        [204, 300]                                      # nothing that waited, newest first
     assert [r.header.stamp.sec for r in pipeline.reports].count(100) == 1   # design once
     final = check_scene(scene_at_poses(design, {b: (design.block(b).position,
                                                     design.block(b).orientation)
                                                 for b in order}))
     assert [(i.block_a, i.block_b) for i in after.interfaces] == \
         [(i.block_a, i.block_b) for i in final.interfaces]
-    assert after.dropped_states - before.dropped_states == 5
+    assert after.dropped_states - before.dropped_states == 4
     assert "5 messages" in out and "arrived while inactive" in out, out
     assert "deactivated" in out and "activated" in out

@@ -212,3 +212,19 @@ def test_log_unstable_at_warn_changes_at_info_and_a_summary_not_a_line_per_repor
                                      AssemblyState))
     assert lines[2][0] == "info" and "5 STABLE, 5 TENSION_REQUIRED" in lines[2][1] \
         and lines[2][1].startswith("10 reports in"), lines
+
+
+def test_integers_accepted_for_every_float_parameter(make_node):
+    """``-p max_bag_duration_s:=120`` (an integer on the launch line) starts the node with
+    120.0, for every float parameter alike (was: FATAL, the node dead at start)."""
+    from rbe_ros.ros.node import PARAMETERS
+
+    floats = {name: d.floating_point_range[0] for name, (_, d) in PARAMETERS.items()
+              if d.type == ParameterType.PARAMETER_DOUBLE}
+    assert {"max_bag_duration_s", "friction_coefficient", "marker_rate_hz"} <= set(floats)
+    given = {name: 120 if name == "max_bag_duration_s" else 1 for name in floats}
+    node = make_node(**given)
+    for name, value in given.items():
+        p = node.get_parameter(name)
+        assert p.type_ == Parameter.Type.DOUBLE and p.value == float(value), name
+    assert node.get_parameter("max_bag_duration_s").value == 120.0

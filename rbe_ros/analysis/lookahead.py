@@ -1,0 +1,313 @@
+"""Look-ahead: the steps of a plan still to come, checked on the as-built state.
+
+A plan is a planned scene (blocks at design, ``sequence`` the order, ``holds`` by step). While
+it is built, the blocks placed so far (a prefix of the order) are where the camera measured
+them; the look-ahead checks the next steps as ``check --sequence`` checks them, with the
+placed blocks at their measured poses, the rest at design, the holds as the plan has them,
+under the declared pose uncertainty. A step fails when it does not stand (a hold beyond a
+robot's capacity included: HOLD_EXCEEDED), when its block cannot reach its pose (not
+insertable: a deviated block may be in its way), or when its margin is below
+``min_margin_g``.
+
+:class:`StepRunner` checks steps of plans over one as-built geometry: contacts are detected
+once, each step through the incremental checker (:class:`StepChecker`), and each state
+(blocks present, blocks held) is checked once, whichever plan it belongs to: a repair's
+candidates share most of their states with the plan (:mod:`rbe_ros.analysis.repair`).
+"""
+from __future__ import annotations
+
+import copy
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..rbe.result import NOT_COMPUTED, Report, Status
+from ..scene import Hold, Scene, SceneError, make_scene
+from .asbuilt import declared
+from .assembly import Assembly
+from .incremental import StepChecker
+from .margin import DEFAULT_DIRECTIONS
+from .options import CheckOptions
+from .pipeline import Placed, _completed, slim
+from .steps import sequence_step, step_count, step_state
+from .validate import validated_assembly
+
+#: Look-ahead steps of the node by default (its ``lookahead_steps`` parameter).
+DEFAULT_LOOKAHEAD = 10
+
+
+def plan_order(plan: Scene) -> tuple[str, ...]:
+    """The order of ``plan``: its sequence, which must place every free block (SceneError:
+    a scene that is not a plan)."""
+    free = [b.id for b in plan.blocks if not b.support]
+    if not plan.sequence:
+        raise SceneError(f"{plan.name!r} is not a plan: it has no sequence (rbe-ros plan -o "
+                         "writes one)")
+    missing = [b for b in free if b not in set(plan.sequence)]
+    if missing:
+        raise SceneError(f"{plan.name!r} is not a whole plan: its sequence does not place "
+                         f"{', '.join(missing[:5])}{' ...' if len(missing) > 5 else ''}")
+    return plan.sequence
+
+
+def placed_count(plan: Scene, built: Scene) -> int:
+    """How many steps of ``plan`` are done in the as-built scene ``built`` (the design's
+    supports and the measured blocks, :func:`rbe_ros.io.poses.scene_at_poses`): its free
+    blocks, which must be the first of the plan's order (SceneError naming a block that is
+    not in the plan, or one measured out of order)."""
+    order = plan_order(plan)
+    ids = {b.id for b in plan.blocks}
+    unknown = [b.id for b in built.blocks if b.id not in ids]
+    if unknown:
+        raise SceneError(f"measured poses name {'a block' if len(unknown) == 1 else 'blocks'} "
+                         f"not in the plan {plan.name!r}: "
+                         f"{', '.join(repr(i) for i in unknown[:5])}")
+    free = set(order)
+    placed = {b.id for b in built.blocks if b.id in free}
+    count = len(placed)
+    if set(order[:count]) != placed:
+        first = next(k for k, b in enumerate(order) if b not in placed)
+        early = next(b for b in order[first:] if b in placed)
+        raise SceneError(f"measured blocks are not a prefix of the plan's order: {early!r} "
+                         f"(step {order.index(early)}) is measured but {order[first]!r} "
+                         f"(step {first}) is not")
+    return count
+
+
+def as_built_plan(plan: Scene, built: Scene) -> Scene:
+    """``plan`` with the blocks of the as-built scene ``built`` (measured blocks and
+    supports) at their poses there, the others at design; sequence and holds kept."""
+    placed_count(plan, built)
+    at = {b.id: b for b in built.blocks}
+    return replace(plan, blocks=tuple(at.get(b.id, b) for b in plan.blocks))
+
+
+def check_plan_design(plan: Scene, design: Scene) -> None:
+    """SceneError unless ``plan`` is a plan of ``design``: the same blocks (ids, supports,
+    shapes and masses); poses may differ (a plan may be written at measured poses)."""
+    ours, theirs = ({b.id: b for b in s.blocks} for s in (plan, design))
+    if set(ours) != set(theirs):
+        differ = sorted(set(ours) ^ set(theirs))
+        raise SceneError(f"the plan {plan.name!r} does not match the design {design.name!r}: "
+                         f"blocks {', '.join(repr(i) for i in differ[:5])} are in only one")
+    for i, b in ours.items():
+        d = theirs[i]
+        if (b.support != d.support or b.vertices.shape != d.vertices.shape
+                or not np.allclose(b.vertices, d.vertices) or b.faces != d.faces
+                or not math.isclose(b.mass, d.mass) or not math.isclose(b.density, d.density)):
+            raise SceneError(f"the plan {plan.name!r} does not match the design "
+                             f"{design.name!r}: block {i!r} differs (shape, mass or support)")
+
+
+@dataclass(frozen=True)
+class StepAhead:
+    """One step checked ahead (the fields of ``rbe_msgs/LookaheadStep``)."""
+
+    step: int
+    block: str                      # "" at a release step
+    stable: bool
+    status: Status
+    insertable: bool
+    margin_g: float                 # NOT_COMPUTED (-1) when no margin was asked for
+    max_hold_force: float           # N; 0 when nothing is held
+    held: tuple[str, ...]
+    message: str                    # why it fails ("" when it passes)
+    report: Report = field(repr=False, default=None)   # the step's report (slim)
+
+    @property
+    def passes(self) -> bool:
+        return not self.message
+
+
+@dataclass(frozen=True)
+class Lookahead:
+    """The as-built state and the steps ahead of it (``rbe_msgs/ExecutionState``)."""
+
+    current_step: int               # blocks placed; the next step to place
+    total_steps: int                # steps of the plan (a release step included)
+    as_built: Report | None         # the as-built state's check (None: nothing placed)
+    steps: list[StepAhead]
+    first_failing_step: int         # -1: every step checked passes
+    message: str                    # why the plan cannot go on as planned ("" fine)
+    time: float = 0.0               # s
+
+    @property
+    def failing(self) -> StepAhead | None:
+        return next((s for s in self.steps if not s.passes), None)
+
+
+def failure(report: Report, min_margin_g: float = 0.0) -> str:
+    """Why a step's ``report`` fails the look-ahead ("" when it passes): it does not stand
+    (a hold beyond capacity is HOLD_EXCEEDED), its block is not insertable, or its margin is
+    below ``min_margin_g`` (> 0)."""
+    if not report.stable:
+        return f"{report.status.name}: {report.message}"
+    if not report.insertable:
+        return f"not insertable: {report.message}"
+    if min_margin_g > 0 and report.margin_g != NOT_COMPUTED and report.margin_g < min_margin_g:
+        return f"margin {report.margin_g:.4f} g below the minimum {min_margin_g:g} g"
+    return ""
+
+
+def where(step: int, block: str) -> str:
+    """"step 12 (v05)", or "step 12 (release)" for a release step."""
+    return f"step {step} ({block or 'release'})"
+
+
+class StepRunner:
+    """Checks steps of plans on one as-built scene (the blocks at their poses; a plan is a
+    sequence and holds over these blocks), each state once.
+
+    ``options``: the check's (the scene's declared pose uncertainty applied); a margin is
+    computed when they ask for one or ``min_margin_g`` > 0. The as-built state (supports and
+    the placed blocks) is validated as a check validates a scene; blocks not placed are at
+    design and may overlap a deviated one: their step is then not insertable."""
+
+    def __init__(self, scene: Scene, options: CheckOptions, placed: int,
+                 min_margin_g: float = 0.0,
+                 should_stop: Callable[[], bool] | None = None):
+        options = declared(options, scene)
+        if min_margin_g > 0 and not options.margin_directions:
+            options = replace(options, margin_directions=DEFAULT_DIRECTIONS)
+        self.scene, self.options, self.min_margin_g = scene, options, min_margin_g
+        self.placed = placed
+        self.should_stop = should_stop
+        order = plan_order(scene)
+        built = {*order[:placed]} | {b.id for b in scene.blocks if b.support}
+        validated_assembly(scene.subset(built), options.limits, options.contact)
+        self.full = Assembly.from_scene(scene, options.contact)
+        self.memo: dict[tuple, Report] = {}
+        self.checks = 0
+        self.checker = StepChecker(options, local=not options.full_solve)
+
+    def report(self, plan: Scene, k: int, checker: StepChecker) -> Report:
+        """The report of step ``k`` of ``plan`` (a scene over these blocks: sequence and
+        holds), slim; ``checker`` is advanced when the state is new."""
+        step = sequence_step(plan, k)
+        key = (step.present, step.held)
+        found = self.memo.get(key)
+        if found is None:
+            if self.should_stop is not None and self.should_stop():
+                raise TimeoutError(f"stopped before {where(k, step.block)}")
+            assembly = self.full.subset(step.present, step.held, step.grips)
+            found = checker.check(assembly)
+            # whether a verdict hangs on the contact tolerance is asked of the state built
+            # (placed blocks only), not of the steps ahead: one or two solves each
+            found = _completed(found, assembly, step.held, self.options,
+                               Placed(self.full, step.present, step.block,
+                                      plan.approach_of(step.block)),
+                               tolerance=k < self.placed)
+            found = self.memo[key] = slim(found)
+            self.checks += 1
+        return replace(found, step_index=k, block_placed=step.block)
+
+    def ahead(self, plan: Scene, k: int, checker: StepChecker) -> StepAhead:
+        """Step ``k`` of ``plan`` as a look-ahead step."""
+        report = self.report(plan, k, checker)
+        force = max((float(np.linalg.norm(w.force)) for w in report.hold_wrenches),
+                    default=0.0)
+        return StepAhead(k, report.block_placed, report.stable, report.status,
+                         report.insertable, report.margin_g, force, report.held_blocks,
+                         failure(report, self.min_margin_g), report)
+
+    def scan(self, plan: Scene, start: int, stop: int, checker: StepChecker,
+             until_failure: bool = True) -> list[StepAhead]:
+        """Steps ``start`` .. ``stop - 1`` of ``plan``, in order (up to the first that fails
+        with ``until_failure``); ``checker`` is advanced through them."""
+        out = []
+        for k in range(start, stop):
+            out.append(self.ahead(plan, k, checker))
+            if until_failure and not out[-1].passes:
+                break
+        return out
+
+    def fork(self, checker: StepChecker) -> StepChecker:
+        """A copy of ``checker`` to go on from where it is (its kept state is shared, never
+        changed in place)."""
+        return copy.copy(checker)
+
+
+def look_ahead(plan: Scene, built: Scene, options: CheckOptions = CheckOptions(), *,
+               lookahead_steps: int = DEFAULT_LOOKAHEAD, min_margin_g: float = 0.0,
+               until_failure: bool = False) -> Lookahead:
+    """Check the as-built state of ``plan`` (the free blocks of the as-built scene ``built``
+    placed, a prefix of its order, at their measured poses) and its next ``lookahead_steps``
+    steps (0: to the end) with the rest at design and the plan's holds, under ``options`` and
+    the plan's declared pose uncertainty. ``until_failure``: stop at the first step that fails.
+
+    Raises SceneError for bad input: measured blocks not in the plan, or not a prefix of its
+    order, a plan that is not one (no whole sequence), measured blocks that interpenetrate."""
+    start = time.perf_counter()
+    if lookahead_steps < 0:
+        raise SceneError(f"lookahead_steps must be >= 0, not {lookahead_steps}")
+    scene = as_built_plan(plan, built)
+    placed = placed_count(plan, built)
+    runner = StepRunner(scene, options, placed, min_margin_g)
+    checker = runner.checker
+    total = step_count(scene)
+    as_built = runner.report(scene, placed - 1, checker) if placed else None
+    stop = total if lookahead_steps == 0 else min(total, placed + lookahead_steps)
+    steps = runner.scan(scene, placed, stop, checker, until_failure)
+    failing = next((s for s in steps if not s.passes), None)
+    message = ""
+    if as_built is not None and not as_built.stable:
+        message = f"as built, {where(placed - 1, as_built.block_placed)} does not stand: " \
+                  f"{as_built.message}"
+    elif failing is not None:
+        message = f"{where(failing.step, failing.block)} fails at the measured poses: " \
+                  f"{failing.message}"
+    return Lookahead(placed, total, as_built, steps,
+                     -1 if failing is None else failing.step, message,
+                     time.perf_counter() - start)
+
+
+def held_by_step(plan: Scene) -> list[tuple[str, ...]]:
+    """The free blocks held at each step of ``plan`` (a release step included)."""
+    order = plan_order(plan)
+    return [step_state(plan, order, k)[1] for k in range(step_count(plan))]
+
+
+def holds_of(plan: Scene, order, held: list[tuple[str, ...]]) -> tuple[Hold, ...]:
+    """The holds of ``plan`` with its free blocks held at step k as ``held[k]`` says (one
+    hold per run of steps; a run to the last entry of ``held`` ends there when a release
+    step follows, else never), grips and capacities as the plan's hold of that block gives
+    them; the plan's holds of supports (scaffolds) kept."""
+    supports = {b.id for b in plan.blocks if b.support}
+    given = {}
+    for h in plan.holds:
+        given.setdefault(h.block, h)
+    out = [h for h in plan.holds if h.block in supports]
+    for block in order:
+        k = 0
+        while k < len(held):
+            if block in held[k]:
+                first = k
+                while k < len(held) and block in held[k]:
+                    k += 1
+                h = given.get(block)
+                out.append(Hold(block, first, k if k < len(held) else None,
+                                *((h.grip, h.max_force, h.max_torque) if h else ())))
+            k += 1
+    return tuple(out)
+
+
+def with_plan(scene: Scene, order, held: list[tuple[str, ...]]) -> Scene:
+    """``scene`` with the order ``order`` and the free blocks held as ``held`` (by step; a
+    release step appended when the last placement holds blocks)."""
+    held = list(held[:len(order)])
+    if held and held[-1]:
+        held.append(())
+    approach = ()
+    if scene.approach:
+        given = dict(zip(scene.sequence, scene.approach))
+        approach = tuple(given.get(b) for b in order)
+    return make_scene(scene.name, scene.blocks, scene.gravity, order,
+                      holds_of(scene, order, held), scene.pose_uncertainty, approach)
+
+
+__all__ = ["DEFAULT_LOOKAHEAD", "Lookahead", "StepAhead", "StepRunner", "as_built_plan",
+           "check_plan_design", "failure", "held_by_step", "holds_of", "look_ahead",
+           "placed_count", "plan_order", "where", "with_plan"]

@@ -1,0 +1,171 @@
+"""Executing a plan from measured poses: the node's (``~/execution``, ``~/plan_update``) and
+the replay's one definition of what a design or a pose message means for the plan.
+
+The plan is a planned scene (the design with a sequence and holds: ``design_file``, or a
+design sent with a sequence on ``~/design``). After each as-built state the node checked,
+:meth:`Execution.advance` looks ahead (:func:`rbe_ros.analysis.lookahead.look_ahead`: the
+placed blocks, a prefix of the plan's order, at their measured poses, the next
+``lookahead_steps`` steps with the rest at design); when a step ahead fails it repairs the
+rest of the plan (:func:`rbe_ros.analysis.repair.repair_plan`, in the node a process of its
+own), sends the repaired plan and looks ahead again on it. Poses that do not fit the plan (a
+block out of the plan's order, a block not in the design, a design that is not the plan's)
+make the state inactive with the reason, the step reached and its look-ahead kept.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+from ..analysis.lookahead import DEFAULT_LOOKAHEAD, check_plan_design, look_ahead
+from ..analysis.options import CheckOptions
+from ..analysis.repair import Repair, repair_plan
+from ..scene import Scene, SceneError
+from .messages import (execution_to_dict, lookahead_step_to_dict, plan_update_to_dict,
+                       report_to_dict)
+
+#: The node's parameter defaults (and a bag's recorded before them).
+LOOKAHEAD_STEPS = DEFAULT_LOOKAHEAD
+MIN_MARGIN_G = 0.0
+#: Kinds of output of one as-built state, in order: an ExecutionState, a PlanUpdate.
+EXECUTION, PLAN_UPDATE = "execution", "plan_update"
+
+
+@dataclass(frozen=True)
+class Settings:
+    """The node's execution parameters (recorded with its settings for replay)."""
+
+    lookahead_steps: int = LOOKAHEAD_STEPS
+    min_margin_g: float = MIN_MARGIN_G
+
+    @classmethod
+    def of(cls, recorded: dict | None) -> "Settings":
+        recorded = recorded or {}
+        return cls(int(recorded.get("lookahead_steps", LOOKAHEAD_STEPS)),
+                   float(recorded.get("min_margin_g", MIN_MARGIN_G)))
+
+
+#: How a repair is made: ``repair(plan, built, options, settings)``.
+Repairer = Callable[[Scene, Scene, CheckOptions, Settings], Repair]
+
+
+def repair(plan: Scene, built: Scene, options: CheckOptions, settings: Settings) -> Repair:
+    """The core's repair with the node's settings: within its look-ahead window, its
+    minimum margin (a function of its own: the node runs it in another process)."""
+    return repair_plan(plan, built, options, min_margin_g=settings.min_margin_g,
+                       lookahead_steps=settings.lookahead_steps)
+
+
+NO_PLAN = "no plan: set design_file to a planned scene, or send a design with a sequence"
+
+
+class Execution:
+    """The plan under execution and what the last as-built state made of it."""
+
+    def __init__(self) -> None:
+        self.plan: Scene | None = None
+        self.error = NO_PLAN
+        self.last: dict | None = None       # the last ExecutionState of accepted poses
+        # (as-built scene, plan, settings, options) of the last outputs
+        self._seen: tuple = ()
+        self._outputs: list[tuple[str, dict]] = []
+        self._repaired = None               # the as-built scene a repair was last tried at
+
+    def set_design(self, design: Scene | None) -> None:
+        """A new design: its sequence (and holds) is the plan; a design without one keeps
+        the plan held if it is a plan of the design, else says why not."""
+        if design is None:
+            self.plan, self.error = None, "no plan: the design is invalid"
+        elif design.sequence:
+            self.plan, self.error = design, ""
+        elif self.plan is not None:
+            try:
+                check_plan_design(self.plan, design)
+                self.error = ""
+            except SceneError as exc:
+                self.error = str(exc)
+        self.last, self._seen, self._repaired = None, (), None
+
+    def advance(self, built: Scene | SceneError, as_built: dict | None, header: dict,
+                options: CheckOptions, settings: Settings, repairer: Repairer = repair,
+                on_output: Callable[[str, dict], None] | None = None
+                ) -> list[tuple[str, dict]]:
+        """The outputs of one as-built state (``built``, or why the poses were refused;
+        ``as_built``: the node's report of it): an ExecutionState, and when a step ahead
+        fails a PlanUpdate and the ExecutionState of the repaired plan; each passed to
+        ``on_output(kind, message)`` as soon as it is made (the failing step goes out
+        before the repair starts). The same state again gives the same outputs with the new
+        header (a cell sends the same poses at 10 Hz); nothing while no plan was ever given
+        (a node that only checks says nothing on ~/execution); never raises."""
+        out: list[tuple[str, dict]] = []
+
+        def emit(kind: str, message: dict) -> None:
+            out.append((kind, message))
+            if on_output is not None:
+                on_output(kind, message)
+
+        if self.plan is None and self.error == NO_PLAN:
+            return out
+        seen = (built, self.plan, settings, options)
+        if self._seen and all(a is b or a == b for a, b in zip(self._seen[2:], seen[2:])) \
+                and self._seen[0] is built and self._seen[1] is self.plan:
+            for kind, message in self._outputs:
+                emit(kind, {**message, "header": header})
+            return out
+        try:
+            self._advance(built, as_built, header, options, settings, repairer, emit)
+        except Exception as exc:        # an answer, never a crash
+            emit(EXECUTION, self._refused(header, as_built,
+                                          f"execution failed: {type(exc).__name__}: {exc}"))
+        self._seen, self._outputs = seen, out
+        return out
+
+    def _refused(self, header: dict, as_built: dict | None, why: str) -> dict:
+        """The last accepted state (its step and look-ahead), inactive, with the reason."""
+        kept = self.last or execution_to_dict(
+            header, active=False, current_step=0,
+            total_steps=len(self.plan.sequence) if self.plan is not None else 0,
+            as_built=as_built, lookahead=[], first_failing_step=-1, message="")
+        return {**kept, "header": header, "active": False, "message": why,
+                **({"as_built": as_built} if as_built is not None else {})}
+
+    def _advance(self, built, as_built, header, options, settings, repairer, emit) -> None:
+        if self.plan is None or self.error:
+            return emit(EXECUTION, self._refused(header, as_built, self.error))
+        if isinstance(built, SceneError):
+            return emit(EXECUTION, self._refused(header, as_built,
+                                                 f"poses not accepted: {built}"))
+        try:
+            state = self._state(built, as_built, header, options, settings)
+        except SceneError as exc:       # out of the plan's order, not of the plan
+            return emit(EXECUTION, self._refused(header, as_built, str(exc)))
+        emit(EXECUTION, state)
+        if state["first_failing_step"] < 0 or self._repaired is built:
+            return None
+        self._repaired = built          # tried once per as-built state
+        found = repairer(self.plan, built, options, settings)
+        emit(PLAN_UPDATE, plan_update_to_dict(
+            header, reason=found.reason or state["message"], changed_step=found.changed_step,
+            feasible=found.feasible, repair=found.kind, order=found.order, holds=found.holds,
+            message=found.message))
+        if found.feasible and found.changed:
+            self.plan = replace(self.plan, sequence=tuple(found.order),
+                                holds=tuple(found.holds))
+            emit(EXECUTION, self._state(built, as_built, header, options, settings))
+        return None
+
+    def _state(self, built: Scene, as_built, header, options, settings) -> dict:
+        ahead = look_ahead(self.plan, built, options, lookahead_steps=settings.lookahead_steps,
+                           min_margin_g=settings.min_margin_g)
+        self.last = execution_to_dict(
+            header, active=True, current_step=ahead.current_step,
+            total_steps=ahead.total_steps,
+            # the as-built state with the plan's holds at its step (nothing placed: the
+            # node's check of the supports)
+            as_built=report_to_dict(ahead.as_built, header) if ahead.as_built is not None
+            else as_built, lookahead=[lookahead_step_to_dict(s) for s in ahead.steps],
+            first_failing_step=ahead.first_failing_step, message=ahead.message)
+        return self.last
+
+
+__all__ = ["EXECUTION", "Execution", "LOOKAHEAD_STEPS", "MIN_MARGIN_G", "NO_PLAN",
+           "PLAN_UPDATE", "Repairer", "Settings", "repair"]

@@ -1,0 +1,219 @@
+"""Building from measurements (issue 30): the look-ahead of a plan at measured poses and the
+repair of its rest (``rbe-ros repair``), checked against closed forms of box stacks (the
+centre of mass over the supporting edge) and by ``rbe-ros check --sequence`` of the
+repaired plan; ``plan --min-margin`` re-checked by ``check --sequence --margin``."""
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+from rbe_ros import generators
+from rbe_ros.analysis.lookahead import check_plan_design, look_ahead
+from rbe_ros.cli import main
+from rbe_ros.io.poses import scene_at_poses
+from rbe_ros.io.scene_json import scene_to_dict
+from rbe_ros.scene import SceneError, box_block, make_scene
+
+#: Block a's measured deviation: 4 mm outward along x, 3 deg about z.
+SHIFT, YAW = 0.004, 3.0
+RHO = 2000.0
+
+
+def _box(bid, x0, x1, z0, z1, support=False):
+    return box_block(bid, (x1 - x0, 0.4, z1 - z0), ((x0 + x1) / 2, 0, (z0 + z1) / 2),
+                     density=RHO, support=support)
+
+
+#: A counterweighted cantilever on a ground slab whose edge is x = 0: a (overhanging the
+#: edge), b on a's overhanging end (a + b stand 2.1 mm inside the edge), c on a's back end.
+A, B, C = (-0.6, 0.4), (0.0425, 0.4425), (-0.6, -0.2)
+
+
+def counterweight(sequence=("a", "b", "c")):
+    blocks = [_box("ground", -1.5, 0.0, -0.2, 0.0, True), _box("a", *A, 0.0, 0.2),
+              _box("b", *B, 0.2, 0.4), _box("c", *C, 0.2, 0.4)]
+    return make_scene("counterweight", blocks, sequence=sequence,
+                      pose_uncertainty=(0.005, 3.5))
+
+
+def com_x(*spans, shift=0.0):
+    """x of the centre of mass of boxes of equal section given by their x spans (the
+    first shifted by ``shift``): the closed form a step tips by (> 0: beyond the edge)."""
+    mass = [x1 - x0 for x0, x1 in spans]
+    mid = [(x0 + x1) / 2 for x0, x1 in spans]
+    mid[0] += shift
+    return sum(m * x for m, x in zip(mass, mid)) / sum(mass)
+
+
+def pose(x=0.0, yaw=0.0, z=0.1, base=-0.1):
+    half = math.radians(yaw) / 2
+    return {"position": [base + x, 0.0, z], "orientation": [0, 0, math.sin(half), math.cos(half)]}
+
+
+@pytest.fixture
+def files(tmp_path):
+    plan = tmp_path / "plan.json"
+    plan.write_text(json.dumps(scene_to_dict(counterweight())))
+    measured = tmp_path / "measured.json"
+    measured.write_text(json.dumps({"poses": {"a": pose(SHIFT, YAW)}}))
+    return tmp_path, plan, measured
+
+
+def run(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_the_closed_form_says_where_the_deviation_matters():
+    # a + b stand as designed, tip with a 4 mm off; a + c and all three stand either way
+    assert com_x(A, B) < -0.002 and com_x(A, B, shift=SHIFT) > 0.0005
+    assert com_x(A, C, shift=SHIFT) < -0.1 and com_x(A, B, C, shift=SHIFT) < -0.05
+
+
+def test_a_later_step_fails_at_the_measured_poses(files, capsys, tmp_path):
+    _, plan, measured = files
+    # independently: the as-built plan (a measured, b and c at design) by check --sequence
+    scene = counterweight()
+    built = scene_at_poses(scene, {"a": (pose(SHIFT, YAW)["position"],
+                                          pose(SHIFT, YAW)["orientation"])})
+    asbuilt = tmp_path / "asbuilt.json"
+    asbuilt.write_text(json.dumps(scene_to_dict(make_scene(
+        scene.name, [built.block("a") if b.id == "a" else b for b in scene.blocks],
+        sequence=scene.sequence, pose_uncertainty=scene.pose_uncertainty))))
+    code, out, _ = run(capsys, "check", asbuilt, "--sequence", "--json")
+    assert [r["stable"] for r in json.loads(out)["reports"]] == [True, False, True]
+    # the look-ahead finds it, step by step, with the as-built state first
+    ahead = look_ahead(scene, built, lookahead_steps=0)
+    assert ahead.current_step == 1 and ahead.total_steps == 3 and ahead.as_built.stable
+    assert ahead.first_failing_step == 1 and [s.block for s in ahead.steps] == ["b", "c"]
+    assert not ahead.steps[0].stable and ahead.steps[0].status.name == "TENSION_REQUIRED"
+    assert "step 1 (b)" in ahead.message
+    one = look_ahead(scene, built, lookahead_steps=1)
+    assert [s.step for s in one.steps] == [1]
+
+
+def test_repair_by_order_every_remaining_step_rechecked(files, capsys):
+    tmp, plan, measured = files
+    out_file = tmp / "repaired.json"
+    code, out, _ = run(capsys, "repair", plan, "--poses", measured, "--json", "-o", out_file)
+    result = json.loads(out)
+    assert code == 0 and result["feasible"] and result["changed"]
+    # no robot in this plan (K 0): only the order saves it, c before b
+    assert result["repair"] == "swap" and result["changed_step"] == 1
+    assert result["order"] == ["a", "c", "b"] and result["holds"] == []
+    assert "step 1 (b)" in result["message"]
+    code, out, _ = run(capsys, "check", out_file, "--sequence", "--json")
+    reports = json.loads(out)["reports"]
+    assert [r["block_placed"] for r in reports] == ["a", "c", "b"]
+    assert all(r["stable"] for r in reports)
+    assert com_x(A, C, shift=SHIFT) < 0          # the closed form of the new step 1
+
+
+def test_repair_by_a_hold_within_k(files, capsys):
+    tmp, plan, measured = files
+    out_file = tmp / "held.json"
+    code, out, _ = run(capsys, "repair", plan, "--poses", measured, "--max-held", "1",
+                       "--json", "-o", out_file)
+    result = json.loads(out)
+    assert code == 0 and result["feasible"] and result["repair"] == "hold"
+    assert result["order"] == ["a", "b", "c"] and result["held"][1] != []
+    assert len(result["held"][1]) == 1 and result["held"][2] == []
+    code, out, _ = run(capsys, "check", out_file, "--sequence", "--json")
+    reports = json.loads(out)["reports"]
+    assert all(r["stable"] for r in reports)
+    assert reports[1]["held_blocks"] == result["held"][1]
+    # the robot carries what tips: a moment about the edge, so a force > 0
+    assert max(math.hypot(*w["force"].values()) for w in reports[1]["hold_wrenches"]) > 0.1
+
+
+@pytest.mark.parametrize("x", [0.0, -SHIFT])
+def test_the_plan_stands_unchanged(files, capsys, x):
+    tmp, plan, _ = files
+    measured = tmp / "inward.json"
+    measured.write_text(json.dumps({"poses": {"a": pose(x, 0.0)}}))
+    code, out, _ = run(capsys, "repair", plan, "--poses", measured, "--json")
+    result = json.loads(out)
+    assert code == 0 and result["feasible"] and not result["changed"]
+    assert result["repair"] == "none" and result["order"] == ["a", "b", "c"]
+    assert com_x(A, B, shift=x) < 0
+
+
+def test_no_repair_names_the_step_and_block(tmp_path, capsys):
+    # the harmonic stack at 0.98 of its limit, its bottom block 12 mm inward: the three
+    # above it are beyond its edge once all are placed, so the finished stack cannot stand
+    # and no hold, order or plan saves it
+    scene = generators.harmonic_stack(n=4, scale=0.98)
+    plan = tmp_path / "stack.json"
+    plan.write_text(json.dumps(scene_to_dict(scene)))
+    bottom = scene.block("h04")
+    measured = tmp_path / "m.json"
+    measured.write_text(json.dumps({"poses": {"h04": {
+        "position": [float(bottom.position[0]) - 0.012, 0.0, float(bottom.position[2])],
+        "orientation": [0, 0, 0, 1]}}}))
+    # closed form (Paterson & Zwick): right edges e_k, block k's centre at e_k - 1/2
+    e = {4: 0.98 / 8}
+    for k in (3, 2, 1):
+        e[k] = e[k + 1] + 0.98 / (2 * k)
+    top3 = sum(e[k] for k in (1, 2, 3)) / 3 - 0.5
+    assert top3 < e[4] and top3 > e[4] - 0.012            # stands as designed, not built
+    assert (e[3] + e[2]) / 2 - 0.5 < e[4] - 0.012          # the step before still stands
+    code, out, _ = run(capsys, "repair", plan, "--poses", measured, "--max-held", "2",
+                       "--json")
+    result = json.loads(out)
+    assert code == 1 and not result["feasible"] and not result["changed"]
+    assert result["message"].startswith("step 3 (h01) fails at the measured poses")
+    assert "no build order can end stable" in result["message"]
+
+
+def test_bad_input_one_line_exit_2(files, capsys):
+    tmp, plan, _ = files
+    cases = {
+        "order.json": ({"b": pose(0, 0, 0.3, 0.2425)}, "not a prefix of the plan's order"),
+        "unknown.json": ({"a": pose(), "zz": pose()}, "not in the design"),
+    }
+    for name, (poses, why) in cases.items():
+        (tmp / name).write_text(json.dumps({"poses": poses}))
+        code, out, err = run(capsys, "repair", plan, "--poses", tmp / name)
+        assert code == 2 and out == "" and why in err and len(err.strip().splitlines()) == 1
+    unplanned = tmp / "unplanned.json"
+    unplanned.write_text(json.dumps(scene_to_dict(counterweight(sequence=()))))
+    code, _, err = run(capsys, "repair", unplanned, "--poses", tmp / "order.json")
+    assert code == 2 and "is not a plan" in err
+    with pytest.raises(SceneError, match="does not match the design"):
+        check_plan_design(counterweight(), make_scene("other", [
+            _box("ground", -1.5, 0.0, -0.2, 0.0, True), _box("a", -0.6, 0.5, 0.0, 0.2)]))
+    check_plan_design(counterweight(), counterweight(sequence=()))
+
+
+def test_min_margin_is_honoured_at_every_step(tmp_path, capsys):
+    arch = tmp_path / "arch.json"
+    arch.write_text(json.dumps(scene_to_dict(generators.semicircular_arch(n=7))))
+    planned = tmp_path / "planned.json"
+    code, out, _ = run(capsys, "plan", arch, "--max-held", "2", "--json")
+    default = json.loads(out)
+    assert default["weakest_step"]["step"] == -1       # no margin asked for
+    code, out, _ = run(capsys, "plan", arch, "--max-held", "2", "--margin", "--json")
+    weakest = json.loads(out)["weakest_step"]
+    assert 0.1 < weakest["margin_g"] < 0.13 and weakest["block"]
+    code, out, _ = run(capsys, "plan", arch, "--max-held", "2", "--min-margin", "0.13",
+                       "--json", "-o", planned)
+    result = json.loads(out)
+    assert code == 0 and result["weakest_step"]["margin_g"] >= 0.13
+    code, out, _ = run(capsys, "check", planned, "--sequence", "--margin", "--json")
+    reports = json.loads(out)["reports"]
+    assert all(r["stable"] and r["margin_g"] >= 0.13 for r in reports)
+    code, out, _ = run(capsys, "plan", arch, "--max-held", "2", "--min-margin", "0.3")
+    assert code == 1 and "below the minimum 0.3 g" in out
+
+
+def test_a_window_checks_and_repairs_the_next_steps_only(files, capsys):
+    _, plan, measured = files
+    code, out, _ = run(capsys, "repair", plan, "--poses", measured, "--lookahead-steps", "1",
+                       "--json")
+    result = json.loads(out)
+    assert code == 0 and result["repair"] == "swap" and result["order"] == ["a", "c", "b"]
+    assert [s["step"] for s in result["steps"]] == [1]
+    assert "steps 1 to 1 (the look-ahead) pass" in result["message"]

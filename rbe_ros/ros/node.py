@@ -94,7 +94,7 @@ from ..io.markers import MARKER_TYPE, run_markers, step_markers
 from ..io.messages import (plan_feedback_to_dict, plan_goal_from_dict, plan_result_to_dict,
                            poses_to_dict, report_header, report_to_dict, state_to_dict)
 from ..io.cell_file import read_cell
-from ..io.plans import INVALID_CELL, plan_state
+from ..io.plans import INVALID_CELL
 from ..io.execution import EXECUTION, LOOKAHEAD_STEPS, MIN_MARGIN_G, Execution, Settings
 from ..io.poses import AsBuilt
 from ..io.replay import (DESIGN, EXECUTION_TYPE, OPTIONS_KEY, PLAN_GOAL_TYPE, PLAN_RESULT_TYPE,

@@ -33,6 +33,7 @@ from .analysis.validate import validated_assembly
 from .analysis.verdict import check
 from .analysis.virtual import ANALYSES, virtual_assembly
 from .generators import GENERATORS
+from .interlock import INTERLOCK_GENERATORS
 from .io.figures import draw_report
 from .io.messages import header_dict, json_safe, report_json, report_to_dict, state_to_dict
 from .io.replay import (REPORT_TOPIC, STATE_TOPIC, Run, RunReader, bag_options,
@@ -143,6 +144,9 @@ def _scene(args) -> tuple[Scene, Assembly | None]:
                          "them, not at measured poses (--poses)")
     scene, stored = load_design(args.scene, args.density, stored=args.interfaces != "detected",
                                 supports=args.supports)
+    args.warnings = list(scene.warnings)     # what loading repaired: --json lists them too
+    for warning in scene.warnings:
+        print(f"rbe-ros: warning: {warning}", file=sys.stderr)
     if args.poses:
         scene = scene_at_poses(scene, load_poses(args.poses))
     if args.interfaces == "compare":
@@ -218,7 +222,7 @@ def build_parser() -> argparse.ArgumentParser:
     figure.set_defaults(run=_run_figure)
 
     generate = sub.add_parser("generate", help="write a parametric scene as JSON")
-    generate.add_argument("name", choices=sorted(GENERATORS))
+    generate.add_argument("name", choices=sorted({**GENERATORS, **INTERLOCK_GENERATORS}))
     generate.add_argument("-p", "--param", action="append", default=[], metavar="KEY=VALUE",
                           help="generator parameter (JSON value), e.g. -p n=15 "
                           "-p thickness_ratio=0.12")
@@ -327,6 +331,7 @@ def _run_check(args) -> int:
     else:
         reports = [check_scene(scene, options, stored)]
         out = {"scene": scene.name, **report_json(reports[0])}
+    out["warnings"] = args.warnings
     if args.interfaces == "compare":
         out["interfaces_compare"] = args.interfaces_compare.to_json()
     if args.bag:
@@ -395,7 +400,7 @@ def _run_figure(args) -> int:
 
 
 def _run_generate(args) -> int:
-    make = GENERATORS[args.name]
+    make = {**GENERATORS, **INTERLOCK_GENERATORS}[args.name]
     allowed = inspect.signature(make).parameters
     params = {}
     for item in args.param:
@@ -529,7 +534,7 @@ def _run_plan(args) -> int:
                "order": plan.order, "failed_step": plan.failed_step, "message": plan.message,
                "holds": scene_to_dict(plan.scene).get("holds", []) if plan.scene else [],
                "search_checks": plan.checks, "models": plan.models, "time": plan.time,
-               "steps": [step_summary(r) for r in plan.reports]}
+               "steps": [step_summary(r) for r in plan.reports], "warnings": args.warnings}
         print(json.dumps(out, indent=1))
     else:
         verdict = "feasible" if plan.feasible else f"NOT feasible (step {plan.failed_step})"

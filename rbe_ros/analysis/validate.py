@@ -9,9 +9,11 @@ invalid: the check's verdict says so (INFEASIBLE).
 """
 from __future__ import annotations
 
+import math
+
 from ..deadline import stage
 from ..geometry.contacts import ContactOptions
-from ..geometry.overlap import find_penetration
+from ..geometry.overlap import Penetration, find_penetration
 from ..geometry.uncertainty import allowances
 from ..scene import Scene, SceneError, ValidationLimits, validate_scene
 from .assembly import Assembly
@@ -36,8 +38,21 @@ def validate_assembly(assembly: Assembly, limits: ValidationLimits = ValidationL
         a, b = assembly.blocks[hit.a], assembly.blocks[hit.b]
         raise SceneError(f"blocks {a.id!r} and {b.id!r} interpenetrate: they overlap by "
                          f"{hit.depth:.4g} m, more than the tolerance {hit.tol:.4g} m"
-                         + (" (with the declared pose uncertainty)" if contact.uncertain else ""),
+                         + (" (with the declared pose uncertainty)" if contact.uncertain else "")
+                         + f"; --pose-uncertainty {accepting_uncertainty(hit, contact)} would "
+                         "accept it as a contact (if the poses are measured that well)",
                          [a.id, b.id])
+
+
+def accepting_uncertainty(hit: Penetration, contact: ContactOptions) -> str:
+    """The smallest ``--pose-uncertainty POS_M[,ANGLE_DEG]`` (the position rounded up to
+    0.1 mm, the declared angle kept) under which the overlap ``hit`` is a contact: each of
+    the two blocks' allowance grows by the added position uncertainty, so the overlap's excess
+    over its tolerance is shared by two."""
+    needed = contact.pose_uncertainty_m + 0.5 * (hit.depth - hit.tol)
+    position = math.ceil(needed * 1e4 * (1 + 1e-9)) / 1e4
+    angle = contact.pose_uncertainty_deg
+    return f"{position:g}" + (f",{angle:g}" if angle > 0 else "")
 
 
 def validated_assembly(scene: Scene, limits: ValidationLimits | None = ValidationLimits(),

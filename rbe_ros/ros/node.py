@@ -737,6 +737,8 @@ class RbeChecks:
         """The design of ``design_file`` as the message a pipeline would send on ~/design
         (SceneError if it cannot be read)."""
         scene, _ = load_design(path)
+        for warning in scene.warnings:
+            self.get_logger().warning(f"design_file {path!r}: {warning}")
         if scene.pose_uncertainty is not None:
             self.get_logger().warning(
                 f"design_file {path!r} declares pose_uncertainty {list(scene.pose_uncertainty)}"

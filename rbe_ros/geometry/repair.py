@@ -1,0 +1,156 @@
+"""Meshes as they come: repair open or inconsistently wound meshes that are closed within a
+tolerance, at load, and say what was repaired.
+
+Exported meshes often arrive as triangle soups (every vertex repeated per triangle), with a
+few triangles missing (open edges) or turned inside out. A block must be a closed, outward
+wound polyhedron (:mod:`rbe_ros.geometry.block`), so :func:`repair_mesh` first leaves a mesh
+that is one untouched, and otherwise, in this order:
+
+1. merges vertices closer than MERGE_TOL times the mesh's longest extent (trimesh's
+   ``merge_vertices``) and drops degenerate and repeated triangles;
+2. makes the winding consistent and outward (trimesh's ``fix_winding`` and ``fix_inversion``);
+3. closes every hole whose boundary is one loop, planar within PLANAR_TOL times the extent:
+   the loop becomes one polygon face (wound against its boundary edges), whatever its shape
+   (a fan of triangles would fold over a non-convex hole);
+4. when the closed mesh is convex (its volume within HULL_TOL of its convex hull's), replaces
+   it by that hull, so that the checks treat it as the convex block it is (noise of an export
+   can put a vertex just outside a face plane).
+
+What cannot be closed so (a hole that is not planar, an edge shared by more than two faces,
+no volume) stays a :class:`ValueError` with the reason, which the loader turns into
+INVALID_INPUT naming the block.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+from scipy.spatial import ConvexHull
+
+from .block import is_closed, signed_volume
+
+#: Vertices closer than this share of the mesh's longest extent are one vertex.
+MERGE_TOL = 1e-6
+#: A hole's boundary within this share of the extent of its best-fit plane is filled.
+PLANAR_TOL = 1e-4
+#: A repaired mesh whose volume is within this share of its convex hull's is its hull.
+HULL_TOL = 1e-4
+
+
+@dataclass(frozen=True)
+class Repaired:
+    """A mesh after :func:`repair_mesh`: vertices, polygon faces and what was done (empty:
+    the mesh was closed and kept as given)."""
+
+    vertices: np.ndarray
+    faces: tuple[tuple[int, ...], ...]
+    notes: tuple[str, ...] = ()
+
+
+def repair_mesh(vertices, faces) -> Repaired:
+    """The mesh of ``vertices`` and polygon ``faces``, repaired if it is open or wound
+    inconsistently (module docstring); raises ValueError when it cannot be closed."""
+    vertices = np.asarray(vertices, dtype=float)
+    faces = tuple(tuple(int(i) for i in f) for f in faces)
+    if _closed(faces) and signed_volume(vertices, faces) > 0:
+        return Repaired(vertices, faces)
+    scale = float(np.ptp(vertices, axis=0).max()) or 1.0
+    triangles = np.array([(f[0], f[i], f[i + 1]) for f in faces for i in range(1, len(f) - 1)],
+                         dtype=np.int64).reshape(-1, 3)
+    mesh = trimesh.Trimesh(vertices, triangles, process=False, validate=False)
+    notes = []
+    before = len(mesh.vertices)
+    mesh.merge_vertices(merge_tex=True, merge_norm=True,
+                        digits_vertex=max(0, int(-np.floor(np.log10(MERGE_TOL * scale)))))
+    mesh.remove_unreferenced_vertices()
+    if len(mesh.vertices) < before:
+        notes.append(f"merged {before - len(mesh.vertices)} duplicate vertices")
+    keep = mesh.nondegenerate_faces() & mesh.unique_faces()
+    if not keep.all():
+        mesh.update_faces(keep)
+        notes.append(f"dropped {int((~keep).sum())} degenerate or repeated triangles")
+    flipped = _fix_winding(mesh)
+    if flipped:
+        notes.append(f"turned {flipped} triangles to a consistent winding")
+    out_faces = [tuple(int(i) for i in f) for f in mesh.faces]
+    holes = _boundary_loops(out_faces)
+    for loop in holes:
+        points = mesh.vertices[list(loop)]
+        centred = points - points.mean(axis=0)
+        off_plane = np.linalg.svd(centred, compute_uv=False)[-1] if len(loop) > 3 else 0.0
+        # the smallest singular value bounds the rms distance from the best plane
+        if len(loop) < 3 or off_plane / np.sqrt(len(loop)) > PLANAR_TOL * scale:
+            raise ValueError(f"mesh is not closed: a hole of {len(loop)} edges is not planar "
+                             f"within {PLANAR_TOL:g} of the block's extent (cannot be filled)")
+        out_faces.append(tuple(reversed(loop)))
+    if holes:
+        notes.append(f"filled {len(holes)} hole{'s' if len(holes) > 1 else ''}")
+    verts = np.asarray(mesh.vertices, dtype=float)
+    if not _closed(out_faces):
+        raise ValueError("mesh is not closed (every edge must join exactly two faces, wound "
+                         "consistently) and could not be repaired")
+    volume = signed_volume(verts, out_faces)
+    if volume < 0:
+        out_faces = [tuple(reversed(f)) for f in out_faces]
+        volume = -volume
+        notes.append("turned inside out (faces wound inward)")
+    if not volume > 1e-9 * scale ** 3:
+        raise ValueError(f"mesh has no volume (volume {volume:.3g} m^3)")
+    hull = ConvexHull(verts)
+    if abs(hull.volume - volume) <= HULL_TOL * hull.volume:
+        verts, out_faces = _hull_mesh(verts, hull)
+        notes.append(f"replaced by its convex hull (volumes agree within {HULL_TOL:g})")
+    return Repaired(verts, tuple(out_faces), tuple(notes))
+
+
+def _closed(faces) -> bool:
+    return bool(faces) and all(len(f) >= 3 for f in faces) and is_closed(faces)
+
+
+def _fix_winding(mesh: trimesh.Trimesh) -> int:
+    """Make the triangles' winding consistent (trimesh), returning how many were turned."""
+    before = mesh.faces.copy()
+    trimesh.repair.fix_winding(mesh)
+    return int((mesh.faces != before).any(axis=1).sum())
+
+
+def _boundary_loops(faces) -> list[tuple[int, ...]]:
+    """The loops of directed edges whose reverse no face has (the holes' boundaries); raises
+    ValueError where they do not form simple loops (an edge of more than two faces)."""
+    directed = [(f[i], f[(i + 1) % len(f)]) for f in faces for i in range(len(f))]
+    present = set(directed)
+    if len(present) < len(directed):
+        raise ValueError("mesh is not closed: an edge is shared by more than two faces or "
+                         "wound the same way twice (cannot be repaired)")
+    following: dict[int, int] = {}
+    for u, v in directed:
+        if (v, u) not in present:
+            if u in following:
+                raise ValueError("mesh is not closed: two holes meet at a vertex (cannot be "
+                                 "repaired)")
+            following[u] = v
+    loops = []
+    while following:
+        start = min(following)
+        loop = [start]
+        nxt = following.pop(start)
+        while nxt != start:
+            if nxt not in following:
+                raise ValueError("mesh is not closed: an open edge does not return to "
+                                 "its start (cannot be repaired)")
+            loop.append(nxt)
+            nxt = following.pop(nxt)
+        loops.append(tuple(loop))
+    return loops
+
+
+def _hull_mesh(vertices: np.ndarray, hull: ConvexHull):
+    """The hull's vertices and triangles, wound outward."""
+    index = np.full(len(vertices), -1)
+    index[hull.vertices] = np.arange(len(hull.vertices))
+    simplices = hull.simplices.copy()
+    a, b, c = (vertices[simplices[:, k]] for k in range(3))
+    inward = np.einsum("ij,ij->i", np.cross(b - a, c - a), hull.equations[:, :3]) < 0
+    simplices[inward] = simplices[inward][:, ::-1]
+    return vertices[hull.vertices], [tuple(int(i) for i in index[s]) for s in simplices]

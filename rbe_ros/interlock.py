@@ -1,0 +1,349 @@
+"""Interlocking assemblies of non-convex parts: the scenes of tests/data/interlock.
+
+Each part is a polycube (a union of grid cells, its boundary the cells' exposed faces:
+coplanar squares, merged into one face per plane by the shape analysis) or an extruded
+polygon (a voussoir with a shear key); every part is non-convex, so that a convex hull
+would cover a neighbour's notch. Conventions as in :mod:`rbe_ros.generators`: SI units,
+gravity along -z, supports named, a block's position is the mean of its vertices, a
+deterministic output, and ``sequence`` a build order (bottom up) that the planner may
+replace. The friction coefficient of the suite is 0.55 (``SUITE_MU``).
+
+- :func:`polyomino_wall`: a planar wall of tetrominoes (L, J, T, S, Z) one cell thick; in the
+  wall's plane the pieces interlock, so they come in along its normal.
+- :func:`log_cabin`: a 3D interlock: logs with notched ends, crossing at the corners.
+- :func:`cradle`: a non-convex support base with slots; T-pieces set into them and pairs of
+  L-pieces on top.
+- :func:`keyed_vault`: an arch of voussoirs with shear keys (a tongue on one joint, a groove
+  on the other), the key stone grooved on both sides.
+- :func:`greedy_trap`: a cup with two pieces in it: the lower one, which a greedy planner
+  places first, hooks over the other's foot and leaves no second step; the other order works.
+- :func:`sealed_pocket`: a part that can leave its pocket only through a wall of the support:
+  no plan exists.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .generators import signed_volume
+from .scene import Block, Scene, make_block, make_scene
+
+#: The friction coefficient the interlocking suite is planned with.
+SUITE_MU = 0.55
+
+_DIRECTIONS = ((np.array([1, 0, 0]), 0), (np.array([-1, 0, 0]), 0), (np.array([0, 1, 0]), 1),
+               (np.array([0, -1, 0]), 1), (np.array([0, 0, 1]), 2), (np.array([0, 0, -1]), 2))
+
+
+def polycube_mesh(cells) -> tuple[np.ndarray, list[tuple[int, int, int, int]]]:
+    """The boundary of the union of unit grid ``cells`` (integer (i, j, k)): grid vertices and
+    one outward-wound square per exposed cell face."""
+    filled = {tuple(int(v) for v in c) for c in cells}
+    index: dict[tuple[int, int, int], int] = {}
+    faces = []
+    for cell in sorted(filled):
+        c = np.array(cell)
+        for normal, axis in _DIRECTIONS:
+            if tuple(c + normal) in filled:
+                continue
+            # the face's corners, counter-clockwise seen from outside: e_u x e_v = normal
+            u, v = (axis + 1) % 3, (axis + 2) % 3
+            if normal[axis] < 0:
+                u, v = v, u
+            base = c + (normal > 0) * normal
+            corners = [base.copy() for _ in range(4)]
+            corners[1][u] += 1
+            corners[2][u] += 1
+            corners[2][v] += 1
+            corners[3][v] += 1
+            faces.append(tuple(index.setdefault(tuple(int(x) for x in p), len(index))
+                               for p in corners))
+    vertices = np.array(sorted(index, key=index.get), dtype=float)
+    return vertices, faces
+
+
+def polycube_block(block_id: str, cells, cell=(0.1, 0.1, 0.1), origin=(0.0, 0.0, 0.0), *,
+                   density: float = 2000.0, support: bool = False) -> Block:
+    """A block of the grid ``cells``, each ``cell`` (m, per axis) large, the grid's corner
+    (0, 0, 0) at ``origin``; its frame at the mean of its vertices."""
+    vertices, faces = polycube_mesh(cells)
+    world = np.asarray(origin, dtype=float) + vertices * np.asarray(cell, dtype=float)
+    centre = world.mean(axis=0)
+    return make_block(block_id, world - centre, faces, centre, density=density, support=support)
+
+
+def extruded_block(block_id: str, profile, y0: float, y1: float, *, density: float = 2000.0,
+                   support: bool = False) -> Block:
+    """A prism of the simple polygon ``profile`` ((x, z) points, either orientation) in the
+    xz-plane, between y = y0 and y = y1; its frame at the mean of its vertices."""
+    p = np.asarray(profile, dtype=float)
+    n = len(p)
+    vertices = np.vstack((np.column_stack((p[:, 0], np.full(n, y0), p[:, 1])),
+                          np.column_stack((p[:, 0], np.full(n, y1), p[:, 1]))))
+    faces = [tuple(range(n)), tuple(range(2 * n - 1, n - 1, -1))]
+    faces += [(i, n + i, n + (i + 1) % n, (i + 1) % n) for i in range(n)]
+    if signed_volume(vertices, faces) < 0:      # the profile ran the other way: turn out
+        faces = [f[::-1] for f in faces]
+    centre = vertices.mean(axis=0)
+    return make_block(block_id, vertices - centre, faces, centre, density=density,
+                      support=support)
+
+
+# ----------------------------------------------------------------------------- tetrominoes
+
+#: The non-convex tetrominoes in the (x, z) grid, one orientation each.
+_TETROMINOES = {"L": ((0, 0), (0, 1), (0, 2), (1, 0)), "J": ((0, 0), (1, 0), (1, 1), (1, 2)),
+                "T": ((0, 0), (1, 0), (2, 0), (1, 1)), "S": ((0, 0), (1, 0), (1, 1), (2, 1)),
+                "Z": ((1, 0), (2, 0), (0, 1), (1, 1))}
+
+
+def _orientations(cells) -> list[tuple[tuple[int, int], ...]]:
+    """The distinct rotations of a 2D piece (no mirror images: L and J are listed apart),
+    each shifted to its lowest row, then leftmost cell, at the origin."""
+    out = []
+    pts = np.array(cells)
+    for _ in range(4):
+        pts = np.column_stack((-pts[:, 1], pts[:, 0]))
+        shape = sorted(map(tuple, (pts - pts.min(axis=0)).tolist()))
+        if shape not in out:
+            out.append(shape)
+    return [tuple(tuple(int(v) for v in c) for c in s) for s in out]
+
+
+def tetromino_tiling(width: int, height: int, seed: int = 0) -> list[tuple[str, tuple]]:
+    """A tiling of the width x height grid (x, z) by non-convex tetrominoes, found by
+    backtracking from the lowest, leftmost empty cell, the pieces tried in an order drawn
+    from ``seed``: [(kind, cells)]; ValueError when there is none."""
+    if width * height % 4:
+        raise ValueError(f"a {width} x {height} wall has {width * height} cells, not a "
+                         "multiple of 4")
+    rng = np.random.default_rng(seed)
+    shapes = [(k, o) for k, cells in _TETROMINOES.items() for o in _orientations(cells)]
+    grid = np.zeros((width, height), dtype=bool)
+    placed: list[tuple[str, tuple]] = []
+    budget = [200_000]
+
+    def fill() -> bool:
+        empty = np.argwhere(~grid.T)        # (z, x), row by row
+        if not len(empty):
+            return True
+        z, x = (int(v) for v in empty[0])
+        budget[0] -= 1
+        if budget[0] < 0:
+            return False
+        for i in rng.permutation(len(shapes)):
+            kind, shape = shapes[i]
+            # the shape's first cell in row order goes on (x, z)
+            first = min(shape, key=lambda c: (c[1], c[0]))
+            cells = [(x + cx - first[0], z + cz - first[1]) for cx, cz in shape]
+            if all(0 <= cx < width and 0 <= cz < height and not grid[cx, cz]
+                   for cx, cz in cells):
+                for c in cells:
+                    grid[c] = True
+                placed.append((kind, tuple(cells)))
+                if fill():
+                    return True
+                placed.pop()
+                for c in cells:
+                    grid[c] = False
+        return False
+
+    if not fill():
+        raise ValueError(f"no tiling of a {width} x {height} wall by L, J, T, S, Z found "
+                         f"(seed {seed})")
+    return placed
+
+
+def _ground(lo, hi, *, density: float, block_id: str = "ground") -> Block:
+    return polycube_block(block_id, [(0, 0, 0)], np.subtract(hi, lo), lo, density=density,
+                          support=True)
+
+
+def _bottom_up(blocks: list[Block]) -> list[str]:
+    """Free block ids, lowest centroid first (then by id): a build order."""
+    free = [b for b in blocks if not b.support]
+    return [b.id for b in sorted(free, key=lambda b: (round(float(b.position[2]), 9), b.id))]
+
+
+def polyomino_wall(width: int = 8, height: int = 6, cell: float = 0.1, seed: int = 0,
+                   density: float = 2000.0) -> Scene:
+    """A wall in the xz-plane, ``width`` x ``height`` cells of ``cell`` m, one cell thick
+    (y), tiled by non-convex tetrominoes (:func:`tetromino_tiling`), on a support slab
+    "ground" (top at z = 0). Pieces "p00", ... in tiling order; in the wall's plane every
+    piece is locked by its neighbours, so a piece comes in along the wall's normal (+-y)."""
+    tiles = tetromino_tiling(width, height, seed)
+    blocks = [_ground((-cell, -cell, -cell), ((width + 1) * cell, 2 * cell, 0.0),
+                      density=density)]
+    for k, (_, cells) in enumerate(tiles):
+        blocks.append(polycube_block(f"p{k:02d}", [(x, 0, z) for x, z in cells],
+                                     (cell,) * 3, density=density))
+    return make_scene(f"polyomino-wall({width}x{height}, seed {seed})", blocks,
+                      sequence=_bottom_up(blocks))
+
+
+def log_cabin(levels: int = 4, length: int = 5, width: int = 5, cell: float = 0.1,
+              density: float = 600.0) -> Scene:
+    """A log cabin of ``levels`` courses, each of two logs along x ("x{level}_{0|1}") and,
+    half a course higher, two along y ("y{level}_{0|1}"), crossing at the four corners with
+    half-lap notches: at a corner column the courses alternate cell by cell, so every log
+    is two cells high along its length and one at its ends (notched on top), and hooks over
+    the crossing log below. ``length`` x ``width`` cells in plan; on a support "ground"."""
+    blocks = [_ground((-cell, -cell, -cell), ((length + 1) * cell, (width + 1) * cell, 0.0),
+                      density=2000.0)]
+    for level in range(levels):
+        z = 2 * level
+        for side, y in enumerate((0, width - 1)):
+            cells = [(0, y, z), (length - 1, y, z)]
+            cells += [(x, y, zz) for x in range(1, length - 1) for zz in (z, z + 1)]
+            blocks.append(polycube_block(f"x{level}_{side}", cells, (cell,) * 3,
+                                         density=density))
+        for side, x in enumerate((0, length - 1)):
+            cells = [(x, 0, z + 1), (x, width - 1, z + 1)]
+            cells += [(x, y, zz) for y in range(1, width - 1) for zz in (z + 1, z + 2)]
+            blocks.append(polycube_block(f"y{level}_{side}", cells, (cell,) * 3,
+                                         density=density))
+    return make_scene(f"log-cabin({levels} levels)", blocks, sequence=_bottom_up(blocks))
+
+
+def cradle(slots: int = 6, depth: int = 2, cell: float = 0.1, density: float = 2000.0) -> Scene:
+    """Blocks set into a non-convex support "base": a slab with ``slots`` slots one cell
+    wide and deep, three cells apart (x), ``depth`` cells long (y) and open at both ends.
+    Into each slot a T-piece "t{i}" (stem in the slot, its flange on the ribs either side:
+    it comes in from above or along the slot, +-y); on each T a pair of L-pieces "l{i}a"
+    (lower, its upturn at +x) and "l{i}b" (upper, hooked into the lower one's notch)
+    filling three cells by two."""
+    n = 3 * slots
+    base = [(x, y, 0) for x in range(n) for y in range(depth)]
+    base += [(x, y, 1) for x in range(n) for y in range(depth) if x % 3 != 1]
+    blocks = [polycube_block("base", base, (cell,) * 3, (0.0, 0.0, -2 * cell),
+                             density=density, support=True)]
+    for i in range(slots):
+        x = 3 * i
+        ys = range(depth)
+        t = [(x + 1, y, 1) for y in ys] + [(x + dx, y, 2) for dx in range(3) for y in ys]
+        la = [(x + dx, y, 3) for dx in range(3) for y in ys] + [(x + 2, y, 4) for y in ys]
+        lb = [(x + dx, y, 4) for dx in range(2) for y in ys]
+        lb += [(x + dx, y, 5) for dx in range(3) for y in ys]
+        for bid, cells in ((f"t{i}", t), (f"l{i}a", la), (f"l{i}b", lb)):
+            blocks.append(polycube_block(bid, cells, (cell,) * 3, (0.0, 0.0, -2 * cell),
+                                         density=density))
+    return make_scene(f"cradle({slots} slots)", blocks, sequence=_bottom_up(blocks))
+
+
+def keyed_vault(voussoirs: int = 11, radius: float = 1.0, thickness: float = 0.25,
+                depth: float = 0.4, span_deg: float = 120.0, key_ratio: float = 0.25,
+                density: float = 2000.0) -> Scene:
+    """A segmental arch ("vault", extruded along y) of ``voussoirs`` "v00" (at +x) ...
+    over ``span_deg`` degrees of a circle of centre-line ``radius``, with shear keys: every
+    joint carries a tongue (``key_ratio`` of the thickness wide and deep, at mid thickness)
+    of the voussoir nearer its springing in a groove of the one nearer the key, so the key
+    stone is grooved on both sides and can only come in along y. On supports
+    "springing_right" and "springing_left", whose tops are the springing joints."""
+    half = math.radians(span_deg) / 2
+    angles = np.linspace(math.pi / 2 - half, math.pi / 2 + half, voussoirs + 1)
+    r_in, r_out = radius - thickness / 2, radius + thickness / 2
+    w, h = key_ratio * thickness / 2, key_ratio * thickness
+    mid = voussoirs / 2
+
+    def joint(k: int, sign: int):
+        """Points across joint k from intrados to extrados, the key bulging by sign * h
+        towards growing angle (tongue +1, groove -1, flat 0)."""
+        a = angles[k]
+        d = np.array([math.cos(a), math.sin(a)])
+        t = np.array([-math.sin(a), math.cos(a)])
+        pts = [r_in * d, (radius - w) * d, (radius - w) * d + sign * h * t,
+               (radius + w) * d + sign * h * t, (radius + w) * d, r_out * d]
+        return pts if sign else [pts[0], pts[-1]]
+
+    def key_sign(k: int) -> int:
+        """Joint k's key bulges towards growing angle (+1) when the voussoir at the smaller
+        angle is the nearer its springing (right half), else back (-1); none at springings."""
+        if k in (0, voussoirs):
+            return 0
+        return 1 if k <= mid else -1
+
+    blocks = []
+    for side, k in (("right", 0), ("left", voussoirs)):
+        # below the springing joint, down to 0.3 m under its lower end, vertical sides
+        d = np.array([math.cos(angles[k]), math.sin(angles[k])])
+        low = min(r_in * d[1], r_out * d[1]) - 0.3
+        profile = [r_in * d, r_out * d, (r_out * d[0], low), (r_in * d[0], low)]
+        blocks.append(extruded_block(f"springing_{side}", profile, -depth / 2, depth / 2,
+                                     density=density, support=True))
+    ids = [f"v{i:02d}" for i in range(voussoirs)]
+    for i, bid in enumerate(ids):
+        lower = joint(i, key_sign(i))            # at the smaller angle
+        upper = joint(i + 1, key_sign(i + 1))
+        profile = lower + upper[::-1]
+        blocks.append(extruded_block(bid, profile, -depth / 2, depth / 2, density=density))
+    order = []
+    left, right = 0, voussoirs - 1
+    while left <= right:
+        order.append(ids[left])
+        if left != right:
+            order.append(ids[right])
+        left, right = left + 1, right - 1
+    return make_scene(f"keyed-vault({voussoirs})", blocks, sequence=order)
+
+
+def greedy_trap(levels: int = 5, cell: float = 0.1, density: float = 2000.0) -> Scene:
+    """A support "cup" with a closed pocket 3 x 2 x 2 cells (x, y, z), open only upward, and
+    in it two pieces: "hook" (y = 0: a bar on the floor rising to a lip that hangs over
+    (0, 0, 0)) and "keel" (its foot at (0, 0, 0), the rest of the pocket at y = 1, a
+    platform on the cup's rim carrying a stack of ``levels`` courses of two L-trominoes,
+    "c{level}a"/"c{level}b"). The hook's centroid is lower, so a greedy planner places it
+    first; then the keel's foot cannot pass its lip, nothing else touches a present block,
+    and the plan dead-ends at step 1. Keel first, then hook, then the stack, works."""
+    cup = [(x, y, z) for x in range(-1, 4) for y in range(-1, 3) for z in range(-1, 2)
+           if not (0 <= x < 3 and 0 <= y < 2 and z >= 0)]
+    blocks = [polycube_block("cup", cup, (cell,) * 3, density=density, support=True)]
+    hook = [(1, 0, 0), (2, 0, 0), (0, 0, 1), (1, 0, 1), (2, 0, 1)]
+    keel = [(0, 0, 0), (0, 1, 0), (1, 1, 0), (2, 1, 0), (0, 1, 1), (1, 1, 1), (2, 1, 1)]
+    keel += [(x, y, 2) for x in range(3) for y in (1, 2)]
+    blocks += [polycube_block("hook", hook, (cell,) * 3, density=density),
+               polycube_block("keel", keel, (cell,) * 3, density=density)]
+    for level in range(levels):
+        z = 3 + level
+        a = [(0, 1, z), (1, 1, z), (0, 2, z)]
+        b = [(2, 1, z), (2, 2, z), (1, 2, z)]
+        if level % 2:                   # mirrored in x: the courses' seams cross
+            a, b = ([(2 - x, y, zz) for x, y, zz in a], [(2 - x, y, zz) for x, y, zz in b])
+        blocks += [polycube_block(f"c{level}a", a, (cell,) * 3, density=density),
+                   polycube_block(f"c{level}b", b, (cell,) * 3, density=density)]
+    order = ["keel", "hook"] + [f"c{level}{s}" for level in range(levels) for s in "ab"]
+    return make_scene(f"greedy-trap({levels} levels)", blocks, sequence=order)
+
+
+def sealed_pocket(width: int = 10, height: int = 4, cell: float = 0.1,
+                  density: float = 2000.0) -> Scene:
+    """No plan exists: a support "housing" with a pocket open only at +x, closed there by
+    the support "wall", holds the piece "trapped" (an L in the pocket: the only way out is
+    through the wall; up, its bar meets the housing's roof); beside it a tetromino wall
+    ``width`` x ``height`` cells (:func:`polyomino_wall`'s pieces, "p00", ...)."""
+    blocks = [_ground((-cell, -cell, -cell), ((width + 6) * cell, 2 * cell, 0.0),
+                      density=density)]
+    x0 = width + 1
+    pocket = [(x0 + 1, 0, 1), (x0 + 2, 0, 1), (x0 + 3, 0, 1), (x0 + 3, 0, 2)]
+    housing = [(x, y, z) for x in range(x0, x0 + 4) for y in range(-1, 2) for z in range(3)
+               if (x, y, z) not in pocket]
+    blocks.append(polycube_block("housing", housing, (cell,) * 3, density=density,
+                                 support=True))
+    blocks.append(polycube_block("wall", [(x0 + 4, y, z) for y in range(-1, 2)
+                                          for z in range(3)], (cell,) * 3, density=density,
+                                 support=True))
+    blocks.append(polycube_block("trapped", pocket, (cell,) * 3, density=density))
+    for k, (_, cells) in enumerate(tetromino_tiling(width, height, 0)):
+        blocks.append(polycube_block(f"p{k:02d}", [(x, 0, z) for x, z in cells],
+                                     (cell,) * 3, density=density))
+    return make_scene(f"sealed-pocket({width}x{height})", blocks, sequence=_bottom_up(blocks))
+
+
+INTERLOCK_GENERATORS = {
+    "polyomino-wall": polyomino_wall,
+    "log-cabin": log_cabin,
+    "cradle": cradle,
+    "keyed-vault": keyed_vault,
+    "greedy-trap": greedy_trap,
+    "sealed-pocket": sealed_pocket,
+}

@@ -96,6 +96,81 @@ def _key_order(ids) -> list[str]:
 
 # --------------------------------------------------------------------------- generators
 
+def polycube(block_id: str, cells, size: float = 0.1, *, density: float = 2000.0,
+             support: bool = False) -> Block:
+    """A block made of the cubes ``cells`` (integer (i, j, k), cube [i, i+1] x ... times
+    ``size`` m): the cubes' faces between a cube and no cube, wound outward, with vertices on
+    the grid, posed at the cubes' mean centre. Cubes must meet face to face (not along an
+    edge only), so the mesh is closed and manifold."""
+    filled = {tuple(int(v) for v in c) for c in cells}
+    corners: dict[tuple, int] = {}
+    faces = []
+    for c in sorted(filled):
+        for axis in range(3):
+            for side in (0, 1):
+                step = [0, 0, 0]
+                step[axis] = 2 * side - 1
+                if tuple(np.add(c, step)) in filled:
+                    continue
+                u, v = (axis + 1) % 3, (axis + 2) % 3
+                quad = []
+                for du, dv in ((0, 0), (1, 0), (1, 1), (0, 1)):
+                    p = list(c)
+                    p[axis] += side
+                    p[u] += du
+                    p[v] += dv
+                    quad.append(corners.setdefault(tuple(p), len(corners)))
+                faces.append(tuple(quad) if side else tuple(quad[::-1]))
+    grid = np.array(sorted(corners, key=corners.get), dtype=float) * size
+    centre = (np.array(sorted(filled), dtype=float) + 0.5).mean(axis=0) * size
+    return make_block(block_id, grid - centre, faces, centre, density=density, support=support)
+
+
+#: A 4 x 4 square of four T tetrominoes, locked in its plane: (x, z) cells per piece.
+T_SQUARE = (((0, 3), (1, 3), (2, 3), (1, 2)), ((3, 3), (3, 2), (2, 2), (3, 1)),
+            ((0, 2), (0, 1), (1, 1), (0, 0)), ((2, 1), (1, 0), (2, 0), (3, 0)))
+
+
+def tetromino_wall(squares_x: int = 2, squares_z: int = 2, size: float = 0.1,
+                   density: float = 2000.0) -> Scene:
+    """A wall one cube thick (y) of T tetrominoes on a support "ground" (top at z = 0),
+    ``squares_x`` by ``squares_z`` copies of :data:`T_SQUARE`, pieces "t{n}" listed bottom
+    up (no sequence: a plan chooses). A piece whose square holds it on four sides can only
+    come in along the wall's normal (+-y)."""
+    blocks = [_box("ground", (-size, -2 * size, -size), ((4 * squares_x + 1) * size, 3 * size,
+                                                          0.0), density=density, support=True)]
+    pieces = []
+    for sz in range(squares_z):
+        for sx in range(squares_x):
+            for piece in T_SQUARE:
+                pieces.append([(4 * sx + x, 0, 4 * sz + z) for x, z in piece])
+    pieces.sort(key=lambda cells: (min(c[2] for c in cells), min(c[0] for c in cells)))
+    ids = _ids("t", len(pieces))
+    blocks += [polycube(i, cells, size, density=density) for i, cells in zip(ids, pieces)]
+    return make_scene(f"tetromino-wall({squares_x}x{squares_z})", blocks)
+
+
+def cradle_row(bars: int = 4, depth: int = 3, size: float = 0.1,
+               density: float = 2000.0) -> Scene:
+    """A non-convex support "cradle" (a comb: ``bars`` grooves along y, open above and at
+    both ends), a bar "bar{i}" set into each groove standing one cube proud, and over each
+    bar an inverted U "cap{i}" whose legs stand on the cradle beside the groove: blocks in
+    a non-convex base, non-convex blocks over them (no sequence: a plan chooses)."""
+    width = 4 * bars + 1
+    grooves = [4 * i + 2 for i in range(bars)]
+    base = [(x, y, z) for x in range(width) for y in range(depth) for z in (0, 1)
+            if not (z == 1 and x in grooves)]
+    blocks = [polycube("cradle", base, size, density=density, support=True)]
+    for i, g in enumerate(grooves):
+        blocks.append(polycube(f"bar{i}", [(g, y, z) for y in range(depth) for z in (1, 2)],
+                               size, density=density))
+        blocks.append(polycube(f"cap{i}", [(x, y, 3) for x in (g - 1, g, g + 1)
+                                           for y in range(depth)]
+                               + [(x, y, 2) for x in (g - 1, g + 1) for y in range(depth)],
+                               size, density=density))
+    return make_scene(f"cradle-row({bars})", blocks)
+
+
 def two_blocks(shift: float = 0.0, incline_deg: float = 0.0, width: float = 1.0,
                depth: float = 1.0, height: float = 0.5, density: float = 2000.0) -> Scene:
     """Two stacked blocks (Kao et al. 2021, Sec. 3.1): support "base" under free "top".

@@ -4,6 +4,8 @@ the path check against an independent sampled sweep (trimesh's collision manager
 sequence and a plan that avoids it."""
 from __future__ import annotations
 
+import itertools
+import json
 import math
 from dataclasses import replace
 
@@ -19,6 +21,7 @@ from rbe_ros.analysis.options import CheckOptions, InsertionOptions
 from rbe_ros.analysis.pipeline import check_scene, check_sequence
 from rbe_ros.analysis.validate import validate_assembly
 from rbe_ros.analysis.planning import plan_sequence
+from rbe_ros.cli import main
 from rbe_ros.geometry.insertion import PathCheck, cone_directions, in_cone, shrunk
 from rbe_ros.io.foxglove_scene import scene_update, x_onto
 from rbe_ros.io.markers import ARROW, approach_markers, scene_meshes, step_markers
@@ -204,9 +207,10 @@ def test_brick_under_lintel_refused_down_inserted_sideways():
     assert not _independent_sweep_free(scene, [b.id for b in scene.blocks], "brick", DOWN)
 
 
-def test_non_convex_neighbour_is_its_convex_hull():
-    """Conservative for non-convex blocks: a block in the notch of a U-shaped neighbour is
-    refused from above (the U's hull covers the notch) though the notch is open upwards."""
+def test_non_convex_neighbour_is_its_true_shape():
+    """A block in the notch of a U-shaped neighbour (its caps triangulated) comes straight
+    down, as the sampled sweep of the true shapes says (the U's hull would cover the notch),
+    and not from the side (through an arm)."""
     u = [(-0.3, 0), (0.3, 0), (0.3, 0.3), (0.1, 0.3), (0.1, 0.1), (-0.1, 0.1), (-0.1, 0.3),
          (-0.3, 0.3)]
     caps = [(0, 1, 4), (0, 4, 5), (1, 2, 3), (1, 3, 4), (0, 5, 6), (0, 6, 7)]
@@ -214,13 +218,18 @@ def test_non_convex_neighbour_is_its_convex_hull():
                              box_block("b", (0.2, 0.3, 0.2), (0, 0, 0.2), density=RHO)])
     assert _independent_sweep_free(scene, ["u", "b"], "b", DOWN)     # truly free
     found = _insertion(scene, "b")
-    assert not found.insertable and found.blocked_by == ("u",)
+    assert found.insertable
+    np.testing.assert_allclose(found.direction, DOWN, atol=1e-12)
+    side = _insertion(scene, "b", given=np.array([0.0, 0.6, -0.8]))
+    assert side.insertable == _independent_sweep_free(scene, ["u", "b"], "b", [0, 0.6, -0.8])
+    assert side.insertable      # along the open ends and down
+    assert not _insertion(scene, "b", given=np.array([0.6, 0.0, -0.8])).insertable
 
 
-def test_non_convex_moving_block_is_its_convex_hull():
-    """Conservative for a non-convex moving block too: an inverted U coming down over a post
-    that fits its notch is refused (its hull would sweep through the post), though the
-    sampled sweep of the true shape is free."""
+def test_non_convex_moving_block_is_its_true_shape():
+    """A non-convex moving block too: an inverted U coming down over a post that fits its
+    notch comes straight down (its hull would sweep through the post), as the sampled sweep
+    of the true shape says."""
     u = [(-0.3, 0.3), (-0.3, 0), (-0.1, 0), (-0.1, 0.2), (0.1, 0.2), (0.1, 0), (0.3, 0),
          (0.3, 0.3)]
     scene = _ground(box_block("post", (0.1, 0.3, 0.15), (0, 0, 0.075), support=True,
@@ -229,7 +238,8 @@ def test_non_convex_moving_block_is_its_convex_hull():
                                          (4, 6, 7)]))
     assert _independent_sweep_free(scene, ["ground", "post", "u"], "u", DOWN)
     found = _insertion(scene, "u")
-    assert not found.insertable and "post" in found.blocked_by
+    assert found.insertable
+    np.testing.assert_allclose(found.direction, DOWN, atol=1e-12)
 
 
 def _independent_sweep_free(scene, present, block, direction, samples=40) -> bool:
@@ -476,3 +486,189 @@ def test_overhang_within_the_declared_angle_comes_straight_down():
     beyond, _ = _as_built(_overhang(steep), "b", _declared(deg=1.0))
     np.testing.assert_allclose(beyond.direction, [-math.sin(steep), 0, -math.cos(steep)],
                                atol=1e-9)
+
+
+# ---------------------------------------------------------------- non-convex closed forms
+# (issue 28): polycube blocks, every face axis-aligned, against a sampled sweep of the true
+# meshes (trimesh's collision manager) whose moving mesh is offset inward exactly
+
+VOXEL = 0.1
+LATTICE = [np.array(v, dtype=float) / np.linalg.norm(v)
+           for v in itertools.product((-1, 0, 1), repeat=3) if any(v)]
+
+
+def _mesh(scene, block_id):
+    posed = Assembly.from_scene(scene.subset([block_id])).blocks[0]
+    return trimesh.Trimesh(posed.vertices, posed.triangles, process=False)
+
+
+def _inward(mesh, offset):
+    """An orthogonal polyhedron (every face normal a +-axis) with every face moved in by
+    ``offset``: each vertex moves by -offset times the sum of the distinct normals of its
+    faces (exact where at most three orthogonal planes meet, convex corner or reflex)."""
+    normals = np.round(mesh.face_normals, 9)
+    assert np.all(np.sort(np.abs(normals), axis=1)[:, :2] == 0)      # axis-aligned
+    moved = mesh.vertices.copy()
+    for v, faces in enumerate(mesh.vertex_faces):
+        distinct = np.unique(normals[faces[faces >= 0]], axis=0)
+        moved[v] -= offset * distinct.sum(axis=0)
+    return trimesh.Trimesh(moved, mesh.faces, process=False)
+
+
+def _sweep_free(scene, block_id, direction, distance=None, step=0.004) -> bool:
+    """The oracle: the block's true mesh, faces moved in by 0.5 mm, at positions every
+    ``step`` m along its path (from where it is clear of every other block's bounding box
+    along the direction, or over ``distance``) collides with no other block's true mesh."""
+    manager = trimesh.collision.CollisionManager()
+    boxes = []
+    for b in scene.blocks:
+        if b.id != block_id:
+            other = _mesh(scene, b.id)
+            manager.add_object(b.id, other)
+            boxes.append(other.bounds)
+    moving = _inward(_mesh(scene, block_id), 5e-4)
+    d = np.asarray(direction, dtype=float)
+    if distance is None:        # clear: past every box corner along -d
+        corners = np.array([[x, y, z] for lo, hi in boxes
+                            for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                            for z in (lo[2], hi[2])])
+        distance = max(0.0, float(np.max(corners @ -d) - np.min(moving.vertices @ -d)))
+    for t in np.append(np.arange(0.0, distance, step), distance):
+        tf = np.eye(4)
+        tf[:3, 3] = -t * d
+        if manager.in_collision_single(moving, transform=tf):
+            return False
+    return True
+
+
+def _free_of_lattice(scene, block_id, options=CheckOptions()):
+    """The lattice directions (26: axes, face and body diagonals) along which the block can
+    come in, by our check (each given in turn) and by the oracle."""
+    assembly = Assembly.from_scene(scene)
+    present = [b.id for b in scene.blocks]
+    ours = {tuple(np.round(d, 6)) for d in LATTICE
+            if block_insertion(assembly, present, block_id, options, given=d).insertable}
+    oracle = {tuple(np.round(d, 6)) for d in LATTICE if _sweep_free(scene, block_id, d)}
+    return ours, oracle
+
+
+def _axes(*vectors):
+    return {tuple(np.round(np.array(v, dtype=float) / np.linalg.norm(v), 6)) for v in vectors}
+
+
+def _cells(nx, ny, nz, minus=()):
+    return [c for c in itertools.product(range(nx), range(ny), range(nz)) if c not in minus]
+
+
+def _polycube_scene(name, parts):
+    return make_scene(name, [gen.polycube(b, cells, VOXEL, support=support)
+                             for b, cells, support in parts])
+
+
+def test_l_block_in_an_l_notch_exactly_the_notchs_open_axes():
+    """An L prism set into an L-shaped notch cut through a base (open along y, its foot
+    under the base's overhang): interfaces +-x, +-z, so the cone is the line +-y, and the
+    true shapes leave exactly the notch's open axes +-y (the bar is open upwards, the foot
+    is not); the base's hull would cover the notch."""
+    notch = [(1, y, z) for y in range(3) for z in (1, 2, 3)] + \
+        [(x, y, 1) for x in (2, 3) for y in range(3)]
+    scene = _polycube_scene("l-notch", [("base", _cells(5, 3, 4, notch), True),
+                                        ("l", notch, False)])
+    ours, oracle = _free_of_lattice(scene, "l")
+    assert oracle == _axes((0, 1, 0), (0, -1, 0))
+    assert ours == oracle
+    found = _insertion(scene, "l")
+    assert found.insertable and abs(found.direction[1]) == pytest.approx(1.0)
+
+
+def test_tetromino_in_a_planar_wall_along_the_walls_normal_both_ways():
+    """A T tetromino locked in its plane by three other T's and the ground (a 4 x 4 square):
+    interfaces +-x, +-z, the cone's lineality the wall's normal y: it comes in along +-y,
+    both ways, nothing else; with --approach-max-angle 30 it is refused (no direction within
+    30 deg of down leaves its interfaces); the top piece, free above, comes down."""
+    scene = gen.tetromino_wall(1, 1, VOXEL)
+    locked = "t01"      # cells (x, z) (1, 0), (2, 0), (3, 0), (2, 1): under the others
+    box = Assembly.from_scene(scene.subset([locked])).blocks[0].aabb
+    np.testing.assert_allclose(box, [[0.1, 0, 0], [0.4, 0.1, 0.2]], atol=1e-12)
+    ours, oracle = _free_of_lattice(scene, locked)
+    assert oracle == _axes((0, 1, 0), (0, -1, 0))
+    assert ours == oracle
+    found = _insertion(scene, locked)
+    assert found.insertable and abs(found.direction[1]) == pytest.approx(1.0)
+    options = replace(CheckOptions(), insertion=InsertionOptions(approach_max_angle=30.0))
+    assembly = Assembly.from_scene(scene)
+    refused = block_insertion(assembly, [b.id for b in scene.blocks], locked, options)
+    assert not refused.insertable
+    assert refused.reason == "no direction within 30 deg of straight down leaves every interface"
+    top = block_insertion(assembly, [b.id for b in scene.blocks], "t03", options)
+    np.testing.assert_allclose(top.direction, DOWN, atol=1e-12)
+
+
+def test_block_in_a_u_cradle_down_and_along_the_open_ends():
+    """A bar in a U-shaped cradle's groove (open above and at both ends): interfaces +z,
+    +-x, so the cone is {d_x = 0, d_z <= 0}, and every lattice direction of it is free by
+    the true shapes: down, +-y and the diagonals between; it comes straight down."""
+    groove = [(1, y, 1) for y in range(3)]
+    scene = _polycube_scene("cradle", [("cradle", _cells(3, 3, 2, groove), True),
+                                       ("bar", groove, False)])
+    ours, oracle = _free_of_lattice(scene, "bar")
+    assert oracle == _axes((0, 0, -1), (0, 1, 0), (0, -1, 0), (0, 1, -1), (0, -1, -1))
+    assert ours == oracle
+    np.testing.assert_allclose(_insertion(scene, "bar").direction, DOWN, atol=1e-12)
+
+
+def test_peg_in_a_blind_hole_only_along_its_axis():
+    """A peg in a blind square hole, standing out above it: interfaces +z and +-x, +-y, the
+    cone the ray down; only straight down is free (the hole's axis)."""
+    scene = _polycube_scene("hole", [
+        ("base", _cells(3, 3, 2, [(1, 1, 1)]), True), ("peg", [(1, 1, 1), (1, 1, 2)], False)])
+    ours, oracle = _free_of_lattice(scene, "peg")
+    assert oracle == _axes((0, 0, -1)) == ours
+    assert cone_directions(_cone(scene, "peg"), DOWN) == [pytest.approx(DOWN)]
+
+
+def _lidded_channel():
+    """A 1.3 m channel (0.2 x 0.2 inside, along x) under a lid, a block filling it at each
+    end, and a 0.1 m block in the middle touching floor, walls and lid: its cone is the
+    channel's axis, and both ways the end blocks are 0.5 m away."""
+    return _ground(box_block("w1", (1.3, 0.1, 0.2), (0, -0.15, 0.1), support=True, density=RHO),
+                   box_block("w2", (1.3, 0.1, 0.2), (0, 0.15, 0.1), support=True, density=RHO),
+                   box_block("lid", (1.3, 0.4, 0.1), (0, 0, 0.25), support=True, density=RHO),
+                   box_block("end1", (0.1, 0.2, 0.2), (-0.6, 0, 0.1), density=RHO),
+                   box_block("end2", (0.1, 0.2, 0.2), (0.6, 0, 0.1), density=RHO),
+                   box_block("b", (0.1, 0.2, 0.2), (0, 0, 0.1), density=RHO))
+
+
+def test_lidded_channel_refused_unless_a_shorter_approach_is_given():
+    """The block cannot get in (a path must be free until the block is clear of every
+    present block, and both ends of the channel are filled), though over twice its size
+    (0.4 m, the former path) it would "slide in"; --approach-distance 0.4 accepts it."""
+    scene = _lidded_channel()
+    assert not _sweep_free(scene, "b", (1, 0, 0)) and not _sweep_free(scene, "b", (-1, 0, 0))
+    assert _sweep_free(scene, "b", (1, 0, 0), distance=0.4)
+    found = _insertion(scene, "b")
+    assert not found.insertable and set(found.blocked_by) == {"end1", "end2"}
+    options = replace(CheckOptions(), insertion=InsertionOptions(approach_distance=0.4))
+    short = block_insertion(Assembly.from_scene(scene), [b.id for b in scene.blocks], "b",
+                            options)
+    assert short.insertable and abs(short.direction[0]) == pytest.approx(1.0)
+
+
+def test_cli_approach_options(tmp_path, capsys):
+    """The flags reach the check: the channel's block refused by default, accepted with
+    --approach-distance 0.4; the tetromino refused with --approach-max-angle 30."""
+    channel = tmp_path / "channel.json"
+    scene = _lidded_channel()
+    channel.write_text(json.dumps(scene_to_dict(make_scene(
+        "c", scene.blocks, sequence=["end1", "end2", "b"]))))
+    wall = tmp_path / "wall.json"
+    t = gen.tetromino_wall(1, 1, VOXEL)
+    wall.write_text(json.dumps(scene_to_dict(make_scene("w", t.blocks,
+                                                        sequence=["t00", "t02", "t01"]))))
+    for path, extra, insertable in ((channel, [], False), (channel, ["--approach-distance",
+                                                                     "0.4"], True),
+                                    (wall, [], True), (wall, ["--approach-max-angle", "30"],
+                                                       False)):
+        assert main(["check", str(path), "--sequence", "--json", *extra]) == 0
+        last = json.loads(capsys.readouterr().out)["reports"][-1]
+        assert last["insertable"] is insertable, (path.name, extra)

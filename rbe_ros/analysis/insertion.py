@@ -25,10 +25,6 @@ from .options import CheckOptions
 #: accepts (its penetration_tol), so that neighbours in contact do not block its path.
 CLEARANCE = 2.0
 
-#: The approach distance when none is given: this many times the block's longest extent.
-DEFAULT_APPROACH = 2.0
-
-
 @dataclass(frozen=True)
 class _Index:
     """What every step's insertion asks of one assembly, as arrays: block ids, bounding
@@ -87,12 +83,11 @@ def interface_normals(assembly: Assembly, block: int, present: np.ndarray) -> np
     return np.concatenate([index.normals[into], -index.normals[out]])
 
 
-def approach_distance(assembly: Assembly, block: int, options: CheckOptions) -> float:
-    """m: the option's, else DEFAULT_APPROACH times the block's longest bounding-box edge."""
-    if options.insertion.approach_distance > 0:
-        return options.insertion.approach_distance
-    box = assembly.blocks[block].aabb
-    return DEFAULT_APPROACH * float(np.max(box[1] - box[0]))
+def approach_distance(options: CheckOptions) -> float | None:
+    """m over which a path must be free: the option's, else None (from where the block is
+    clear of every present block's bounding box, see
+    :class:`rbe_ros.geometry.insertion.PathCheck`)."""
+    return options.insertion.approach_distance or None
 
 
 def block_insertion(assembly: Assembly, present: Sequence[str], block: str,
@@ -109,9 +104,10 @@ def block_insertion(assembly: Assembly, present: Sequence[str], block: str,
     limits = options.limits or ValidationLimits()
     allow = block_allowances(assembly, options.contact)
     path = PathCheck(moving, [assembly.blocks[j] for j in others],
-                     approach_distance(assembly, k, options),
+                     approach_distance(options),
                      CLEARANCE * limits.penetration_tol * moving.size + allow[k],
                      index.boxes[others], allow[others])
     angle = contact_angle_deg(options.contact.angle_tol_deg, options.contact.pose_uncertainty_deg)
     return insertion(interface_normals(assembly, k, mask), path,
-                     np.asarray(assembly.gravity, dtype=float), given, np.radians(angle))
+                     np.asarray(assembly.gravity, dtype=float), given, np.radians(angle),
+                     np.radians(options.insertion.approach_max_angle))

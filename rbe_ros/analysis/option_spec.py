@@ -173,8 +173,12 @@ OPTIONS: tuple[Option, ...] = (
            "pose (insertable) and along which direction (insertion_direction)",
            "--no-insertion", "insertion_check"),
     Option("insertion.approach_distance", float, "insertion: the placed block's path must be "
-           "free over this many m; 0: twice the block's longest extent", "--approach-distance",
-           "approach_distance", 0.0, 100.0, metavar="M"),
+           "free over this many m; 0: until it is clear of every present block's bounding "
+           "box", "--approach-distance", "approach_distance", 0.0, 100.0, metavar="M"),
+    Option("insertion.approach_max_angle", float, "insertion: the largest angle in degrees "
+           "from straight down (along gravity) a block may arrive from (a top-down gripper: "
+           "small); 180: any direction, down preferred", "--approach-max-angle",
+           "approach_max_angle", 0.0, 180.0, metavar="DEG"),
     Option("hold_force_max", float, "largest force in N a robot's hold may apply to a held "
            "block (at its grip); a step that stands only with more is HOLD_EXCEEDED; a scene "
            "hold's \"max_force\" wins; 0: unbounded", "--hold-force-max", "hold_force_max",

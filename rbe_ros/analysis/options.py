@@ -38,10 +38,13 @@ class HoldSearch:
 @dataclass(frozen=True)
 class InsertionOptions:
     """Whether a report says from where its placed block can arrive (analysis/insertion.py),
-    and over which distance its path must be free (m; 0: twice the block's longest extent)."""
+    over which distance its path must be free (m; 0: until it is clear of every present
+    block's bounding box), and the largest angle from straight down (along gravity) of its
+    direction (degrees; 180: any direction, down preferred)."""
 
     enabled: bool = True
     approach_distance: float = 0.0
+    approach_max_angle: float = 180.0
 
 
 @dataclass(frozen=True)

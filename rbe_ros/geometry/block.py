@@ -61,6 +61,12 @@ class PosedBlock:
                                 #      read-only: they do not depend on the pose)
     face_extents: np.ndarray    # (F, 2) min and max of n . x over the block's vertices x
     convex: bool                # every vertex inside every face plane (to 1e-6 of the size)
+    # the mesh in the block frame and the pose, for the exact shape of a non-convex block
+    # (rbe_ros.geometry.decompose): shared by identical blocks, read-only
+    local_vertices: np.ndarray | None = None    # (n, 3) block frame
+    triangles: np.ndarray | None = None         # (m, 3) vertex indices, wound outward
+    rotation: np.ndarray | None = None          # (3, 3) block frame -> world
+    position: np.ndarray | None = None          # (3,)
 
     @cached_property
     def faces(self) -> tuple[Face, ...]:
@@ -84,6 +90,8 @@ class _Shape:
     centroid: np.ndarray
     extents: np.ndarray         # (F, 2) min and max of n . x over the vertices
     convex: bool
+    vertices: np.ndarray        # (n, 3) as keyed (rounded to 1e-12 m), read-only
+    triangles: np.ndarray       # (m, 3) the faces' fans, read-only
 
 
 def pose_block(block: Block) -> PosedBlock:
@@ -134,7 +142,8 @@ def pose_blocks(blocks) -> list[PosedBlock]:
         out.append(PosedBlock(block.id, block.support, world[vb:ve], centroids[k], shape.volume,
                               float(mass), shape.volume ** (1.0 / 3.0), aabb[k], normals[fb:fe],
                               offsets[fb:fe], origins[fb:fe], us[fb:fe], vs[fb:fe],
-                              shape.outlines, extents[fb:fe], shape.convex))
+                              shape.outlines, extents[fb:fe], shape.convex, shape.vertices,
+                              shape.triangles, rot[k], pos[k]))
     return out
 
 
@@ -150,7 +159,8 @@ def _shape(vertex_bytes: bytes, count: int, faces) -> _Shape:
     checkpoint()
     vertices = np.frombuffer(vertex_bytes).reshape(count, 3)
     ragged = _Ragged(faces)
-    if not _is_closed(ragged.fans()):
+    triangles = ragged.fans()
+    if not _is_closed(triangles):
         raise ValueError("mesh is not closed (every edge must join exactly two faces,"
                          " wound consistently)")
     centres = ragged.sums(vertices[ragged.corners]) / ragged.counts[:, None]
@@ -165,7 +175,9 @@ def _shape(vertex_bytes: bytes, count: int, faces) -> _Shape:
     checkpoint()
     extents = projection_extents(vertices, normals)
     convex = bool((extents[:, 1] - offsets).max(initial=0.0) <= 1e-6 * size)
-    return _Shape(*planes, volume, centroid, extents, convex)
+    vertices.flags.writeable = False
+    triangles.flags.writeable = False
+    return _Shape(*planes, volume, centroid, extents, convex, vertices, triangles)
 
 
 def is_closed(faces) -> bool:

@@ -31,15 +31,18 @@ the contact detection and the validation) do not block each other.
 """
 from __future__ import annotations
 
+from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from functools import lru_cache
+import math
+import threading
 
 import fcl
 import numpy as np
 from scipy.spatial import ConvexHull
 
 from .block import PosedBlock
+from .decompose import convex_pieces
 
 #: Feasibility of a direction of the cone: n . d <= FEASIBLE_TOL (numerical zero).
 FEASIBLE_TOL = 1e-9
@@ -75,23 +78,42 @@ def distinct_normals(normals: np.ndarray) -> np.ndarray:
     return np.unique(np.round(normals, 9), axis=0)
 
 
-def cone_directions(normals: np.ndarray, down: np.ndarray) -> list[np.ndarray]:
-    """The candidate unit directions of the cone {d : N d <= 0}, closest to ``down`` first
-    (the first is the exact closest feasible direction); empty when the cone is {0}.
+def cone_directions(normals: np.ndarray, down: np.ndarray,
+                    max_angle: float = math.pi) -> list[np.ndarray]:
+    """The candidate unit directions of the cone {d : N d <= 0} within ``max_angle``
+    (radians) of ``down``, closest to ``down`` first (the first is the exact closest feasible
+    direction); empty when there is none.
 
-    Candidates: ``down``; ``down`` projected onto each face plane n . d = 0; each edge
-    +-(n_i x n_j); and each face plane's in-plane axes (projections of the world axes), so
-    that a ground-only block also offers horizontal approaches."""
+    The set generates the cone and holds its nearest direction to ``down``:
+
+    - ``down``, and ``down`` projected onto each face plane n . d = 0 and onto each edge
+      line n_i x n_j (the nearest direction lies in the relative interior of one face of the
+      cone: the whole space, a facet, an edge);
+    - the cone's extreme rays: of a pointed cone its feasible edges +-(n_i x n_j); with a line
+      l of lineality (every normal perpendicular to l), the rays +-(l x n_i) in the plane
+      across it; of a half-space, -n;
+    - its lineality space both ways: the line +-l (a piece in a planar wall comes in along
+      the wall's normal, either side); a plane's (the cone is a half-space, or the plane
+      itself) in-plane axes, the world axes projected onto it, both ways; the whole space's
+      (no interfaces) axes;
+    - with ``max_angle`` below 90 deg the cap {d : angle(d, down) <= max_angle} cuts the
+      cone: the directions where the cap's circle meets each face plane, the extreme
+      directions of the cone within the cap."""
     normals = distinct_normals(normals)
     down = np.asarray(down, dtype=float) / np.linalg.norm(down)
     raw = [down[None, :]]
     if len(normals):
         raw.append(down - (normals @ down)[:, None] * normals)     # onto each face plane
         axes = np.eye(3)[None, :, :] - normals[:, :, None] * normals[:, None, :]
-        raw += [axes.reshape(-1, 3), -axes.reshape(-1, 3)]          # each plane's axes
+        raw += [axes.reshape(-1, 3), -axes.reshape(-1, 3), -normals]
         i, j = np.triu_indices(len(normals), 1)
         edges = np.cross(normals[i], normals[j])
         raw += [edges, -edges]
+        for line in lineality(normals):
+            across = np.cross(line, normals)
+            raw += [line[None, :], -line[None, :], across, -across]
+        if max_angle < math.pi:
+            raw.append(_cap_crossings(normals, down, max_angle))
     else:
         raw += [np.eye(3), -np.eye(3)]
     raw = np.concatenate(raw)
@@ -99,6 +121,7 @@ def cone_directions(normals: np.ndarray, down: np.ndarray) -> list[np.ndarray]:
     raw = raw[norms >= 1e-9] / norms[norms >= 1e-9, None]
     if len(normals):
         raw = raw[np.max(raw @ normals.T, axis=1) <= FEASIBLE_TOL]
+    raw = raw[raw @ down >= math.cos(max_angle) - FEASIBLE_TOL]
     # closest to down first; ties broken by the rounded direction (deterministic)
     keys = np.round(raw, 9)
     order = np.lexsort((*keys.T[::-1], -np.round(raw @ down, 9)))
@@ -106,12 +129,76 @@ def cone_directions(normals: np.ndarray, down: np.ndarray) -> list[np.ndarray]:
     return list(raw[order[np.sort(first)]])
 
 
-@lru_cache(maxsize=4096)
-def _hull_object(key: bytes, clearance: float) -> fcl.CollisionObject:
-    """An fcl object of the convex hull of the vertices serialised in ``key``, shrunk by
-    ``clearance`` (m) if > 0 (cached: a present block is tested against many moving blocks)."""
-    points = np.frombuffer(key).reshape(-1, 3)
-    return fcl.CollisionObject(_convex(shrunk(points, clearance) if clearance > 0 else points))
+def lineality(normals: np.ndarray) -> np.ndarray:
+    """An orthonormal basis (rows) of the cone's lineality space {d : N d = 0} when it is a
+    line (the normals span a plane); empty otherwise (a plane's and the whole space's
+    directions are the in-plane and world axes of :func:`cone_directions`)."""
+    if len(normals) < 2:
+        return np.zeros((0, 3))
+    _, sigma, vt = np.linalg.svd(normals)
+    rank = int(np.sum(sigma > 1e-9 * sigma[0]))
+    return vt[2:] if rank == 2 else np.zeros((0, 3))
+
+
+def _cap_crossings(normals: np.ndarray, down: np.ndarray, angle: float) -> np.ndarray:
+    """The unit directions at ``angle`` from ``down`` in each plane n . d = 0 (two per plane
+    that the cap's circle crosses): d = cos(angle) down + sin(angle) u with u perpendicular
+    to down and n . u = -cot(angle) n . down."""
+    out = []
+    for n in normals:
+        side = n - (n @ down) * down                    # n's part across down
+        w = float(np.linalg.norm(side))
+        if w < 1e-12:
+            continue
+        target = -(n @ down) * math.cos(angle) / (w * math.sin(angle)) if angle > 0 else 0.0
+        if abs(target) > 1.0:
+            continue
+        e = side / w
+        f = np.cross(down, e)
+        for sign in (1.0, -1.0):
+            u = target * e + sign * math.sqrt(1.0 - target * target) * f
+            out.append(math.cos(angle) * down + math.sin(angle) * u)
+    return np.array(out).reshape(-1, 3)
+
+
+def block_pieces(block: PosedBlock) -> list[np.ndarray]:
+    """World vertices of convex pieces whose union is ``block``: the block itself when it is
+    convex, its exact decomposition (:func:`rbe_ros.geometry.decompose.convex_pieces`) when
+    it is not, else (no exact decomposition: a curved non-convex mesh, or too large) its
+    convex hull, which is conservative."""
+    if block.convex or block.triangles is None:
+        return [block.vertices]
+    pieces = convex_pieces(block.local_vertices, block.triangles)
+    if pieces is None:
+        return [block.vertices]
+    return [p @ block.rotation.T + block.position for p in pieces]
+
+
+_LOCK = threading.Lock()
+_PRESENT: OrderedDict = OrderedDict()     # (mesh key, allowance) -> [(fcl object, aabb)]
+
+
+def _present_pieces(block: PosedBlock, allowance: float) -> list:
+    """fcl objects and bounding boxes of ``block``'s convex pieces, each shrunk by
+    ``allowance`` (m) if > 0 (kept for the last 4096 blocks asked: a present block is tested
+    against many moving blocks)."""
+    key = (block.vertices.tobytes(), None if block.convex or block.triangles is None
+           else block.triangles.tobytes(), allowance)
+    with _LOCK:
+        found = _PRESENT.get(key)
+        if found is not None:
+            _PRESENT.move_to_end(key)
+            return found
+    found = []
+    for piece in block_pieces(block):
+        points = shrunk(piece, allowance) if allowance > 0 else piece
+        found.append((fcl.CollisionObject(_convex(points)),
+                      np.array([points.min(axis=0), points.max(axis=0)])))
+    with _LOCK:
+        _PRESENT[key] = found
+        if len(_PRESENT) > 4096:
+            _PRESENT.popitem(last=False)
+    return found
 
 
 def _convex(points: np.ndarray) -> fcl.Convex:
@@ -146,13 +233,16 @@ def shrunk(vertices: np.ndarray, clearance: float) -> np.ndarray:
 class PathCheck:
     """The swept-path test of one block moving into its pose past fixed ``present`` blocks
     (their bounding boxes ``boxes``, (n, 2, 3), if known; each shrunk by its ``allowances``
-    entry, m, if given): its convex hull shrunk by ``clearance`` (once), swept over
-    ``distance`` m along each direction asked."""
+    entry, m, if given): the block's convex pieces (:func:`block_pieces`) shrunk by
+    ``clearance`` (once), swept along each direction asked over ``distance`` m, or when it is
+    None from where the block is clear of every present block's bounding box (its far side
+    along the direction) to its pose."""
 
-    def __init__(self, moving: PosedBlock, present: Sequence[PosedBlock], distance: float,
-                 clearance: float, boxes: np.ndarray | None = None,
+    def __init__(self, moving: PosedBlock, present: Sequence[PosedBlock],
+                 distance: float | None, clearance: float, boxes: np.ndarray | None = None,
                  allowances: np.ndarray | None = None):
-        self.end = shrunk(moving.vertices, clearance)
+        self.ends = [shrunk(p, clearance) for p in block_pieces(moving)]
+        self.vertices = moving.vertices
         self.present = list(present)
         self.boxes = (np.array([b.aabb for b in self.present]).reshape(-1, 2, 3)
                       if boxes is None else boxes)
@@ -160,32 +250,48 @@ class PathCheck:
                            else np.asarray(allowances, dtype=float))
         self.distance = distance
 
+    def length(self, direction: np.ndarray) -> float:
+        """m the block travels along unit ``direction`` into its pose: the given distance,
+        else from beyond every present bounding box (along -direction) to the pose."""
+        if self.distance is not None:
+            return self.distance
+        if not len(self.boxes):
+            return 0.0
+        back = -np.asarray(direction, dtype=float)
+        far = float(np.max(np.maximum(self.boxes[:, 0] * back, self.boxes[:, 1] * back)
+                           .sum(axis=1)))
+        return max(0.0, far - float(np.min(self.vertices @ back)))
+
     def blockers(self, direction: np.ndarray) -> tuple[str, ...]:
-        """Ids of the present blocks the path along unit ``direction`` hits."""
-        swept = np.vstack([self.end, self.end - self.distance * np.asarray(direction, float)])
-        low, high = swept.min(axis=0), swept.max(axis=0)
-        boxes = self.boxes
-        near = np.flatnonzero(np.all(boxes[:, 0] <= high, axis=1)
-                              & np.all(boxes[:, 1] >= low, axis=1))
-        if not len(near):
-            return ()
-        body = fcl.CollisionObject(_convex(swept))
-        request, hits = fcl.CollisionRequest(), []
-        for k in near:
-            other = _hull_object(np.ascontiguousarray(self.present[k].vertices,
-                                                      dtype=float).tobytes(),
-                                 float(self.allowances[k]))
-            if fcl.collide(body, other, request, fcl.CollisionResult()):
-                hits.append(self.present[k].id)
-        return tuple(hits)
+        """Ids of the present blocks the path along unit ``direction`` hits (in their order)."""
+        step = self.length(direction) * np.asarray(direction, dtype=float)
+        hit = np.zeros(len(self.present), dtype=bool)
+        request = fcl.CollisionRequest()
+        for end in self.ends:
+            swept = np.vstack([end, end - step])
+            low, high = swept.min(axis=0), swept.max(axis=0)
+            near = np.flatnonzero(~hit & np.all(self.boxes[:, 0] <= high, axis=1)
+                                  & np.all(self.boxes[:, 1] >= low, axis=1))
+            if not len(near):
+                continue
+            body = fcl.CollisionObject(_convex(swept))
+            for k in near:
+                for other, box in _present_pieces(self.present[k], float(self.allowances[k])):
+                    if (np.all(box[0] <= high) and np.all(box[1] >= low)
+                            and fcl.collide(body, other, request, fcl.CollisionResult())):
+                        hit[k] = True
+                        break
+        return tuple(self.present[k].id for k in np.flatnonzero(hit))
 
 
 def insertion(normals: np.ndarray, path: PathCheck, down: np.ndarray,
-              given: np.ndarray | None = None, angle_tol: float = 0.0) -> Insertion:
+              given: np.ndarray | None = None, angle_tol: float = 0.0,
+              max_angle: float = math.pi) -> Insertion:
     """How a block reaches its pose, ``normals`` (k, 3) those of its interfaces, into it:
-    the first direction of :func:`cone_directions` whose ``path`` is free (straight down
-    first if it is within ``angle_tol``, radians, of the cone), or ``given`` (unit) checked
-    alone, within ``angle_tol`` of the cone."""
+    the first direction of :func:`cone_directions` within ``max_angle`` (radians) of
+    ``down`` whose ``path`` is free (straight down first if it is within ``angle_tol``,
+    radians, of the cone), or ``given`` (unit) checked alone, within ``angle_tol`` of the
+    cone and within ``max_angle`` of down."""
     normals = np.asarray(normals, dtype=float).reshape(-1, 3)
     down = np.asarray(down, dtype=float) / np.linalg.norm(down)
     blockers: dict[str, None] = {}
@@ -195,6 +301,11 @@ def insertion(normals: np.ndarray, path: PathCheck, down: np.ndarray,
         if not in_cone(given, normals, np.sin(angle_tol)):
             return Insertion(False, reason=f"the given approach {_fmt(given)} comes out of a "
                              "neighbour (against an interface normal)")
+        off = math.acos(float(np.clip(given @ down, -1.0, 1.0)))
+        if off > max_angle + 1e-9:
+            return Insertion(False, reason=f"the given approach {_fmt(given)} is "
+                             f"{math.degrees(off):.3g} deg from straight down, beyond "
+                             f"{math.degrees(max_angle):.3g} deg")
         candidates = [given]
     elif in_cone(down, normals, np.sin(angle_tol)):
         # straight down is the closest direction when the cone holds it (within the contact
@@ -205,10 +316,15 @@ def insertion(normals: np.ndarray, path: PathCheck, down: np.ndarray,
             return Insertion(True, down)
         blockers.update(dict.fromkeys(hits))
         tried = 1
-        candidates = cone_directions(normals, down)[1:]
+        candidates = [d for d in cone_directions(normals, down, max_angle)
+                      if d @ down < 1.0 - 1e-12]
     else:
-        candidates = cone_directions(normals, down)
+        candidates = cone_directions(normals, down, max_angle)
         if not candidates:
+            if max_angle < math.pi and cone_directions(normals, down):
+                return Insertion(False, reason=f"no direction within "
+                                 f"{math.degrees(max_angle):.3g} deg of straight down leaves "
+                                 "every interface")
             return Insertion(False, reason="enclosed: no direction leaves every interface")
     for d in candidates:
         hits = path.blockers(d)

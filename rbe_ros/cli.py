@@ -24,6 +24,7 @@ from .analysis.assembly import Assembly
 from .analysis.friction import minimum_friction
 from .analysis.option_spec import BY_PATH, OPTIONS, from_outer
 from .analysis.options import CheckOptions
+from .analysis.planning import BUDGET_PER_BLOCK, MIN_BUDGET
 from .analysis.pipeline import check_scene, check_sequence, first_failing_step, slim
 from .analysis.executors import CheckPool, ProcessPool, ray_checks, ray_cluster
 from .analysis.perturb import PoseNoise
@@ -236,8 +237,13 @@ def build_parser() -> argparse.ArgumentParser:
                       help="blocks that may be held (by robots or scaffolds) at any step")
     plan.add_argument("--beam", type=int, default=1, metavar="W",
                       help="partial plans kept per step (default 1: greedy)")
-    plan.add_argument("--candidates", type=int, default=8, metavar="N",
-                      help="candidates tried per partial plan and step, lowest first")
+    plan.add_argument("--candidates", type=int, default=0, metavar="N",
+                      help="candidates tried per partial plan and step, lowest first (default "
+                      "0: all; a limit makes an exhausted search no proof that no plan exists)")
+    plan.add_argument("--search-budget", type=int, default=0, metavar="N",
+                      help="states the search may check before it gives up (a state: a "
+                      "partial plan and the block it places); default 0: "
+                      f"max({MIN_BUDGET}, {BUDGET_PER_BLOCK} x the blocks to place)")
     plan.add_argument("--keep-sequence", action="store_true",
                       help="the scene's sequence is a fixed prefix of the order")
     plan.add_argument("-o", "--output", metavar="SCENE",
@@ -503,6 +509,9 @@ def _run_plan(args) -> int:
               f"place, at most {args.max_held} held", file=sys.stderr)
     if args.workers < 1:
         raise ValueError("--workers must be at least 1")
+    if args.search_budget < 0:
+        raise ValueError(f"--search-budget must be >= 0 (0: the default), not "
+                         f"{args.search_budget}")
     look_ahead = (ray_checks(None if args.ray == "local" else args.ray, max(args.workers, 2),
                              **({"num_cpus": args.workers} if args.ray == "local" else {}))
                   if args.ray else
@@ -511,7 +520,8 @@ def _run_plan(args) -> int:
     # the plan's --time-limit bounds the whole search, not each check
     limit = options.solve.time_limit
     limits = PlanLimits(args.max_held, args.beam, args.candidates, args.keep_sequence,
-                        time_limit=limit if math.isfinite(limit) else 0.0)
+                        time_limit=limit if math.isfinite(limit) else 0.0,
+                        search_budget=args.search_budget)
     limits.search()                 # a limit out of range: an error of the command line
     options = replace(options, solve=replace(options.solve, time_limit=math.inf))
     reports = ReportLines(args.reports) if args.reports else None
@@ -530,8 +540,11 @@ def _run_plan(args) -> int:
         out_path.parent.mkdir(parents=True, exist_ok=True)
         out_path.write_text(json.dumps(scene_to_dict(plan.scene)))
     if args.json:
-        out = {"scene": scene.name, "feasible": plan.feasible, "max_held": args.max_held,
+        out = {"scene": scene.name, "feasible": plan.feasible, "outcome": plan.outcome,
+               "max_held": args.max_held,
                "order": plan.order, "failed_step": plan.failed_step, "message": plan.message,
+               "failure": plan.failure, "search_states": plan.states,
+               "search_backups": plan.backups,
                "holds": scene_to_dict(plan.scene).get("holds", []) if plan.scene else [],
                "search_checks": plan.checks, "models": plan.models, "time": plan.time,
                "steps": [step_summary(r) for r in plan.reports], "warnings": args.warnings}

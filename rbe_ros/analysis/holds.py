@@ -36,6 +36,7 @@ size). Both parts count checks, not seconds, so results do not depend on the mac
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -64,6 +65,10 @@ class HoldResult:
     exact: bool
     checks: int
     stands: bool = True        # False: even the returned set does not make it stand
+    #: no set of at most this many blocks stands: proven by the exact search (each depth up
+    #: to it searched whole), -1: nothing proven. A planner's proof that a step needs more
+    #: than K holds.
+    none_within: int = -1
 
 
 class StabilityOracle:
@@ -74,8 +79,11 @@ class StabilityOracle:
     it touches, so verdicts carry over from step to step."""
 
     def __init__(self, assembly: Assembly, options: CheckOptions = CheckOptions(),
-                 cache: dict | None = None):
+                 cache: dict | None = None, on_check: Callable[[], None] | None = None):
         self.assembly = assembly
+        #: called before each check that is not cached (a planner counts it, and stops
+        #: there by raising when its time is up)
+        self.on_check = on_check
         self.options = options
         self.graph = ContactGraph(assembly)
         self.ids = self.graph.ids
@@ -106,19 +114,19 @@ class StabilityOracle:
         key = self._key(component)
         found = self._shared.get(key)
         if found is None:
+            self._count()
             found = is_stable(self._sub(component), self.options)
             self._shared[key] = found
-            self.checks += 1
         return found
 
     def report(self, component: tuple[frozenset, frozenset]) -> Report:
         """The plain check of one component (cached): the explanation of a failure."""
         found = self._cache.get(component)
         if found is None:
+            self._count()
             found = check(self._sub(component), self.options)
             self._cache[component] = found
             self._shared.setdefault(self._key(component), found.stable)
-            self.checks += 1
         return found
 
     def failing(self, held, *, explain: bool = True) -> list[tuple[frozenset, Report | None]]:
@@ -153,20 +161,28 @@ class StabilityOracle:
         names = {self.ids[k] for k in held}
         key = ("capacity", frozenset(self.ids), frozenset(names))
         if key not in self._shared:
+            self._count()
             grips = [*self.assembly.grips, *(Grip(b) for b in sorted(names))]
             whole = self.assembly.subset(self.ids, names | {g.block for g in grips}, grips)
             report = check(whole, options)
             self._shared[key] = report if report.status == Status.HOLD_EXCEEDED else None
-            self.checks += 1
         return self._shared[key]
+
+    def _count(self) -> None:
+        self.checks += 1
+        if self.on_check is not None:
+            self.on_check()
 
 
 def minimal_holds(assembly: Assembly, options: CheckOptions = CheckOptions(), *,
                   search: HoldSearch | None = None, prefer=(),
-                  oracle: StabilityOracle | None = None) -> HoldResult:
+                  oracle: StabilityOracle | None = None, greedy: bool = True) -> HoldResult:
     """The smallest set of free blocks of ``assembly`` to hold so that it stands (empty if
     it stands). ``prefer``: block ids tried first (e.g. the blocks held at the previous
-    step, so that a robot keeps its grip). See the module docstring for the method."""
+    step, so that a robot keeps its grip). ``greedy`` False: no heuristic after the exact
+    search (a planner that only asks whether a set within K exists: none found is an empty
+    set that does not stand, ``none_within`` saying what was proven). See the module
+    docstring for the method."""
     search = options.holds if search is None else search
     oracle = oracle or StabilityOracle(assembly, options)
     first = oracle.failing(())
@@ -176,6 +192,7 @@ def minimal_holds(assembly: Assembly, options: CheckOptions = CheckOptions(), *,
                  and not oracle.support[oracle.index[b]]]
     budget = oracle.checks + search.max_checks
     lower = len(first)            # disjoint failing components: one block each at least
+    proven = lower - 1
     for depth in range(lower, search.max_size + 1):
         try:
             found = _deepen(oracle, frozenset(), depth, preferred, budget, set())
@@ -183,8 +200,11 @@ def minimal_holds(assembly: Assembly, options: CheckOptions = CheckOptions(), *,
             break
         if found is not None:
             return HoldResult(_names(oracle, found), True, oracle.checks)
+        proven = depth
+    if not greedy:
+        return HoldResult((), False, oracle.checks, False, proven)
     held = _greedy(oracle, preferred, search.greedy_width)
-    return HoldResult(_names(oracle, held), False, oracle.checks, oracle.stands(held))
+    return HoldResult(_names(oracle, held), False, oracle.checks, oracle.stands(held), proven)
 
 
 def _names(oracle: StabilityOracle, held) -> tuple[str, ...]:

@@ -1,5 +1,6 @@
 """Sequence planning: an insertion order in which every step stands with at most K blocks
-held, found by beam search (width 1: greedy).
+held, found by depth-first search that backs up on a dead end (its first descent is the
+greedy plan), or by beam search (width > 1, without backing up).
 
 Steps: every free block of the scene is placed once (blocks "present from the start" do
 not exist in a plan). With ``keep_sequence`` the scene's sequence is a fixed prefix of the
@@ -10,23 +11,42 @@ blocks (a scaffold, a centring present for some steps) apply by step index as in
 At each step, the candidates of a partial plan are the unplaced blocks that rest on a
 present block (an interface whose normal into the candidate points up, against gravity),
 then those that only touch one, each group lowest first (centroid along gravity), then the
-largest contact area with present blocks, then scene order; of these the first
-``candidates`` that can reach their pose past the present blocks (insertion, see
+largest contact area with present blocks, then scene order; of these those (the first
+``candidates`` when set) that can reach their pose past the present blocks (insertion, see
 :mod:`rbe_ros.analysis.insertion`; those that cannot are named when the step fails). For a
 candidate the holds are
 found as a robot would keep them: nothing, if the step stands so; else the blocks held at
 the previous step plus the new block, less every hold whose release keeps the step
 standing (oldest first); when none can go and the set does not stand, one more block is
 held (the highest the failed check names as moving first) and the releases are tried again;
-if that ends with more than K, the exact minimal hold search
-(:func:`rbe_ros.analysis.holds.minimal_holds`, within its budget). A held block has a
+if that ends with more than K (the repair stops there), the exact minimal hold search up
+to K holds (:func:`rbe_ros.analysis.holds.minimal_holds`, within its check budget), whose
+end without a set proves that the step needs more than K. A held block has a
 robot's grip at its centroid, as ``check --sequence`` checks the planned scene: a candidate
 is feasible with at most K holds, each robot within the hold capacities of the options
 (``hold_force_max``, ``hold_torque_max``); when no candidate is, the message names the
 wrench the best one needs.
-Each partial plan keeps the first ``beam`` feasible candidates; of all children the ``beam``
-best survive (fewest hold-steps so far, then fewest holds now, then candidate rank).
-No child at a step: the plan fails there.
+
+The search (:meth:`_Planner.expand`: the children of a partial plan, its candidates in rank
+order each tried by :meth:`_Planner.trial`, the one feasibility test of a step): depth
+first, the first feasible child first, so that the first descent is the greedy plan and
+costs what it did. A partial plan with no further child is dead: the set of its blocks goes
+into a memo and the search backs up to try the next child of its parent. Whether the
+remaining blocks can be placed depends on that set only, since any blocks may be held at a
+step (K holds plus one placing robot): a state reached again by another order is skipped
+unchecked. Each state checked (a partial plan and the block it places) counts against the
+budget (``search_budget``; :func:`default_budget`); ``time_limit`` and ``should_stop`` end
+it too. The outcome (:attr:`Plan.outcome`): ``planned``; ``no_plan`` when the search is
+exhausted and every refusal is a proof (a candidate that cannot be inserted, or whose exact
+hold search up to K holds ran to its end without its check budget running out, and no
+``candidates`` limit cut a step short): no order exists in which every block touches a
+placed one when placed; ``budget_exhausted`` (the budget, or an exhausted search with an
+unproven refusal); ``stopped``. A failed plan is the deepest partial plan the search made,
+with why no block could follow it: the best candidate, the holds it needs, and with hold
+capacities the wrench each robot would need against them.
+With ``beam`` > 1, each partial plan keeps the first ``beam`` feasible candidates; of all
+children the ``beam`` best survive (fewest hold-steps so far, then fewest holds now, then
+candidate rank); no child at a step: the plan fails there (``dead_end``).
 
 A candidate step is the partial plan's last standing state plus one block, so it is checked
 as :func:`check_sequence` checks a step (:class:`StepChecker`: the kept forces of that state,
@@ -44,6 +64,7 @@ from __future__ import annotations
 
 import collections
 import copy
+import itertools
 import math
 import time
 from collections.abc import Callable, Iterator
@@ -66,6 +87,10 @@ from .verdict import UNEXPLAINED, check
 
 #: How the message of a plan stopped by ``should_stop`` begins (a time limit, a cancel).
 STOPPED = "stopped after"
+#: The default search budget: states per block to place, and at least this many states.
+BUDGET_PER_BLOCK, MIN_BUDGET = 2, 200
+#: s between two progress heartbeats while the search checks candidates.
+HEARTBEAT = 1.0
 #: A contact carries a block when its normal into the block points up by at least this
 #: cosine (87 deg from vertical).
 RESTS_ON = 0.05
@@ -73,38 +98,75 @@ RESTS_ON = 0.05
 
 @dataclass(frozen=True)
 class PlanOptions:
-    """The planner's search: the holds it may use, the width of its beam, and how a
-    candidate is checked."""
+    """The planner's search: the holds it may use, the width of its beam, how a candidate
+    is checked, and what bounds the search."""
 
     max_held: int = 2            # K: blocks held at any step
-    beam: int = 1                # partial plans kept per step (1: greedy)
-    candidates: int = 8          # insertable candidates tried per partial plan and step
+    beam: int = 1                # partial plans kept per step (1: depth-first, greedy first)
+    #: insertable candidates tried per partial plan and step (0: all; a limit makes a search
+    #: that runs out of candidates no proof that no plan exists)
+    candidates: int = 0
     keep_sequence: bool = False  # the scene's sequence is a fixed prefix of the order
     #: every trial of a candidate checked whole, without the incremental checks (to
     #: compare with)
     full_candidates: bool = False
-    time_limit: float = math.inf  # s: then the best partial plan is returned
+    time_limit: float = math.inf  # s: then the deepest partial plan is returned
+    #: states the search may check (a state: a partial plan and the block it places, checked
+    #: for its holds); 0: :func:`default_budget` of the blocks to place
+    search_budget: int = 0
 
     def __post_init__(self):
-        for name, low in (("max_held", 0), ("beam", 1), ("candidates", 1)):
+        for name, low in (("max_held", 0), ("beam", 1), ("candidates", 0),
+                          ("search_budget", 0)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
                 raise ValueError(f"{name} must be an integer >= {low}, not {value!r}")
         if not self.time_limit > 0:
             raise ValueError(f"time_limit must be > 0 s, not {self.time_limit!r}")
 
+    def budget(self, blocks: int) -> int:
+        """The states the search may check for ``blocks`` blocks to place."""
+        return self.search_budget or default_budget(blocks)
+
+
+def default_budget(blocks: int) -> int:
+    """The default search budget (states checked) of a plan of ``blocks`` blocks: the
+    first descent (about one state per block, more where candidates fail) and as many
+    again for backing up, at least :data:`MIN_BUDGET`. docs/SEARCH.md: what that costs."""
+    return max(MIN_BUDGET, BUDGET_PER_BLOCK * blocks)
+
 
 @dataclass(frozen=True)
 class PlanProgress:
-    """Where a running plan is: after each placed step of its best partial plan."""
+    """Where a running plan is: after each placed step, and at least every
+    :data:`HEARTBEAT` s while it checks candidates (``placing`` False)."""
 
-    placed: int                  # blocks placed
+    placed: int                  # blocks placed on the current partial plan
     total: int                   # blocks to place
-    step: int                    # the step just placed
+    step: int                    # the step last placed (-1: none)
     block: str
     held: tuple[str, ...]        # blocks held at that step
     elapsed: float               # s since the search started
-    estimate: float              # s left, from the mean time per block so far
+    #: s left: from the mean time per block so far while the search goes down without
+    #: stalling; else what the budget (states left at the mean time per state so far) or
+    #: the time limit leaves, whichever is less; -1: unknown
+    estimate: float
+    checks: int = 0              # candidate checks so far (each hold search's included)
+    states: int = 0              # states checked of ``budget``
+    budget: int = 0
+    backups: int = 0             # dead ends backed out of
+    deepest: int = 0             # most blocks placed by any partial plan so far
+    placing: bool = True         # a step was just placed (False: a heartbeat)
+    bound: str = "steps"         # what ``estimate`` comes from: steps, budget, time limit
+
+
+#: What a plan's search ended with (:attr:`Plan.outcome`).
+PLANNED = "planned"                  # every block placed
+NO_PLAN = "no_plan"                  # the search was exhausted: no plan with at most K held
+BUDGET_EXHAUSTED = "budget_exhausted"  # the budget ran out (or a part could not be proven)
+HALTED = "stopped"                   # the time limit, a cancel or a newer goal
+DEAD_END = "dead_end"                # a beam (width > 1, it does not back up) found no child
+OUTCOMES = (PLANNED, NO_PLAN, BUDGET_EXHAUSTED, HALTED, DEAD_END)
 
 
 @dataclass
@@ -112,7 +174,9 @@ class Plan:
     """The result of :func:`plan_sequence`. ``held[k]``: blocks held at step k (one more
     entry than ``order`` when a release step follows the last placement). ``reports``: the
     step reports of the search, without their interfaces (the full ones are streamed to
-    ``on_report``): memory stays linear in the blocks."""
+    ``on_report``): memory stays linear in the blocks. Not feasible: the deepest partial
+    plan the search made, ``failed_step`` its length, ``failure`` why no block could follow
+    it."""
 
     feasible: bool
     order: list[str]
@@ -124,6 +188,13 @@ class Plan:
     checks: int = 0                        # candidate checks spent by the search
     time: float = 0.0                      # s
     models: dict[str, int] = field(default_factory=dict)   # checks answered per model
+    outcome: str = ""                      # one of OUTCOMES ("": not planned, bad input)
+    states: int = 0                        # states checked by the search
+    backups: int = 0                       # dead ends backed out of
+    #: the deepest partial plan's failure: the best candidate ("block"), the holds it
+    #: needs ("held"), and when a robot's capacity is what fails, the wrench it needs and
+    #: the capacity ("force", "torque", N and N m; "force_max", "torque_max")
+    failure: dict = field(default_factory=dict)
 
     @property
     def max_held(self) -> int:
@@ -144,6 +215,40 @@ class LookAhead(Protocol):
 
 class _Stopped(Exception):
     """The time limit ran out or ``should_stop`` asked to stop."""
+
+
+class _Budget(Exception):
+    """The search checked as many states as its budget allows."""
+
+
+@dataclass(frozen=True)
+class TrialResult:
+    """Whether a candidate step can be placed (:meth:`_Planner.trial`): the blocks held
+    at it, its report and checked assembly when it can (``ok``), and when it cannot, whether
+    that is proven (no set of at most K holds stands: a search that runs out of states
+    refused only by proofs has shown that no plan exists)."""
+
+    held: tuple[str, ...]
+    ok: bool
+    report: Report | None = None
+    assembly: Assembly | None = None
+    proven: bool = True
+
+
+@dataclass
+class _Failure:
+    """Why no (further) block could follow a partial plan: the candidates that cannot be
+    inserted (with the reason), the refused candidate needing the fewest holds, and whether
+    every refusal is proven."""
+
+    blocked: dict[str, str] = field(default_factory=dict)
+    best: tuple[str, tuple[str, ...]] | None = None
+    proven: bool = True
+
+    def refused(self, block: str, found: TrialResult) -> None:
+        if self.best is None or len(found.held) < len(self.best[1]):
+            self.best = (block, found.held)
+        self.proven = self.proven and found.proven
 
 
 @dataclass(frozen=True)
@@ -247,13 +352,27 @@ class _Planner:
         self.insertions: dict = {}              # order -> insertion of its last block
         self.checks = 0
         self.models: collections.Counter = collections.Counter()
-        self.start = time.perf_counter()
+        self.dead: set[frozenset] = set()       # the memo: sets of blocks with no completion
+        self.states = self.backups = 0          # states checked, dead ends backed out of
+        self.streamed = 0                       # steps of the path streamed to on_report
+        self.streaming = False                  # the stream is the path's so far
+        self.start = self.beat = time.perf_counter()
+        self.descent = 0.0                      # s to the last step of the first descent
 
     def poll(self) -> None:
-        """Raise _Stopped when the time limit ran out or the caller asks to stop."""
-        if (time.perf_counter() - self.start > self.plan.time_limit
+        """Raise _Stopped when the time limit ran out or the caller asks to stop; a
+        progress heartbeat at most every :data:`HEARTBEAT` s."""
+        now = time.perf_counter()
+        if (now - self.start > self.plan.time_limit
                 or (self.should_stop is not None and self.should_stop())):
             raise _Stopped
+        if now - self.beat >= HEARTBEAT:
+            self._progress(False)
+
+    def checked(self) -> None:
+        """A check of a hold search (StabilityOracle.on_check): counted, then a poll."""
+        self.checks += 1
+        self.poll()
 
     def counted(self, report: Report) -> None:
         self.checks += 1
@@ -264,9 +383,9 @@ class _Planner:
         return supports_present(self.base, k) + tuple(order)
 
     def candidates(self, order: tuple[str, ...], blocked: dict[str, str]) -> Iterator[str]:
-        """The first ``candidates`` blocks, in rank order, that can reach their pose (each
-        found when asked for: the search mostly takes the first); those that cannot go into
-        ``blocked`` with the reason."""
+        """The blocks that may be placed after ``order``, in rank order, that can reach
+        their pose (each found when asked for: the search mostly takes the first; at most
+        ``candidates`` when set); those that cannot go into ``blocked`` with the reason."""
         k = len(order)
         prefix = self.scene.sequence if self.plan.keep_sequence else ()
         if k < len(prefix):
@@ -287,7 +406,8 @@ class _Planner:
                                blocked)
 
     def insertable(self, order, ranked, blocked: dict[str, str]) -> Iterator[str]:
-        """The first ``candidates`` of ``ranked`` that can reach their pose after ``order``."""
+        """The first ``candidates`` (all: 0) of ``ranked`` that can reach their pose after
+        ``order``."""
         found = 0
         for b in ranked:
             why = self.blocked((*order, b))
@@ -317,36 +437,39 @@ class _Planner:
         found = self.insertion(order)
         return "" if found is None or found.insertable else found.reason
 
-    def holds_for(self, partial: _Partial, block: str):
-        """(held blocks, within K, step report or None, its assembly) for the step that
-        places ``block`` after ``partial``."""
+    def trial(self, partial: _Partial, block: str) -> TrialResult:
+        """Whether ``block`` can be placed after ``partial`` with at most K held, and how
+        (:class:`TrialResult`): the one feasibility test of a candidate step."""
         trial = _Trial(self, partial, block)
-        held = self._holds(trial, partial.held[-1] if partial.held else ())
-        ok = len(held) <= self.plan.max_held and trial.stands(held)
-        assembly, report = trial.result(held) if ok else (None, None)
-        return held, ok, report, assembly
+        held, proven = self._holds(trial, partial.held[-1] if partial.held else ())
+        if len(held) <= self.plan.max_held and trial.stands(held):
+            return TrialResult(held, True, *trial.result(held)[::-1])
+        return TrialResult(held, False, proven=proven)
 
-    def _holds(self, trial: _Trial, previous) -> tuple[str, ...]:
+    def _holds(self, trial: _Trial, previous) -> tuple[tuple[str, ...], bool]:
         """The holds of ``trial``'s step as a robot would keep them (the module docstring):
-        the repair, else the exact search when that needs more than K or fails."""
-        block = trial.order[-1]
+        the repair, else the exact search for at most K; and whether no set of at most K
+        stands is proven (the exact search searched every one)."""
+        block, k = trial.order[-1], self.plan.max_held
         held = self._repair(trial, block, previous)
-        if len(held) > self.plan.max_held or not trial.stands(held):
-            self.poll()
-            oracle = StabilityOracle(trial.assembly, trial.options, self.cache)
-            result = minimal_holds(trial.assembly, trial.options, prefer=(*previous, block),
-                                   oracle=oracle)
-            self.checks += oracle.checks
-            if result.stands and (len(result.blocks) < len(held) or not trial.stands(held)):
-                held = result.blocks
-        return held
+        if len(held) <= k and trial.stands(held):
+            return held, False
+        self.poll()
+        oracle = StabilityOracle(trial.assembly, trial.options, self.cache, self.checked)
+        result = minimal_holds(trial.assembly, trial.options,
+                               search=replace(trial.options.holds, max_size=k),
+                               prefer=(*previous, block), oracle=oracle, greedy=False)
+        if result.stands:
+            return result.blocks, False
+        return held, result.none_within >= k
 
     def _repair(self, trial: _Trial, new: str, previous) -> tuple[str, ...]:
         """Nothing held if the step stands so; else the previous holds and the new block,
         less every hold whose release keeps the step standing (oldest first); if none can
-        go and the set does not stand, one more hold and the releases again. (A set is
-        checked only when no release settles it: a step held by the previous holds and
-        the new block that stands with fewer needs no proof that it stands with all.)"""
+        go and the set does not stand, one more hold and the releases again, up to K + 1
+        holds (beyond, the exact search decides). (A set is checked only when no release
+        settles it: a step held by the previous holds and the new block that stands with
+        fewer needs no proof that it stands with all.)"""
         if trial.stands(()):
             return ()
         held = [b for b in previous if b in trial.free] + [new]
@@ -355,28 +478,39 @@ class _Planner:
             if len(fewer) < len(held) or trial.stands(held):
                 held = fewer
                 break
+            if len(held) > self.plan.max_held:
+                break
             more = trial.next_hold(held)
             if more is None:
                 break
             held.append(more)
         return tuple(sorted(held, key=self.position.__getitem__))
 
-    def _capacity_note(self, partial: _Partial, block: str) -> str:
+    def _need(self, partial: _Partial, block: str) -> tuple[str, dict]:
         """What the robots would need beyond their capacities at the step that places
-        ``block`` after ``partial``, held as the plan would hold it with unbounded robots
-        ("" when the capacities are unbounded, or that needs more than K holds or is within
-        them)."""
-        if self.options.hold_force_max is None and self.options.hold_torque_max is None:
-            return ""
+        ``block`` after ``partial``, held as the plan would hold it with unbounded robots:
+        a message tail and the wrenches ("" and {} when the capacities are unbounded, or
+        that needs more than K holds)."""
+        force_max, torque_max = self.options.hold_force_max, self.options.hold_torque_max
+        if force_max is None and torque_max is None:
+            return "", {}
         unbounded = replace(self.options, hold_force_max=None, hold_torque_max=None)
         trial = _Trial(self, partial, block, unbounded)
-        held = self._holds(trial, partial.held[-1] if partial.held else ())
+        held, _ = self._holds(trial, partial.held[-1] if partial.held else ())
         if len(held) > self.plan.max_held or not trial.stands(held):
-            return ""
-        oracle = StabilityOracle(trial.assembly, self.options, self.cache)
-        over = oracle.capacity([oracle.index[b] for b in held])
-        return (f"; with {', '.join(held)} held (fewest with unbounded robots), {over.message}"
-                if over is not None else "")
+            return "", {}
+        wrenches = trial.result(held)[1].hold_wrenches
+        need = {"held": list(held), "force_max": force_max, "torque_max": torque_max,
+                "wrenches": [{"block": w.block, "force": float(np.linalg.norm(w.force)),
+                              "torque": float(np.linalg.norm(w.torque))} for w in wrenches]}
+        shown = ", ".join(f"the robot on {w['block']} |F| {w['force']:.4g} N, |M| "
+                          f"{w['torque']:.4g} N m" for w in need["wrenches"])
+        caps = " and ".join(f"{value:.4g} {unit}" for value, unit in
+                            ((force_max, "N"), (torque_max, "N m")) if value is not None)
+        bounded = _Trial(self, partial, block).result(held)[1]
+        return (f"; with {', '.join(held)} held (fewest with unbounded robots) it needs "
+                f"{shown}, against a capacity of {caps} per robot; with the robots bounded: "
+                f"{bounded.status.name}, {bounded.message}"), need
 
     def step_report(self, order, held, report: Report, assembly: Assembly) -> Report:
         """The report of the step placing ``order[-1]`` with ``held``: the accepted trial's
@@ -388,76 +522,200 @@ class _Planner:
                        held_blocks=tuple(held),
                        num_blocks=len(assembly.blocks), **extra)
 
+    def expand(self, partial: _Partial, failure: _Failure) -> Iterator[_Partial]:
+        """The feasible children of ``partial`` in rank order: its candidates
+        (:meth:`candidates`) each tried (:meth:`trial`), lazily, as the search asks for the
+        next. A candidate whose state is known dead (the memo) is skipped unchecked; each
+        other is a state of the budget. ``failure`` collects why candidates were refused."""
+        tried = 0
+        for rank, b in enumerate(self.candidates(partial.order, failure.blocked)):
+            tried += 1
+            order = (*partial.order, b)
+            if frozenset(order) in self.dead:
+                continue
+            if self.states >= self.budget:
+                raise _Budget
+            self.states += 1
+            start = time.perf_counter()
+            found = self.trial(partial, b)
+            if not found.ok:
+                failure.refused(b, found)
+                continue
+            total, worst, ranks = partial.score
+            report = self.step_report(order, found.held, found.report, found.assembly)
+            report = replace(report, solve_time=time.perf_counter() - start)
+            checker = copy.copy(partial.checker)
+            checker.advance(found.assembly, report)
+            if self.streaming and len(partial.order) == self.streamed:
+                self.on_report(report)          # the next step of the path: streamed
+                self.streamed += 1
+            yield _Partial(order, (*partial.held, found.held),
+                           (total + len(found.held), len(found.held), ranks + rank),
+                           (*partial.reports, slim(report)), checker)
+        if tried and tried == self.plan.candidates:
+            failure.proven = False              # candidates beyond the limit not tried
+
     def run(self) -> Plan:
-        n = len(self.free)
+        n = self.n = len(self.free)
+        self.budget = self.plan.budget(n)
         final = self.full.subset(self.present(self.free, n + 1))
         self.final = check(final, self.options)
         if not self.final.stable:
             return Plan(False, [], [], "the finished assembly does not stand without holds "
                         "(rbe-ros check names why): no build order can end stable",
-                        failed_step=n)
-        beam = [_Partial((), (), (0, 0, 0), (), StepChecker(self.options, explain=False))]
-        for k in range(n):
-            blocked: dict[str, str] = {}
+                        failed_step=n, outcome=NO_PLAN)
+        root = _Partial((), (), (0, 0, 0), (), StepChecker(self.options, explain=False))
+        self.top = self.deepest = root
+        self.streaming = self.on_report is not None and self.plan.beam == 1
+        return self._beam(root) if self.plan.beam > 1 else self._depth_first(root)
+
+    def _depth_first(self, root: _Partial) -> Plan:
+        """Depth-first search, each partial plan's children in rank order (the first descent
+        is the greedy plan). A partial plan with no further child is dead: the set of its
+        blocks goes into the memo (whether the rest can be placed depends on that set only:
+        any blocks may be held at a step), and the search backs up. Exhausted, with every
+        refusal proven: no plan exists."""
+        failure = self.failure = _Failure()
+        path = [(root, self.expand(root, failure), failure)]
+        proven = True
+        try:
+            while path:
+                partial, children, failure = path[-1]
+                child = next(children, None)
+                if child is None:           # dead: every child tried
+                    path.pop()
+                    self.dead.add(frozenset(partial.order))
+                    proven = proven and failure.proven
+                    if path:
+                        self._backed_up(len(path[-1][0].order))
+                    continue
+                if len(child.order) == self.n:
+                    return self._finish(child, True, -1, f"every step stands with at most "
+                                        f"{max(len(h) for h in child.held)} held blocks "
+                                        f"(limit {self.plan.max_held})", PLANNED)
+                failure = _Failure()
+                if len(child.order) > len(self.deepest.order):
+                    self.deepest, self.failure = child, failure
+                path.append((child, self.expand(child, failure), failure))
+                self._pushed(child)
+        except _Stopped:
+            return self._stopped()
+        except _Budget:
+            return self._failed(BUDGET_EXHAUSTED, f"no plan found within the budget "
+                                f"({self.budget} states checked; --search-budget)")
+        if proven:
+            return self._failed(NO_PLAN, f"no plan with at most {self.plan.max_held} held "
+                                "exists (every order searched)")
+        return self._failed(BUDGET_EXHAUSTED, "no plan found: the search was exhausted, but "
+                            "not every refusal is proven (a hold search over its check "
+                            "budget, or --candidates)")
+
+    def _beam(self, root: _Partial) -> Plan:
+        """Beam search (width > 1): at each step the first ``beam`` children of each partial
+        plan, of which the ``beam`` best survive; it does not back up."""
+        beam = [root]
+        for k in range(self.n):
+            self.failure = _Failure()
             self.insertions = {o: f for o, f in self.insertions.items() if len(o) > k}
+            children: dict[frozenset, _Partial] = {}
             try:
-                children, best_rejected = self._children(beam, blocked)
+                for partial in beam:
+                    for child in itertools.islice(self.expand(partial, self.failure),
+                                                  self.plan.beam):
+                        key = frozenset(child.order)
+                        if key not in children or child.score < children[key].score:
+                            children[key] = child
             except _Stopped:
-                return self._finish(beam[0], False, k, f"{STOPPED} {k} of {n} blocks "
-                                    f"(time limit or asked to stop); step {k} not placed")
+                return self._stopped()
+            except _Budget:
+                return self._failed(BUDGET_EXHAUSTED, f"no plan found within the budget "
+                                    f"({self.budget} states checked; --search-budget)")
             if not children:
-                count = len(best_rejected[1]) if best_rejected else 0
-                best = beam[0]
-                why = (f"; the best candidate, {best_rejected[0]}, needs {count} held "
-                       f"block{'' if count == 1 else 's'} ({', '.join(best_rejected[1])})"
-                       + self._capacity_note(best, best_rejected[0])
-                       if best_rejected else
-                       "; no unplaced block touches the placed ones" if not blocked else "")
-                why += "".join(f"; {b} cannot be inserted: {r}" for b, r in blocked.items())
-                return self._finish(beam[0], False, k, f"no block can be placed at step {k} "
-                                    f"with at most {self.plan.max_held} held{why}")
+                return self._failed(DEAD_END, f"no plan found by a beam of {self.plan.beam} "
+                                    "(it does not back up: --beam 1 does)")
             beam = sorted(children.values(), key=lambda p: (p.score, p.order))[:self.plan.beam]
-            self._placed(beam[0], n)
-            if self.pool is not None and self.plan.beam == 1:
-                self._look_ahead(beam[0])
+            self.deepest = beam[0]
+            self._pushed(beam[0])
         best = beam[0]
         return self._finish(best, True, -1, f"every step stands with at most "
                             f"{max((len(h) for h in best.held), default=0)} held blocks "
-                            f"(limit {self.plan.max_held})")
+                            f"(limit {self.plan.max_held})", PLANNED)
 
-    def _children(self, beam: list[_Partial], blocked: dict[str, str]):
-        """The feasible children of the partial plans of ``beam`` (by the set of blocks
-        placed), and the rejected candidate needing the fewest holds; candidates that cannot
-        be inserted go into ``blocked``."""
-        children: dict[frozenset, _Partial] = {}
-        best_rejected = None
-        for partial in beam:
-            found = 0
-            for rank, b in enumerate(self.candidates(partial.order, blocked)):
-                start = time.perf_counter()
-                order = (*partial.order, b)
-                held, ok, report, assembly = self.holds_for(partial, b)
-                if not ok:
-                    if best_rejected is None or len(held) < len(best_rejected[1]):
-                        best_rejected = (b, held)
-                    continue
-                total, worst, ranks = partial.score
-                report = self.step_report(order, held, report, assembly)
-                report = replace(report, solve_time=time.perf_counter() - start)
-                checker = copy.copy(partial.checker)
-                checker.advance(assembly, report)
-                child = _Partial(order, (*partial.held, held),
-                                 (total + len(held), len(held), ranks + rank),
-                                 (*partial.reports, slim(report)), checker)
-                if self.plan.beam == 1 and self.on_report is not None:
-                    self.on_report(report)          # greedy: this step is the plan's
-                key = frozenset(order)
-                if key not in children or child.score < children[key].score:
-                    children[key] = child
-                found += 1
-                if found >= self.plan.beam:
-                    break
-        return children, best_rejected
+    def _pushed(self, partial: _Partial) -> None:
+        """The search went down to ``partial``: its look-ahead, progress."""
+        k = len(partial.order)
+        self.top = partial
+        if self.plan.beam == 1:
+            self.insertions = {o: f for o, f in self.insertions.items() if len(o) > k}
+            if self.pool is not None:
+                self._look_ahead(partial)
+        if not self.backups:
+            self.descent = time.perf_counter() - self.start
+        self._progress(True)
+
+    def _backed_up(self, k: int) -> None:
+        """The search backed up to a partial plan of ``k`` blocks: steps streamed beyond it
+        are no longer the path's (the plan's reports are re-made at the end)."""
+        self.backups += 1
+        if self.streaming and self.streamed > k:
+            self.streaming, self.streamed = False, k
+
+    def _progress(self, placing: bool) -> None:
+        now = time.perf_counter()
+        self.beat = now
+        if self.progress is None:
+            return
+        top, k = self.top, len(self.top.order)
+        estimate, bound = self._estimate(now - self.start, k)
+        self.progress(PlanProgress(k, self.n, k - 1, top.order[-1] if k else "",
+                                   top.held[-1] if k else (), now - self.start, estimate,
+                                   self.checks, self.states, self.budget, self.backups,
+                                   len(self.deepest.order), placing, bound))
+
+    def _estimate(self, elapsed: float, k: int) -> tuple[float, str]:
+        """(s left, what it comes from; -1 and "unknown" when nothing bounds it): see
+        :attr:`PlanProgress.estimate`."""
+        found = []
+        if k and not self.backups:
+            mean = self.descent / k             # s per block of the first descent
+            if elapsed - self.descent <= 2 * mean + HEARTBEAT:      # not stalled
+                found.append((mean * (self.n - k), "steps"))
+        if self.states:
+            found.append(((self.budget - self.states) * elapsed / self.states, "budget"))
+        if math.isfinite(self.plan.time_limit):
+            found.append((max(self.plan.time_limit - elapsed, 0.0), "time limit"))
+        return min(found, default=(-1.0, "unknown"))
+
+    def _stopped(self) -> Plan:
+        k = len(self.deepest.order)
+        return self._finish(self.deepest, False, k, f"{STOPPED} {k} of {self.n} blocks (time "
+                            f"limit or asked to stop); step {k} not placed", HALTED)
+
+    def _failed(self, outcome: str, head: str) -> Plan:
+        """The plan that failed with ``outcome``: the deepest partial plan, and why no block
+        could follow it (its best candidate, the holds it needs, a robot's wrench against
+        the capacity)."""
+        partial, failure = self.deepest, self.failure
+        k = len(partial.order)
+        details = {}
+        if failure.best is not None:
+            block, held = failure.best
+            why = (f"; the best candidate, {block}, needs {len(held)} held "
+                   f"block{'' if len(held) == 1 else 's'} ({', '.join(held)})")
+            try:
+                note, need = self._need(partial, block)
+            except _Stopped:
+                note, need = "", {}
+            why += note
+            details = {"block": block, "held": list(held), **need}
+        else:
+            why = "; no unplaced block touches the placed ones" if not failure.blocked else ""
+        why += "".join(f"; {b} cannot be inserted: {r}" for b, r in failure.blocked.items())
+        message = (f"{head}: the deepest partial plan places {k} of {self.n} blocks "
+                   f"({self.states} states checked, {self.backups} dead ends backed out of); "
+                   f"no block can be placed at step {k} with at most {self.plan.max_held} "
+                   f"held{why}")
+        return self._finish(partial, False, k, message, outcome, details)
 
     def _look_ahead(self, partial: _Partial) -> None:
         """Full checks of the next steps as a held course goes on (the first hold kept, the
@@ -488,15 +746,8 @@ class _Planner:
         future = self.submitted.pop((present, held), None)
         return None if future is None else future.result()
 
-    def _placed(self, best: _Partial, n: int) -> None:
-        if self.progress is None:
-            return
-        k = len(best.order)
-        elapsed = time.perf_counter() - self.start
-        self.progress(PlanProgress(k, n, k - 1, best.order[-1], best.held[-1], elapsed,
-                                   elapsed / k * (n - k)))
-
-    def _finish(self, partial: _Partial, feasible: bool, failed: int, message: str) -> Plan:
+    def _finish(self, partial: _Partial, feasible: bool, failed: int, message: str,
+                outcome: str, failure: dict | None = None) -> Plan:
         order, held = list(partial.order), list(partial.held)
         reports = list(partial.reports)
         n = len(order)
@@ -505,7 +756,7 @@ class _Planner:
             held.append(())                          # release step
             report = replace(self.final, step_index=n, block_placed="")
             reports.append(slim(report))
-            if self.plan.beam == 1 and self.on_report is not None:
+            if self.streaming:
                 self.on_report(report)
         holds = []
         for block in self.free:
@@ -530,11 +781,14 @@ class _Planner:
             # each step's direction, as checked (a given one kept), for a robot to follow
             scene = replace(scene, approach=tuple(
                 r.insertion_direction if r.insertable else None for r in reports[:n]))
-        if self.plan.beam > 1 and self.on_report is not None and scene is not None:
-            # a beam's steps are the plan's only once it is chosen: its reports are re-made
-            check_sequence(scene, self.options, on_step=lambda r, _total: self.on_report(r))
+        if not self.streaming and self.on_report is not None and scene is not None:
+            # a beam's steps, and those a search backed up over, are the plan's only once it
+            # is chosen: their reports are re-made (those streamed before stay)
+            check_sequence(scene, self.options, on_step=lambda r, _total: (
+                self.on_report(r) if r.step_index >= self.streamed else None))
         return Plan(feasible, order, held, message, failed, scene, reports, self.checks,
-                    models=dict(self.models))
+                    models=dict(self.models), outcome=outcome, states=self.states,
+                    backups=self.backups, failure=failure or {})
 
 
 def _planned_under(options: CheckOptions) -> tuple[float, float] | None:
@@ -546,8 +800,9 @@ def _planned_under(options: CheckOptions) -> tuple[float, float] | None:
 
 
 def plan_sequence(scene: Scene, max_held: int = 2, options: CheckOptions = CheckOptions(), *,
-                  beam: int = 1, candidates: int = 8, keep_sequence: bool = False,
+                  beam: int = 1, candidates: int = 0, keep_sequence: bool = False,
                   full_candidates: bool = False, time_limit: float = math.inf,
+                  search_budget: int = 0,
                   progress: Callable[[PlanProgress], None] | None = None,
                   should_stop: Callable[[], bool] | None = None,
                   on_report: Callable[[Report], None] | None = None,
@@ -556,17 +811,20 @@ def plan_sequence(scene: Scene, max_held: int = 2, options: CheckOptions = Check
     """An insertion order of every free block of ``scene`` in which each step stands with at
     most ``max_held`` blocks held (see the module docstring), or where none was found.
 
-    ``progress`` is called after each placed step; ``should_stop`` is polled between
-    candidate checks, and when it returns True (or ``time_limit`` s have passed) the best
-    partial plan is returned (not feasible, "stopped after K of N blocks"). ``on_report``
-    receives each step's full report as the plan makes it (greedy; a beam's after the
-    search). ``look_ahead(assembly, options)``: workers for the full checks of the steps
-    ahead (:mod:`rbe_ros.analysis.executors`), closed when the plan is made; the plan is
-    the same with and without."""
+    ``progress`` is called after each placed step and at least every :data:`HEARTBEAT` s
+    while candidates are checked; ``should_stop`` is polled between checks, and when it
+    returns True (or ``time_limit`` s have passed) the deepest partial plan is returned (not
+    feasible, "stopped after K of N blocks"). ``search_budget``: the states the search may
+    check (0: :func:`default_budget`). :attr:`Plan.outcome` says how the search ended.
+    ``on_report`` receives each step's full report as the plan makes it (those of steps
+    the search backed up over, and a beam's, after the search). ``look_ahead(assembly,
+    options)``: workers for the full checks of the steps ahead
+    (:mod:`rbe_ros.analysis.executors`), closed when the plan is made; the plan is the same
+    with and without."""
     start = time.perf_counter()
     planner = _Planner(scene, declared(options, scene),
                        PlanOptions(max_held, beam, candidates, keep_sequence, full_candidates,
-                                   time_limit),
+                                   time_limit, search_budget),
                        progress, should_stop, on_report)
     if look_ahead is not None and not full_candidates:
         planner.pool = look_ahead(planner.full, planner.options)
@@ -579,4 +837,6 @@ def plan_sequence(scene: Scene, max_held: int = 2, options: CheckOptions = Check
     return result
 
 
-__all__ = ["LookAhead", "Plan", "PlanOptions", "PlanProgress", "STOPPED", "plan_sequence"]
+__all__ = ["BUDGET_EXHAUSTED", "DEAD_END", "HALTED", "LookAhead", "NO_PLAN", "OUTCOMES",
+           "PLANNED", "Plan", "PlanOptions", "PlanProgress", "STOPPED", "TrialResult",
+           "default_budget", "plan_sequence"]

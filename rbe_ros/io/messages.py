@@ -420,7 +420,8 @@ def plan_goal_to_dict(state: dict, limits: PlanLimits) -> dict:
     return {"assembly": state, "max_held": int(limits.max_held),
             "beam": int(limits.beam), "hold_force_max": float(limits.hold_force_max),
             "hold_torque_max": float(limits.hold_torque_max),
-            "time_limit": float(limits.time_limit)}
+            "time_limit": float(limits.time_limit),
+            "search_budget": int(limits.search_budget)}
 
 
 def plan_goal_from_dict(d: Mapping) -> tuple[dict, PlanLimits]:
@@ -431,7 +432,8 @@ def plan_goal_from_dict(d: Mapping) -> tuple[dict, PlanLimits]:
         int(d.get("max_held", 0)), int(d.get("beam", 0)) or 1,
         hold_force_max=float(d.get("hold_force_max", 0.0)),
         hold_torque_max=float(d.get("hold_torque_max", 0.0)),
-        time_limit=float(d.get("time_limit", 0.0)))
+        time_limit=float(d.get("time_limit", 0.0)),
+        search_budget=int(d.get("search_budget", 0)))
 
 
 def plan_result_to_dict(plan: Plan, header: dict) -> dict:
@@ -451,7 +453,8 @@ def plan_feedback_to_dict(progress: PlanProgress) -> dict:
     """An rbe_msgs/action/PlanSequence feedback dict of a plan's progress."""
     return {"placed": int(progress.placed), "total": int(progress.total),
             "step": int(progress.step), "block": str(progress.block),
-            "held": [str(b) for b in progress.held], "elapsed": float(progress.elapsed)}
+            "held": [str(b) for b in progress.held], "elapsed": float(progress.elapsed),
+            "checks": int(progress.checks), "remaining": float(progress.estimate)}
 
 
 __all__ = ["SOLID_PRIMITIVE_BOX", "header_dict", "header_stamp_ns", "json_safe",

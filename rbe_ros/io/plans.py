@@ -25,15 +25,17 @@ class PlanLimits:
 
     max_held: int = 2
     beam: int = 1
-    candidates: int = 8
+    candidates: int = 0             # 0: every insertable candidate
     keep_sequence: bool = False
     hold_force_max: float = 0.0     # N; <= 0: the options'
     hold_torque_max: float = 0.0    # N m; <= 0: the options'
     time_limit: float = 0.0         # s; <= 0: none
+    search_budget: int = 0          # states checked; <= 0: the default (planning.default_budget)
 
     def search(self) -> PlanOptions:
         """The planner's search (ValueError naming a limit out of its range)."""
-        return PlanOptions(self.max_held, self.beam, self.candidates, self.keep_sequence)
+        return PlanOptions(self.max_held, self.beam, self.candidates, self.keep_sequence,
+                           search_budget=max(self.search_budget, 0))
 
 
 def plan_options(options: CheckOptions, limits: PlanLimits) -> CheckOptions:
@@ -53,9 +55,14 @@ def plan_options(options: CheckOptions, limits: PlanLimits) -> CheckOptions:
     return options
 
 
-def _failed(message: str) -> Plan:
+#: The outcome of a request that could not be planned: bad input, or an error of the planner
+#: (beside :data:`rbe_ros.analysis.planning.OUTCOMES`).
+INVALID, ERROR = "invalid", "error"
+
+
+def _failed(message: str, outcome: str = INVALID) -> Plan:
     """The plan of a request that could not be planned (nothing placed)."""
-    return Plan(False, [], [], message, failed_step=0)
+    return Plan(False, [], [], message, failed_step=0, outcome=outcome)
 
 
 def plan_state(read_scene: Callable[[], Scene], limits: PlanLimits,
@@ -85,12 +92,13 @@ def plan_state(read_scene: Callable[[], Scene], limits: PlanLimits,
             validate_scene(scene, options.limits)
         return plan_sequence(scene, search.max_held, plan_options(options, limits),
                              beam=search.beam, candidates=search.candidates,
-                             keep_sequence=search.keep_sequence, progress=progress,
+                             keep_sequence=search.keep_sequence,
+                             search_budget=search.search_budget, progress=progress,
                              should_stop=stop, **extra)
     except SceneError as exc:
         return _failed(f"invalid input: {exc}")
     except Exception as exc:        # a failed plan is a result, never a crash
-        return _failed(f"plan failed: {type(exc).__name__}: {exc}")
+        return _failed(f"plan failed: {type(exc).__name__}: {exc}", ERROR)
 
 
-__all__ = ["HOLD_CAPACITIES", "PlanLimits", "plan_options", "plan_state"]
+__all__ = ["ERROR", "HOLD_CAPACITIES", "INVALID", "PlanLimits", "plan_options", "plan_state"]

@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import shapely
 
 from .generators import signed_volume
 from .scene import Block, Scene, make_block, make_scene
@@ -76,12 +77,23 @@ def polycube_block(block_id: str, cells, cell=(0.1, 0.1, 0.1), origin=(0.0, 0.0,
 def extruded_block(block_id: str, profile, y0: float, y1: float, *, density: float = 2000.0,
                    support: bool = False) -> Block:
     """A prism of the simple polygon ``profile`` ((x, z) points, either orientation) in the
-    xz-plane, between y = y0 and y = y1; its frame at the mean of its vertices."""
+    xz-plane, between y = y0 and y = y1; its frame at the mean of its vertices. The caps
+    are given as triangles (a constrained Delaunay triangulation of the profile), so that a
+    non-convex profile is no face any fan would fold over; the shape analysis merges them."""
     p = np.asarray(profile, dtype=float)
     n = len(p)
     vertices = np.vstack((np.column_stack((p[:, 0], np.full(n, y0), p[:, 1])),
                           np.column_stack((p[:, 0], np.full(n, y1), p[:, 1]))))
-    faces = [tuple(range(n)), tuple(range(2 * n - 1, n - 1, -1))]
+    index = {tuple(np.round(q, 12)): k for k, q in enumerate(p)}
+    # the front cap's triangles turn as the profile does (the sides hold its edges reversed)
+    turn = float(np.sum(p[:, 0] * np.roll(p[:, 1], -1) - np.roll(p[:, 0], -1) * p[:, 1]))
+    cap = []
+    for triangle in shapely.constrained_delaunay_triangles(shapely.Polygon(p)).geoms:
+        a, b, c = (index[tuple(np.round(q, 12))] for q in triangle.exterior.coords[:3])
+        (ux, uz), (vx, vz) = p[b] - p[a], p[c] - p[a]
+        area2 = float(ux * vz - uz * vx)
+        cap.append((a, b, c) if (area2 > 0) == (turn > 0) else (a, c, b))
+    faces = cap + [(n + a, n + c, n + b) for a, b, c in cap]
     faces += [(i, n + i, n + (i + 1) % n, (i + 1) % n) for i in range(n)]
     if signed_volume(vertices, faces) < 0:      # the profile ran the other way: turn out
         faces = [f[::-1] for f in faces]

@@ -1,15 +1,16 @@
 """Interlocking assemblies of non-convex parts: the scenes of tests/data/interlock.
 
-Each part is a polycube (a union of grid cells, its boundary the cells' exposed faces:
-coplanar squares, merged into one face per plane by the shape analysis) or an extruded
+Each part is a polycube (:func:`rbe_ros.generators.polycube`: a union of grid cubes, its
+boundary their exposed faces, merged into one face per plane by the shape analysis) or an extruded
 polygon (a voussoir with a shear key); every part is non-convex, so that a convex hull
 would cover a neighbour's notch. Conventions as in :mod:`rbe_ros.generators`: SI units,
-gravity along -z, supports named, a block's position is the mean of its vertices, a
+gravity along -z, supports named, a block's frame at its centre, a
 deterministic output, and ``sequence`` a build order (bottom up) that the planner may
 replace. The friction coefficient of the suite is 0.55 (``SUITE_MU``).
 
 - :func:`polyomino_wall`: a planar wall of tetrominoes (L, J, T, S, Z) one cell thick; in the
-  wall's plane the pieces interlock, so they come in along its normal.
+  wall's plane the pieces interlock, so a piece locked by its neighbours comes in along the
+  wall's normal (built bottom up, each comes down through the notches of the others).
 - :func:`log_cabin`: a 3D interlock: logs with notched ends, crossing at the corners.
 - :func:`cradle`: a non-convex support base with slots; T-pieces set into them and pairs of
   L-pieces on top.
@@ -27,52 +28,11 @@ import math
 import numpy as np
 import shapely
 
-from .generators import signed_volume
-from .scene import Block, Scene, make_block, make_scene
+from .generators import polycube, signed_volume
+from .scene import Block, Scene, box_block, make_block, make_scene
 
 #: The friction coefficient the interlocking suite is planned with.
 SUITE_MU = 0.55
-
-_DIRECTIONS = ((np.array([1, 0, 0]), 0), (np.array([-1, 0, 0]), 0), (np.array([0, 1, 0]), 1),
-               (np.array([0, -1, 0]), 1), (np.array([0, 0, 1]), 2), (np.array([0, 0, -1]), 2))
-
-
-def polycube_mesh(cells) -> tuple[np.ndarray, list[tuple[int, int, int, int]]]:
-    """The boundary of the union of unit grid ``cells`` (integer (i, j, k)): grid vertices and
-    one outward-wound square per exposed cell face."""
-    filled = {tuple(int(v) for v in c) for c in cells}
-    index: dict[tuple[int, int, int], int] = {}
-    faces = []
-    for cell in sorted(filled):
-        c = np.array(cell)
-        for normal, axis in _DIRECTIONS:
-            if tuple(c + normal) in filled:
-                continue
-            # the face's corners, counter-clockwise seen from outside: e_u x e_v = normal
-            u, v = (axis + 1) % 3, (axis + 2) % 3
-            if normal[axis] < 0:
-                u, v = v, u
-            base = c + (normal > 0) * normal
-            corners = [base.copy() for _ in range(4)]
-            corners[1][u] += 1
-            corners[2][u] += 1
-            corners[2][v] += 1
-            corners[3][v] += 1
-            faces.append(tuple(index.setdefault(tuple(int(x) for x in p), len(index))
-                               for p in corners))
-    vertices = np.array(sorted(index, key=index.get), dtype=float)
-    return vertices, faces
-
-
-def polycube_block(block_id: str, cells, cell=(0.1, 0.1, 0.1), origin=(0.0, 0.0, 0.0), *,
-                   density: float = 2000.0, support: bool = False) -> Block:
-    """A block of the grid ``cells``, each ``cell`` (m, per axis) large, the grid's corner
-    (0, 0, 0) at ``origin``; its frame at the mean of its vertices."""
-    vertices, faces = polycube_mesh(cells)
-    world = np.asarray(origin, dtype=float) + vertices * np.asarray(cell, dtype=float)
-    centre = world.mean(axis=0)
-    return make_block(block_id, world - centre, faces, centre, density=density, support=support)
-
 
 def extruded_block(block_id: str, profile, y0: float, y1: float, *, density: float = 2000.0,
                    support: bool = False) -> Block:
@@ -167,9 +127,10 @@ def tetromino_tiling(width: int, height: int, seed: int = 0) -> list[tuple[str, 
     return placed
 
 
-def _ground(lo, hi, *, density: float, block_id: str = "ground") -> Block:
-    return polycube_block(block_id, [(0, 0, 0)], np.subtract(hi, lo), lo, density=density,
-                          support=True)
+def _ground(lo, hi, *, density: float) -> Block:
+    """The support slab "ground" between the corners ``lo`` and ``hi``."""
+    lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+    return box_block("ground", hi - lo, (lo + hi) / 2, density=density, support=True)
 
 
 def _bottom_up(blocks: list[Block]) -> list[str]:
@@ -188,8 +149,8 @@ def polyomino_wall(width: int = 8, height: int = 6, cell: float = 0.1, seed: int
     blocks = [_ground((-cell, -cell, -cell), ((width + 1) * cell, 2 * cell, 0.0),
                       density=density)]
     for k, (_, cells) in enumerate(tiles):
-        blocks.append(polycube_block(f"p{k:02d}", [(x, 0, z) for x, z in cells],
-                                     (cell,) * 3, density=density))
+        blocks.append(polycube(f"p{k:02d}", [(x, 0, z) for x, z in cells],
+                                     cell, density=density))
     return make_scene(f"polyomino-wall({width}x{height}, seed {seed})", blocks,
                       sequence=_bottom_up(blocks))
 
@@ -208,12 +169,12 @@ def log_cabin(levels: int = 4, length: int = 5, width: int = 5, cell: float = 0.
         for side, y in enumerate((0, width - 1)):
             cells = [(0, y, z), (length - 1, y, z)]
             cells += [(x, y, zz) for x in range(1, length - 1) for zz in (z, z + 1)]
-            blocks.append(polycube_block(f"x{level}_{side}", cells, (cell,) * 3,
+            blocks.append(polycube(f"x{level}_{side}", cells, cell,
                                          density=density))
         for side, x in enumerate((0, length - 1)):
             cells = [(x, 0, z + 1), (x, width - 1, z + 1)]
             cells += [(x, y, zz) for y in range(1, width - 1) for zz in (z + 1, z + 2)]
-            blocks.append(polycube_block(f"y{level}_{side}", cells, (cell,) * 3,
+            blocks.append(polycube(f"y{level}_{side}", cells, cell,
                                          density=density))
     return make_scene(f"log-cabin({levels} levels)", blocks, sequence=_bottom_up(blocks))
 
@@ -228,8 +189,7 @@ def cradle(slots: int = 6, depth: int = 2, cell: float = 0.1, density: float = 2
     n = 3 * slots
     base = [(x, y, 0) for x in range(n) for y in range(depth)]
     base += [(x, y, 1) for x in range(n) for y in range(depth) if x % 3 != 1]
-    blocks = [polycube_block("base", base, (cell,) * 3, (0.0, 0.0, -2 * cell),
-                             density=density, support=True)]
+    blocks = [polycube("base", base, cell, density=density, support=True)]
     for i in range(slots):
         x = 3 * i
         ys = range(depth)
@@ -238,8 +198,7 @@ def cradle(slots: int = 6, depth: int = 2, cell: float = 0.1, density: float = 2
         lb = [(x + dx, y, 4) for dx in range(2) for y in ys]
         lb += [(x + dx, y, 5) for dx in range(3) for y in ys]
         for bid, cells in ((f"t{i}", t), (f"l{i}a", la), (f"l{i}b", lb)):
-            blocks.append(polycube_block(bid, cells, (cell,) * 3, (0.0, 0.0, -2 * cell),
-                                         density=density))
+            blocks.append(polycube(bid, cells, cell, density=density))
     return make_scene(f"cradle({slots} slots)", blocks, sequence=_bottom_up(blocks))
 
 
@@ -309,20 +268,20 @@ def greedy_trap(levels: int = 5, cell: float = 0.1, density: float = 2000.0) -> 
     and the plan dead-ends at step 1. Keel first, then hook, then the stack, works."""
     cup = [(x, y, z) for x in range(-1, 4) for y in range(-1, 3) for z in range(-1, 2)
            if not (0 <= x < 3 and 0 <= y < 2 and z >= 0)]
-    blocks = [polycube_block("cup", cup, (cell,) * 3, density=density, support=True)]
+    blocks = [polycube("cup", cup, cell, density=density, support=True)]
     hook = [(1, 0, 0), (2, 0, 0), (0, 0, 1), (1, 0, 1), (2, 0, 1)]
     keel = [(0, 0, 0), (0, 1, 0), (1, 1, 0), (2, 1, 0), (0, 1, 1), (1, 1, 1), (2, 1, 1)]
     keel += [(x, y, 2) for x in range(3) for y in (1, 2)]
-    blocks += [polycube_block("hook", hook, (cell,) * 3, density=density),
-               polycube_block("keel", keel, (cell,) * 3, density=density)]
+    blocks += [polycube("hook", hook, cell, density=density),
+               polycube("keel", keel, cell, density=density)]
     for level in range(levels):
         z = 3 + level
         a = [(0, 1, z), (1, 1, z), (0, 2, z)]
         b = [(2, 1, z), (2, 2, z), (1, 2, z)]
         if level % 2:                   # mirrored in x: the courses' seams cross
             a, b = ([(2 - x, y, zz) for x, y, zz in a], [(2 - x, y, zz) for x, y, zz in b])
-        blocks += [polycube_block(f"c{level}a", a, (cell,) * 3, density=density),
-                   polycube_block(f"c{level}b", b, (cell,) * 3, density=density)]
+        blocks += [polycube(f"c{level}a", a, cell, density=density),
+                   polycube(f"c{level}b", b, cell, density=density)]
     order = ["keel", "hook"] + [f"c{level}{s}" for level in range(levels) for s in "ab"]
     return make_scene(f"greedy-trap({levels} levels)", blocks, sequence=order)
 
@@ -339,15 +298,15 @@ def sealed_pocket(width: int = 10, height: int = 4, cell: float = 0.1,
     pocket = [(x0 + 1, 0, 1), (x0 + 2, 0, 1), (x0 + 3, 0, 1), (x0 + 3, 0, 2)]
     housing = [(x, y, z) for x in range(x0, x0 + 4) for y in range(-1, 2) for z in range(3)
                if (x, y, z) not in pocket]
-    blocks.append(polycube_block("housing", housing, (cell,) * 3, density=density,
+    blocks.append(polycube("housing", housing, cell, density=density,
                                  support=True))
-    blocks.append(polycube_block("wall", [(x0 + 4, y, z) for y in range(-1, 2)
-                                          for z in range(3)], (cell,) * 3, density=density,
+    blocks.append(polycube("wall", [(x0 + 4, y, z) for y in range(-1, 2)
+                                          for z in range(3)], cell, density=density,
                                  support=True))
-    blocks.append(polycube_block("trapped", pocket, (cell,) * 3, density=density))
+    blocks.append(polycube("trapped", pocket, cell, density=density))
     for k, (_, cells) in enumerate(tetromino_tiling(width, height, 0)):
-        blocks.append(polycube_block(f"p{k:02d}", [(x, 0, z) for x, z in cells],
-                                     (cell,) * 3, density=density))
+        blocks.append(polycube(f"p{k:02d}", [(x, 0, z) for x, z in cells],
+                                     cell, density=density))
     return make_scene(f"sealed-pocket({width}x{height})", blocks, sequence=_bottom_up(blocks))
 
 

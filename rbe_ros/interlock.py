@@ -155,7 +155,7 @@ def polyomino_wall(width: int = 8, height: int = 6, cell: float = 0.1, seed: int
                       sequence=_bottom_up(blocks))
 
 
-def log_cabin(levels: int = 4, length: int = 5, width: int = 5, cell: float = 0.1,
+def log_cabin(levels: int = 6, length: int = 5, width: int = 5, cell: float = 0.1,
               density: float = 600.0) -> Scene:
     """A log cabin of ``levels`` courses, each of two logs along x ("x{level}_{0|1}") and,
     half a course higher, two along y ("y{level}_{0|1}"), crossing at the four corners with
@@ -179,7 +179,7 @@ def log_cabin(levels: int = 4, length: int = 5, width: int = 5, cell: float = 0.
     return make_scene(f"log-cabin({levels} levels)", blocks, sequence=_bottom_up(blocks))
 
 
-def cradle(slots: int = 6, depth: int = 2, cell: float = 0.1, density: float = 2000.0) -> Scene:
+def cradle(slots: int = 8, depth: int = 2, cell: float = 0.1, density: float = 2000.0) -> Scene:
     """Blocks set into a non-convex support "base": a slab with ``slots`` slots one cell
     wide and deep, three cells apart (x), ``depth`` cells long (y) and open at both ends.
     Into each slot a T-piece "t{i}" (stem in the slot, its flange on the ribs either side:
@@ -202,19 +202,19 @@ def cradle(slots: int = 6, depth: int = 2, cell: float = 0.1, density: float = 2
     return make_scene(f"cradle({slots} slots)", blocks, sequence=_bottom_up(blocks))
 
 
-def keyed_vault(voussoirs: int = 11, radius: float = 1.0, thickness: float = 0.25,
+def keyed_vault(voussoirs: int = 15, radius: float = 1.0, thickness: float = 0.25,
                 depth: float = 0.4, span_deg: float = 120.0, key_ratio: float = 0.25,
                 density: float = 2000.0) -> Scene:
     """A segmental arch ("vault", extruded along y) of ``voussoirs`` "v00" (at +x) ...
     over ``span_deg`` degrees of a circle of centre-line ``radius``, with shear keys: every
-    joint carries a tongue (``key_ratio`` of the thickness wide and deep, at mid thickness)
+    joint carries a tongue (``key_ratio`` of the thickness wide, half that deep, mid thickness)
     of the voussoir nearer its springing in a groove of the one nearer the key, so the key
     stone is grooved on both sides and can only come in along y. On supports
     "springing_right" and "springing_left", whose tops are the springing joints."""
     half = math.radians(span_deg) / 2
     angles = np.linspace(math.pi / 2 - half, math.pi / 2 + half, voussoirs + 1)
     r_in, r_out = radius - thickness / 2, radius + thickness / 2
-    w, h = key_ratio * thickness / 2, key_ratio * thickness
+    w = h = key_ratio * thickness / 2        # half its width, its depth
     mid = voussoirs / 2
 
     def joint(k: int, sign: int):

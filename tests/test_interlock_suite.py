@@ -3,9 +3,9 @@ tests/data/interlock, each planned end to end with insertion on and at most 2 he
 every step of the planned scene re-checked by ``check --sequence``, and every step's path
 verified by an independent sampled sweep of the true meshes (trimesh's collision manager,
 not our decomposition): the moving block's faces moved in by 0.5 mm, sampled every 5 mm
-(a tenth of the thinnest feature of the suite, the keyed vault's 62.5 mm shear key) from
-where it is clear of every present block's bounding box to its pose. The greedy trap dead
-ends at step 1 and is planned by backing up; the sealed pocket has no plan.
+(a sixth of the thinnest feature of the suite, the keyed vault's shear keys, 31 mm deep)
+from where it is clear of every present block's bounding box to its pose. The greedy trap
+dead ends at step 1 and is planned by backing up; the sealed pocket has no plan.
 
 The files are what ``rbe-ros generate`` writes (rbe_ros/interlock.py); the first test keeps
 them so. Regenerate with the commands of tests/data/interlock/README.md.
@@ -30,7 +30,7 @@ from rbe_ros.io.scene_json import load_scene, scene_to_dict
 SUITE = Path(__file__).parent / "data" / "interlock"
 #: Each file and the generator call that writes it.
 FILES = {"polyomino_wall_8x6": lambda: polyomino_wall(),
-         "polyomino_wall_10x8": lambda: polyomino_wall(width=10, height=8, seed=1),
+         "polyomino_wall_12x12": lambda: polyomino_wall(width=12, height=12, seed=2),
          "log_cabin": log_cabin, "cradle": cradle, "keyed_vault": keyed_vault,
          "greedy_trap": greedy_trap, "sealed_pocket": sealed_pocket}
 PLANNED = [name for name in FILES if name != "sealed_pocket"]

@@ -14,6 +14,7 @@ import trimesh
 from rbe_ros.cli import main
 from rbe_ros.generators import semicircular_arch
 from rbe_ros.interlock import cradle
+from rbe_ros.io.messages import scene_from_state_dict, state_to_dict
 from rbe_ros.io.scene_json import scene_from_dict, scene_to_dict
 from rbe_ros.scene import SceneError
 
@@ -204,3 +205,18 @@ def test_an_overlap_names_the_pose_uncertainty_that_accepts_it(tmp_path, capsys)
     assert code == 2 and "--pose-uncertainty 0.0021,0.2 would make it a contact" in err
     assert touching("--pose-uncertainty", "0.0021,0.2")
     assert not touching("--pose-uncertainty", "0.002,0.2")
+
+
+def test_an_assembly_state_with_an_open_mesh_is_repaired_as_a_file_is():
+    """The node's and replay's input (an rbe_msgs/AssemblyState dict: meshes as triangles)
+    goes through the same repair: a voussoir with a triangle missing is closed, named, and
+    has the intact voussoir's volume."""
+    intact = semicircular_arch(9)
+    state = state_to_dict(intact, "world")
+    raw = next(b for b in state["blocks"] if b["id"] == "v04")
+    raw["mesh"]["triangles"] = raw["mesh"]["triangles"][2:]     # a quad face gone
+    scene = scene_from_state_dict(state)
+    assert scene.warnings == ("block 'v04': mesh repaired: filled 1 hole; replaced by its "
+                              "convex hull (volumes agree within 0.0001)",)
+    assert _trimesh(scene.block("v04")).volume == pytest.approx(
+        _trimesh(intact.block("v04")).volume, rel=1e-12)

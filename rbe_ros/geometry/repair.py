@@ -22,12 +22,13 @@ INVALID_INPUT naming the block.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import trimesh
 from scipy.spatial import ConvexHull
 
+from ..scene import Block, SceneError
 from .block import is_closed, signed_volume
 
 #: Vertices closer than this share of the mesh's longest extent are one vertex.
@@ -46,6 +47,22 @@ class Repaired:
     vertices: np.ndarray
     faces: tuple[tuple[int, ...], ...]
     notes: tuple[str, ...] = ()
+
+
+def repair_block(block: Block) -> tuple[Block, str | None]:
+    """``block`` with its mesh repaired (:func:`repair_mesh`) and the warning that names it
+    and says what was repaired (None: the mesh was closed, the block is returned as is);
+    SceneError naming the block when the mesh cannot be closed. The one repair of every
+    loader: scene files (CLI, the node's design_file) and AssemblyState messages (node,
+    replay)."""
+    try:
+        fixed = repair_mesh(block.vertices, block.faces)
+    except ValueError as exc:
+        raise SceneError(f"block {block.id!r}: {exc}", [block.id]) from None
+    if not fixed.notes:
+        return block, None
+    return (replace(block, vertices=fixed.vertices, faces=fixed.faces),
+            f"block {block.id!r}: mesh repaired: {'; '.join(fixed.notes)}")
 
 
 def repair_mesh(vertices, faces) -> Repaired:

@@ -3,12 +3,11 @@ from __future__ import annotations
 
 import gzip
 import json
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from ..geometry.repair import repair_mesh
+from ..geometry.repair import repair_block
 from ..scene import (BOX_FACES, Block, DEFAULT_GRAVITY, Hold, Scene, SceneError, box_vertices,
                      finite_array, make_block, make_scene)
 
@@ -22,10 +21,10 @@ def scene_from_dict(data: dict, base_dir: Path | None = None) -> Scene:
         raise SceneError('a scene needs a "blocks" list')
     blocks, warnings = [], []
     for i, raw in enumerate(raw_blocks):
-        block, notes = _block_from_dict(i, raw, base_dir)
+        block, warning = _block_from_dict(i, raw, base_dir)
         blocks.append(block)
-        if notes:
-            warnings.append(f"block {block.id!r}: mesh repaired: {'; '.join(notes)}")
+        if warning:
+            warnings.append(warning)
     seq = data.get("sequence") or ()
     if not isinstance(seq, (list, tuple)):
         raise SceneError('"sequence" must be a list of block ids')
@@ -61,9 +60,9 @@ def _hold_from_dict(index: int, raw) -> Hold:
 _HOLD_EXTRA = ("grip", "max_force", "max_torque")
 
 
-def _block_from_dict(index: int, raw, base_dir: Path | None) -> tuple[Block, tuple[str, ...]]:
+def _block_from_dict(index: int, raw, base_dir: Path | None) -> tuple[Block, str | None]:
     """The block of one entry of "blocks", its mesh repaired if it is open or wound
-    inconsistently (:func:`rbe_ros.geometry.repair.repair_mesh`), and what was repaired."""
+    inconsistently (:func:`rbe_ros.geometry.repair.repair_block`), and the warning of it."""
     if not isinstance(raw, dict):
         raise SceneError(f"block #{index} must be a JSON object")
     if "id" not in raw:
@@ -90,15 +89,7 @@ def _block_from_dict(index: int, raw, base_dir: Path | None) -> tuple[Block, tup
     block = make_block(bid, vertices, faces, raw.get("position", (0, 0, 0)),
                        raw.get("orientation", (0, 0, 0, 1)), density=raw.get("density", 0.0),
                        mass=raw.get("mass", 0.0), support=bool(raw.get("support", False)))
-    if not repair:
-        return block, ()
-    try:
-        fixed = repair_mesh(block.vertices, block.faces)
-    except ValueError as exc:
-        raise SceneError(f"block {bid!r}: {exc}", [bid]) from None
-    if not fixed.notes:
-        return block, ()
-    return replace(block, vertices=fixed.vertices, faces=fixed.faces), fixed.notes
+    return repair_block(block) if repair else (block, None)
 
 
 def _load_mesh_file(bid: str, rel: str, base_dir: Path | None):

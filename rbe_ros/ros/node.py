@@ -590,7 +590,8 @@ class RbeChecks:
         sent: list[bytes] = []
 
         def read(with_sequence: bool) -> Scene:
-            return scene_from_msg(state, sequence=with_sequence, limits=options.limits)
+            return self._repaired(scene_from_msg(state, sequence=with_sequence,
+                                                 limits=options.limits))
 
         def publish(report: Report, scene: Scene, total: int) -> None:
             sent.append(self._publish(scene, report, header))
@@ -733,6 +734,12 @@ class RbeChecks:
             dict_to_message(state_to_dict(result.scene), AssemblyState)
         self._publish(None, result.error, header, state)
 
+    def _repaired(self, scene: Scene) -> Scene:
+        """``scene``, its repaired meshes logged (WARN, each naming the block)."""
+        for warning in scene.warnings:
+            self.get_logger().warning(warning)
+        return scene
+
     def design_message(self, path: str) -> AssemblyState:
         """The design of ``design_file`` as the message a pipeline would send on ~/design
         (SceneError if it cannot be read)."""
@@ -826,7 +833,7 @@ class RbeChecks:
                 dict_to_message(plan_feedback_to_dict(p), PlanSequence.Feedback))
 
         def read() -> Scene:
-            return scene_from_msg(goal.assembly, limits=options.limits)
+            return self._repaired(scene_from_msg(goal.assembly, limits=options.limits))
 
         with self._plan_lock:
             start = time.monotonic()

@@ -23,6 +23,7 @@ INVALID_INPUT naming the block.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import lru_cache
 
 import numpy as np
 import trimesh
@@ -70,7 +71,7 @@ def repair_mesh(vertices, faces) -> Repaired:
     inconsistently (module docstring); raises ValueError when it cannot be closed."""
     vertices = np.asarray(vertices, dtype=float)
     faces = tuple(tuple(int(i) for i in f) for f in faces)
-    if _closed(faces) and signed_volume(vertices, faces) > 0:
+    if _sound(np.ascontiguousarray(vertices).tobytes(), faces):
         return Repaired(vertices, faces)
     scale = float(np.ptp(vertices, axis=0).max()) or 1.0
     triangles = np.array([(f[0], f[i], f[i + 1]) for f in faces for i in range(1, len(f) - 1)],
@@ -119,6 +120,25 @@ def repair_mesh(vertices, faces) -> Repaired:
         verts, out_faces = _hull_mesh(verts, hull)
         notes.append(f"replaced by its convex hull (volumes agree within {HULL_TOL:g})")
     return Repaired(verts, tuple(out_faces), tuple(notes))
+
+
+@lru_cache(maxsize=4096)
+def _sound(vertex_bytes: bytes, faces) -> bool:
+    """Closed, consistently wound and outward: nothing to repair (cached by the exact mesh,
+    so a wall of identical bricks is looked at once). Every directed edge once, and its
+    reverse present: for the few faces of a block, sets of Python tuples (faster than
+    arrays there); for many, the array test of the shape analysis."""
+    if len(faces) > _FEW:
+        closed = _closed(faces)
+    else:
+        directed = {(f[i - 1], f[i]) for f in faces for i in range(len(f))}
+        closed = (len(directed) == sum(len(f) for f in faces) and min(map(len, faces)) >= 3
+                  and all((v, u) in directed for u, v in directed))
+    return closed and signed_volume(np.frombuffer(vertex_bytes).reshape(-1, 3), faces) > 0
+
+
+#: Meshes of more faces are checked with arrays (:func:`_sound`).
+_FEW = 256
 
 
 def _closed(faces) -> bool:

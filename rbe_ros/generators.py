@@ -21,7 +21,7 @@ from .scene import BOX_FACES, Block, Scene, make_block, make_scene
 
 # --------------------------------------------------------------------------- helpers
 
-def signed_volume(vertices: np.ndarray, faces) -> float:
+def _signed_volume(vertices: np.ndarray, faces) -> float:
     """Volume enclosed by the faces (positive when they are wound outward)."""
     total = 0.0
     for f in faces:
@@ -39,7 +39,7 @@ def _prism(block_id: str, corners, *, density: float, support: bool = False) -> 
     centre = corners.mean(axis=0)
     local = corners - centre
     faces = BOX_FACES
-    if signed_volume(local, faces) < 0:
+    if _signed_volume(local, faces) < 0:
         faces = tuple(tuple(reversed(f)) for f in faces)
     return make_block(block_id, local, faces, centre, density=density, support=support)
 

@@ -28,7 +28,8 @@ import math
 import numpy as np
 import shapely
 
-from .generators import polycube, signed_volume
+from .generators import polycube
+from .geometry.block import signed_volume
 from .scene import Block, Scene, box_block, make_block, make_scene
 
 #: The friction coefficient the interlocking suite is planned with.

@@ -17,7 +17,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import trimesh
 
 from rbe_ros.analysis.assembly import Assembly
 from rbe_ros.analysis.insertion import block_insertion
@@ -26,6 +25,8 @@ from rbe_ros.cli import main
 from rbe_ros.interlock import (SUITE_MU, cradle, greedy_trap, keyed_vault, log_cabin,
                                polyomino_wall, sealed_pocket)
 from rbe_ros.io.scene_json import load_scene, scene_to_dict
+
+from helpers import sweep_free
 
 SUITE = Path(__file__).parent / "data" / "interlock"
 #: Each file and the generator call that writes it.
@@ -37,8 +38,6 @@ PLANNED = [name for name in FILES if name != "sealed_pocket"]
 #: The one planned in ``make test``; the others are long.
 SMALL = "polyomino_wall_8x6"
 MU = ("--mu", str(SUITE_MU))
-#: The oracle's inward offset of the moving mesh and its sample spacing (m).
-OFFSET, SPACING = 5e-4, 5e-3
 
 
 def _run(capsys, *argv) -> tuple[int, dict]:
@@ -54,51 +53,6 @@ def test_suite_files_are_the_generators_output(name):
     assembly = Assembly.from_scene(scene)
     free = [b for b in assembly.blocks if not b.support]
     assert 10 <= len(free) <= 40 and not any(b.convex for b in free)
-
-
-def _mesh(block) -> trimesh.Trimesh:
-    """The true mesh of a posed block: every face of the suite is convex (squares,
-    rectangles, the vault's triangulated caps), so a fan of each is exact."""
-    return trimesh.Trimesh(block.vertices, block.triangles, process=False)
-
-
-def _inward(mesh: trimesh.Trimesh, offset: float) -> trimesh.Trimesh:
-    """``mesh`` with every face moved in by ``offset``: each vertex solves n . m = 1 over the
-    distinct planes of its faces (exact where at most three meet, as at every vertex of a
-    polycube or a prism) and moves by -offset m."""
-    normals = np.round(mesh.face_normals, 9)
-    moved = mesh.vertices.copy()
-    for v, faces in enumerate(mesh.vertex_faces):
-        distinct = np.unique(normals[faces[faces >= 0]], axis=0)
-        m = np.linalg.lstsq(distinct, np.ones(len(distinct)), rcond=None)[0]
-        moved[v] -= offset * m
-    return trimesh.Trimesh(moved, mesh.faces, process=False)
-
-
-def _sweep_free(assembly: Assembly, present: list[str], block: str, direction,
-                hulls: bool = False) -> bool:
-    """The oracle: ``block``'s true mesh, moved in by OFFSET, at every SPACING along its path
-    (arriving along ``direction``) from where it is clear of the present blocks' boxes,
-    collides with no present block's true mesh (``hulls``: every mesh its convex hull, as
-    the check before issue 28 swept them)."""
-    by_id = {b.id: b for b in assembly.blocks}
-    manager = trimesh.collision.CollisionManager()
-    for bid in present:
-        mesh = _mesh(by_id[bid])
-        manager.add_object(bid, mesh.convex_hull if hulls else mesh)
-    moving = _inward(_mesh(by_id[block]), OFFSET)
-    if hulls:
-        moving = moving.convex_hull
-    d = np.asarray(direction, dtype=float)
-    corners = np.array([[x, y, z] for bid in present for lo, hi in [by_id[bid].aabb]
-                        for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-    distance = max(0.0, float(np.max(corners @ -d) - np.min(moving.vertices @ -d)))
-    for t in np.append(np.arange(0.0, distance, SPACING), distance):
-        shift = np.eye(4)
-        shift[:3, 3] = -t * d
-        if manager.in_collision_single(moving, transform=shift):
-            return False
-    return True
 
 
 def _most_held(holds, steps: int) -> int:
@@ -127,7 +81,7 @@ def _planned_and_verified(tmp_path, capsys, name: str) -> dict:
     for k, (block, approach) in enumerate(zip(scene.sequence, scene.approach)):
         direction = reports[k]["insertion_direction"]
         np.testing.assert_allclose([direction[a] for a in "xyz"], approach, atol=1e-9)
-        assert _sweep_free(assembly, supports + list(scene.sequence[:k]), block, approach), \
+        assert sweep_free(assembly, supports + list(scene.sequence[:k]), block, approach), \
             f"{name}: step {k}, {block} along {approach} collides in the oracle's sweep"
     return plan
 
@@ -141,7 +95,7 @@ def test_small_assembly_planned_rechecked_and_swept(tmp_path, capsys):
     scene = load_scene(tmp_path / f"{SMALL}_planned.json")
     assembly = Assembly.from_scene(scene)
     hull_blocked = [block for k, (block, d) in enumerate(zip(scene.sequence, scene.approach))
-                    if not _sweep_free(assembly, ["ground", *scene.sequence[:k]], block, d,
+                    if not sweep_free(assembly, ["ground", *scene.sequence[:k]], block, d,
                                        hulls=True)]
     assert len(hull_blocked) >= 3
 

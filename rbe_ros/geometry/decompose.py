@@ -4,19 +4,22 @@ For the swept-path test of insertion (:mod:`rbe_ros.geometry.insertion`): a conv
 translated along a line sweeps exactly the convex hull of its start and end, so a block that
 is a union of convex pieces has an exact swept volume, the union of its pieces' sweeps.
 
-The pieces come from a binary space partition by the planes of the mesh's reflex edges (an
-edge where the solid turns inward): a cell of the partition that no reflex edge crosses holds
-a part of the solid without reflex edges, which is convex when connected, the intersection
-of the cell with the planes of the mesh faces that meet it. A polycube, an L, a U or a T
-prism, a block with a blind hole are cut along their inner corners into a few boxes.
+The pieces come from a binary space partition by the planes of the faces at the mesh's
+reflex edges (an edge where the solid turns inward): a cell in which no reflex edge is left
+holds a part of the solid without reflex edges, which is convex when connected, the
+intersection of the cell with the planes of the mesh faces that meet it; a cell that holds
+more than one such part is cut again by a face plane crossing it. A polycube, an L, a U or a
+T prism, a block with a blind hole are cut along their inner corners into a few boxes.
 
-Every decomposition is verified before it is used: no mesh face meets a piece's interior and
-the piece's centroid is inside the mesh (winding number), so each piece lies in the mesh, and
-the pieces' volumes (disjoint cells) sum to the mesh's volume within 1e-9 of it, so their
-union is the mesh. A mesh that fails, or needs more than :data:`MAX_PIECES` pieces or has
-more than :data:`MAX_TRIANGLES` triangles, has no exact decomposition here (None): the caller
-falls back to the convex hull (conservative: a path accepted is free). Cached per mesh, so
-identical blocks in any pose share one decomposition.
+Every decomposition is verified before it is used: every face's part in a piece's cell lies
+on the piece's boundary, no face cuts into a piece, and each piece's centroid is inside the
+mesh (winding number), so each piece is a part of the solid, and the pieces' volumes
+(disjoint cells) sum to the mesh's volume, so their union is the solid, all within a
+tolerance of :data:`TOLERANCES` (1e-6 of the mesh's diagonal, else 1e-4 for a mesh as
+exported). A mesh that fails both, needs more than :data:`MAX_PIECES` pieces or has more than
+:data:`MAX_TRIANGLES` triangles has no decomposition here (None): the caller falls back to
+the convex hull (conservative: a path accepted is free). Cached per mesh, so identical
+blocks in any pose share one decomposition.
 """
 from __future__ import annotations
 
@@ -30,39 +33,43 @@ from scipy.spatial import ConvexHull, QhullError
 MAX_TRIANGLES = 4000
 MAX_PIECES = 64
 
-#: Relative tolerances (of the mesh's bounding-box diagonal): a reflex edge turns inward by
-#: more than this; a face meets a cell when it reaches this far inside it.
-REFLEX_TOL = 1e-7
-INSIDE_TOL = 1e-7
-#: The pieces' volumes sum to the mesh's within this share of it.
-VOLUME_TOL = 1e-9
+#: Tolerances tried in turn, relative to the mesh's bounding-box diagonal: a reflex edge turns
+#: inward by more than this, a face meets a cell when it reaches this far inside it, and the
+#: pieces' volumes sum to the mesh's within ten times this share of it. The first is for
+#: exact meshes, the second for exported ones (coordinates rounded, faces not quite planar):
+#: both far below the clearance of the path check (2% of the block's size).
+TOLERANCES = (1e-6, 1e-4)
 
 
 def convex_pieces(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, ...] | None:
     """The vertices of the convex pieces (block frame) whose union is the closed mesh
-    (``triangles`` wound outward), verified; None when it has no exact decomposition here."""
+    (``triangles`` wound outward) within the first of :data:`TOLERANCES` that verifies; None
+    when it has no decomposition here."""
     vertices = np.ascontiguousarray(vertices, dtype=float)
     triangles = np.ascontiguousarray(triangles, dtype=np.int64)
-    return _pieces(vertices.tobytes(), triangles.tobytes())
+    for relative in TOLERANCES:
+        found = _pieces(vertices.tobytes(), triangles.tobytes(), relative)
+        if found is not None:
+            return found
+    return None
 
 
 @lru_cache(maxsize=1024)
-def _pieces(vertex_bytes: bytes, triangle_bytes: bytes):
+def _pieces(vertex_bytes: bytes, triangle_bytes: bytes, relative: float):
     vertices = np.frombuffer(vertex_bytes).reshape(-1, 3)
     triangles = np.frombuffer(triangle_bytes, dtype=np.int64).reshape(-1, 3)
     if len(triangles) > MAX_TRIANGLES:
         return None
     tri = vertices[triangles]
     scale = float(np.linalg.norm(np.ptp(vertices, axis=0)))
-    tol = INSIDE_TOL * scale
+    tol = relative * scale
     normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     area = np.linalg.norm(normals, axis=1)
     keep = area > 1e-12 * scale ** 2
     tri, normals = tri[keep], normals[keep] / area[keep, None]
     offsets = np.einsum("ij,ij->i", normals, tri[:, 0])
     volume = float(np.einsum("ij,ij->", tri[:, 0], np.cross(tri[:, 1], tri[:, 2]))) / 6.0
-    ends, planes = _reflex_edges(vertices, triangles[keep], normals, offsets,
-                                 REFLEX_TOL * scale)
+    ends, planes = _reflex_edges(vertices, triangles[keep], normals, offsets, tol)
     low, high = vertices.min(axis=0), vertices.max(axis=0)
     pad = 1e-3 * scale
     corners = np.array(list(itertools.product(*zip(low - pad, high + pad))))
@@ -93,7 +100,7 @@ def _pieces(vertex_bytes: bytes, triangle_bytes: bytes):
             part = _cut(corners, sign * n, sign * d, tol)
             if part is not None:
                 stack.append((np.vstack([a, sign * n]), np.append(b, sign * d), part))
-    if not pieces or abs(total - volume) > VOLUME_TOL * volume + 1e-12 * scale ** 3:
+    if not pieces or abs(total - volume) > 10 * relative * volume:
         return None
     for p in pieces:
         p.flags.writeable = False

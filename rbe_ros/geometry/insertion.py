@@ -8,19 +8,21 @@ feasible one closest to straight down along gravity (a top-down approach suits g
 
 That direction is exact without a solver: the unit direction of a 3D polyhedral cone closest
 to g is g itself, or g projected onto one face's plane, or onto one edge (the cross product of
-two face normals), so :func:`cone_directions` enumerates these few candidates, keeps the
-feasible ones and sorts them by their angle to g. When g lies in the cone's polar (a block in
-a slot across gravity), several directions tie at 90 deg; the sorted list then holds the
-cone's edges and its faces' in-plane axes too, so the path check can try them in turn.
+two face normals). :func:`cone_directions` enumerates these with a set that generates the
+cone (its extreme rays and its lineality space both ways: a piece locked in a planar wall
+comes in along the wall's normal), keeps the feasible ones within the largest approach angle
+from g and sorts them by their angle to g, so the path check can try them in turn.
 
-The path: the moving block's convex hull translated along -d over the approach distance
-sweeps exactly the convex hull of its start and end vertices, one convex body, so one
-discrete collision test of that body per present block decides the path (python-fcl's GJK,
-after a bounding-box broad phase). Conservative for non-convex blocks: the moving block and
-the present ones are their convex hulls, so a path accepted is free, and a path refused
-through a notch of a non-convex neighbour may still be free. The moving block has its faces
-moved in by a clearance first (:func:`shrunk`), so that its neighbours at contact (touching, or
-overlapping as much as the scene validation accepts) do not count as collisions.
+The path: a convex body translated along -d sweeps exactly the convex hull of its start and
+end vertices, so one discrete collision test of that body per present convex body decides the
+path (python-fcl's GJK, after a bounding-box broad phase). A non-convex block, moving or
+present, is its exact convex pieces (:mod:`rbe_ros.geometry.decompose`), so its path is exact
+too; without a decomposition it is its convex hull (conservative: a path accepted is free).
+The path runs from where the block is clear of every present block's bounding box to its
+pose, or over a given distance. The moving block's pieces have their faces moved in by a
+clearance first (:func:`shrunk`), so that its neighbours at contact (touching, or
+overlapping as much as the scene validation accepts) do not count as collisions, and a slide
+along a face in contact is free.
 
 Under a declared pose uncertainty every block, the present ones too, is also shrunk by its
 allowance a (:func:`rbe_ros.geometry.uncertainty.allowances`: no point of the block is
@@ -31,11 +33,11 @@ the contact detection and the validation) do not block each other.
 """
 from __future__ import annotations
 
+import math
+import threading
 from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-import math
-import threading
 
 import fcl
 import numpy as np
@@ -69,20 +71,31 @@ def in_cone(direction, normals: np.ndarray, tol: float = FEASIBLE_TOL) -> bool:
     return bool(len(normals) == 0 or np.max(np.asarray(normals) @ direction) <= tol)
 
 
-def distinct_normals(normals: np.ndarray) -> np.ndarray:
-    """The unit rows of ``normals`` without repeats (within 1e-9), in a deterministic order."""
+def distinct_normals(normals: np.ndarray, tol: float = FEASIBLE_TOL) -> np.ndarray:
+    """The unit rows of ``normals`` without repeats (within 1e-9), in a deterministic order;
+    a row within ``tol`` (chord) of an earlier one is left out too (the faces of a mesh as
+    exported, not quite parallel, give one normal)."""
     normals = np.asarray(normals, dtype=float).reshape(-1, 3)
     if not len(normals):
         return normals
     normals = normals / np.linalg.norm(normals, axis=1, keepdims=True)
-    return np.unique(np.round(normals, 9), axis=0)
+    normals = np.unique(np.round(normals, 9), axis=0)
+    if tol <= FEASIBLE_TOL:
+        return normals
+    kept = []
+    for n in normals:
+        if not kept or np.min(np.linalg.norm(np.array(kept) - n, axis=1)) > tol:
+            kept.append(n)
+    return np.array(kept)
 
 
-def cone_directions(normals: np.ndarray, down: np.ndarray,
-                    max_angle: float = math.pi) -> list[np.ndarray]:
-    """The candidate unit directions of the cone {d : N d <= 0} within ``max_angle``
+def cone_directions(normals: np.ndarray, down: np.ndarray, max_angle: float = math.pi,
+                    tol: float = FEASIBLE_TOL) -> list[np.ndarray]:
+    """The candidate unit directions of the cone {d : N d <= tol} within ``max_angle``
     (radians) of ``down``, closest to ``down`` first (the first is the exact closest feasible
-    direction); empty when there is none.
+    direction); empty when there is none. ``tol`` (the sine of the contact angle tolerance):
+    normals closer than that are one, and the lineality space is that of the normals' span
+    up to it, so that faces not quite parallel (a mesh as exported) keep a wall's normal.
 
     The set generates the cone and holds its nearest direction to ``down``:
 
@@ -99,7 +112,7 @@ def cone_directions(normals: np.ndarray, down: np.ndarray,
     - with ``max_angle`` below 90 deg the cap {d : angle(d, down) <= max_angle} cuts the
       cone: the directions where the cap's circle meets each face plane, the extreme
       directions of the cone within the cap."""
-    normals = distinct_normals(normals)
+    normals = distinct_normals(normals, tol)
     down = np.asarray(down, dtype=float) / np.linalg.norm(down)
     raw = [down[None, :]]
     if len(normals):
@@ -109,7 +122,7 @@ def cone_directions(normals: np.ndarray, down: np.ndarray,
         i, j = np.triu_indices(len(normals), 1)
         edges = np.cross(normals[i], normals[j])
         raw += [edges, -edges]
-        for line in lineality(normals):
+        for line in lineality(normals, tol):
             across = np.cross(line, normals)
             raw += [line[None, :], -line[None, :], across, -across]
         if max_angle < math.pi:
@@ -120,7 +133,7 @@ def cone_directions(normals: np.ndarray, down: np.ndarray,
     norms = np.linalg.norm(raw, axis=1)
     raw = raw[norms >= 1e-9] / norms[norms >= 1e-9, None]
     if len(normals):
-        raw = raw[np.max(raw @ normals.T, axis=1) <= FEASIBLE_TOL]
+        raw = raw[np.max(raw @ normals.T, axis=1) <= max(tol, FEASIBLE_TOL)]
     raw = raw[raw @ down >= math.cos(max_angle) - FEASIBLE_TOL]
     # closest to down first; ties broken by the rounded direction (deterministic)
     keys = np.round(raw, 9)
@@ -129,14 +142,15 @@ def cone_directions(normals: np.ndarray, down: np.ndarray,
     return list(raw[order[np.sort(first)]])
 
 
-def lineality(normals: np.ndarray) -> np.ndarray:
+def lineality(normals: np.ndarray, tol: float = FEASIBLE_TOL) -> np.ndarray:
     """An orthonormal basis (rows) of the cone's lineality space {d : N d = 0} when it is a
-    line (the normals span a plane); empty otherwise (a plane's and the whole space's
-    directions are the in-plane and world axes of :func:`cone_directions`)."""
+    line (the normals span a plane, singular values beyond ``tol`` of the largest); empty
+    otherwise (a plane's and the whole space's directions are the in-plane and world axes
+    of :func:`cone_directions`)."""
     if len(normals) < 2:
         return np.zeros((0, 3))
     _, sigma, vt = np.linalg.svd(normals)
-    rank = int(np.sum(sigma > 1e-9 * sigma[0]))
+    rank = int(np.sum(sigma > max(tol, FEASIBLE_TOL) * sigma[0]))
     return vt[2:] if rank == 2 else np.zeros((0, 3))
 
 
@@ -294,11 +308,12 @@ def insertion(normals: np.ndarray, path: PathCheck, down: np.ndarray,
     cone and within ``max_angle`` of down."""
     normals = np.asarray(normals, dtype=float).reshape(-1, 3)
     down = np.asarray(down, dtype=float) / np.linalg.norm(down)
+    tol = math.sin(angle_tol)
     blockers: dict[str, None] = {}
     tried = 0
     if given is not None:
         given = np.asarray(given, dtype=float) / np.linalg.norm(given)
-        if not in_cone(given, normals, np.sin(angle_tol)):
+        if not in_cone(given, normals, tol):
             return Insertion(False, reason=f"the given approach {_fmt(given)} comes out of a "
                              "neighbour (against an interface normal)")
         off = math.acos(float(np.clip(given @ down, -1.0, 1.0)))
@@ -307,7 +322,7 @@ def insertion(normals: np.ndarray, path: PathCheck, down: np.ndarray,
                              f"{math.degrees(off):.3g} deg from straight down, beyond "
                              f"{math.degrees(max_angle):.3g} deg")
         candidates = [given]
-    elif in_cone(down, normals, np.sin(angle_tol)):
+    elif in_cone(down, normals, tol):
         # straight down is the closest direction when the cone holds it (within the contact
         # angle tolerance: a neighbour's face off vertical by less does not tilt the
         # approach): its path first, the other candidates only when it is blocked
@@ -316,12 +331,12 @@ def insertion(normals: np.ndarray, path: PathCheck, down: np.ndarray,
             return Insertion(True, down)
         blockers.update(dict.fromkeys(hits))
         tried = 1
-        candidates = [d for d in cone_directions(normals, down, max_angle)
+        candidates = [d for d in cone_directions(normals, down, max_angle, tol)
                       if d @ down < 1.0 - 1e-12]
     else:
-        candidates = cone_directions(normals, down, max_angle)
+        candidates = cone_directions(normals, down, max_angle, tol)
         if not candidates:
-            if max_angle < math.pi and cone_directions(normals, down):
+            if max_angle < math.pi and cone_directions(normals, down, math.pi, tol):
                 return Insertion(False, reason=f"no direction within "
                                  f"{math.degrees(max_angle):.3g} deg of straight down leaves "
                                  "every interface")

@@ -110,6 +110,13 @@ scaling: setup
 plan-bench: setup
 	nice -n 10 $(PY) benchmarks/plan_bench.py $(PLAN_BENCH_ARGS)
 
+# The planner's search that backs up (issues 28, 31): outcomes, states and times of the
+# capped 10 x 8 dome against its budget, an exhausted search, a greedy dead end:
+# docs/SEARCH.md (a few minutes; run it nice'd on a shared machine).
+.PHONY: plan-search-bench
+plan-search-bench: setup
+	nice -n 10 $(PY) benchmarks/plan_search.py
+
 # Cost of the shape analysis of large meshes and the check time limit: docs/BOUNDED_CHECKS.md
 # (about a minute).
 .PHONY: bounded

@@ -24,7 +24,7 @@ from .analysis.assembly import Assembly
 from .analysis.friction import minimum_friction
 from .analysis.option_spec import BY_PATH, OPTIONS, from_outer
 from .analysis.options import CheckOptions
-from .analysis.planning import BUDGET_PER_BLOCK, MIN_BUDGET
+from .analysis.planning import BACKUP_BLOCK_STATES, MIN_BACKUP
 from .analysis.pipeline import check_scene, check_sequence, first_failing_step, slim
 from .analysis.executors import CheckPool, ProcessPool, ray_checks, ray_cluster
 from .analysis.perturb import PoseNoise
@@ -242,8 +242,9 @@ def build_parser() -> argparse.ArgumentParser:
                       "0: all; a limit makes an exhausted search no proof that no plan exists)")
     plan.add_argument("--search-budget", type=int, default=0, metavar="N",
                       help="states the search may check before it gives up (a state: a "
-                      "partial plan and the block it places); default 0: "
-                      f"max({MIN_BUDGET}, {BUDGET_PER_BLOCK} x the blocks to place)")
+                      "partial plan and the block it places); default 0: the first descent "
+                      f"(the greedy plan), then max({MIN_BACKUP}, {BACKUP_BLOCK_STATES} / the "
+                      "blocks to place) more")
     plan.add_argument("--keep-sequence", action="store_true",
                       help="the scene's sequence is a fixed prefix of the order")
     plan.add_argument("-o", "--output", metavar="SCENE",

@@ -35,13 +35,17 @@ into a memo and the search backs up to try the next child of its parent. Whether
 remaining blocks can be placed depends on that set only, since any blocks may be held at a
 step (K holds plus one placing robot): a state reached again by another order is skipped
 unchecked. Each state checked (a partial plan and the block it places) counts against the
-budget (``search_budget``; :func:`default_budget`); ``time_limit`` and ``should_stop`` end
-it too. The outcome (:attr:`Plan.outcome`): ``planned``; ``no_plan`` when the search is
-exhausted and every refusal is a proof (a candidate that cannot be inserted, or whose exact
+budget (``search_budget``; by default the first descent is free and :func:`backup_budget`
+states follow its first dead end); ``time_limit`` and ``should_stop`` end it too.
+
+The outcome (:attr:`Plan.outcome`): ``planned``; ``no_plan`` when the search is exhausted
+and every refusal is a proof (a candidate that the insertion check refuses, or whose exact
 hold search up to K holds ran to its end without its check budget running out, and no
 ``candidates`` limit cut a step short): no order exists in which every block touches a
-placed one when placed; ``budget_exhausted`` (the budget, or an exhausted search with an
-unproven refusal); ``stopped``. A failed plan is the deepest partial plan the search made,
+placed one when placed, as the checks see it (a path is the insertion check's: its
+directions, and a part's convex hull where it has no exact decomposition);
+``budget_exhausted`` (the budget, or an exhausted search with an unproven refusal);
+``stopped``. A failed plan is the deepest partial plan the search made,
 with why no block could follow it: the best candidate, the holds it needs, and with hold
 capacities the wrench each robot would need against them.
 With ``beam`` > 1, each partial plan keeps the first ``beam`` feasible candidates; of all
@@ -87,10 +91,14 @@ from .verdict import UNEXPLAINED, check
 
 #: How the message of a plan stopped by ``should_stop`` begins (a time limit, a cancel).
 STOPPED = "stopped after"
-#: The default search budget: states per block to place, and at least this many states.
-BUDGET_PER_BLOCK, MIN_BUDGET = 2, 200
+#: The default search budget after the first dead end: about this many block-states (states
+#: checked times blocks to place: a state's checks grow with the blocks), at least
+#: MIN_BACKUP states.
+BACKUP_BLOCK_STATES, MIN_BACKUP = 2000, 10
 #: s between two progress heartbeats while the search checks candidates.
 HEARTBEAT = 1.0
+#: The last steps of the first descent whose mean time estimates the time left.
+RECENT = 10
 #: A contact carries a block when its normal into the block points up by at least this
 #: cosine (87 deg from vertical).
 RESTS_ON = 0.05
@@ -112,7 +120,7 @@ class PlanOptions:
     full_candidates: bool = False
     time_limit: float = math.inf  # s: then the deepest partial plan is returned
     #: states the search may check (a state: a partial plan and the block it places, checked
-    #: for its holds); 0: :func:`default_budget` of the blocks to place
+    #: for its holds); 0: the first descent, then :func:`backup_budget` states more
     search_budget: int = 0
 
     def __post_init__(self):
@@ -124,16 +132,15 @@ class PlanOptions:
         if not self.time_limit > 0:
             raise ValueError(f"time_limit must be > 0 s, not {self.time_limit!r}")
 
-    def budget(self, blocks: int) -> int:
-        """The states the search may check for ``blocks`` blocks to place."""
-        return self.search_budget or default_budget(blocks)
 
-
-def default_budget(blocks: int) -> int:
-    """The default search budget (states checked) of a plan of ``blocks`` blocks: the
-    first descent (about one state per block, more where candidates fail) and as many
-    again for backing up, at least :data:`MIN_BUDGET`. docs/SEARCH.md: what that costs."""
-    return max(MIN_BUDGET, BUDGET_PER_BLOCK * blocks)
+def backup_budget(blocks: int) -> int:
+    """The states the search may check after its first dead end by default, with ``blocks``
+    blocks to place: :data:`BACKUP_BLOCK_STATES` / blocks, at least :data:`MIN_BACKUP` (the
+    first descent, today's greedy plan, is never cut short by the default). A state of a
+    larger assembly costs more (its checks are larger, and more candidates fail at a dead
+    end): the default keeps a plan that backs up within about a minute from 10 to 100
+    blocks (docs/SEARCH.md)."""
+    return max(MIN_BACKUP, BACKUP_BLOCK_STATES // max(blocks, 1))
 
 
 @dataclass(frozen=True)
@@ -147,13 +154,13 @@ class PlanProgress:
     block: str
     held: tuple[str, ...]        # blocks held at that step
     elapsed: float               # s since the search started
-    #: s left: from the mean time per block so far while the search goes down without
-    #: stalling; else what the budget (states left at the mean time per state so far) or
+    #: s left: from the mean time per block of the last steps while the search goes down
+    #: without stalling; else what the budget (states left at the mean time per state so far) or
     #: the time limit leaves, whichever is less; -1: unknown
     estimate: float
     checks: int = 0              # candidate checks so far (each hold search's included)
     states: int = 0              # states checked of ``budget``
-    budget: int = 0
+    budget: int = 0              # 0: not yet known (the default, before the first dead end)
     backups: int = 0             # dead ends backed out of
     deepest: int = 0             # most blocks placed by any partial plan so far
     placing: bool = True         # a step was just placed (False: a heartbeat)
@@ -358,6 +365,8 @@ class _Planner:
         self.streaming = False                  # the stream is the path's so far
         self.start = self.beat = time.perf_counter()
         self.descent = 0.0                      # s to the last step of the first descent
+        self.backed = (0.0, 0)                  # (s, states) at the first dead end
+        self.recent: collections.deque = collections.deque(maxlen=RECENT)   # s of steps
 
     def poll(self) -> None:
         """Raise _Stopped when the time limit ran out or the caller asks to stop; a
@@ -557,7 +566,8 @@ class _Planner:
 
     def run(self) -> Plan:
         n = self.n = len(self.free)
-        self.budget = self.plan.budget(n)
+        # the default budget: the first descent, then backup_budget states more
+        self.budget = self.plan.search_budget or math.inf
         final = self.full.subset(self.present(self.free, n + 1))
         self.final = check(final, self.options)
         if not self.final.stable:
@@ -589,20 +599,20 @@ class _Planner:
                     if path:
                         self._backed_up(len(path[-1][0].order))
                     continue
+                failure = _Failure()
+                if len(child.order) > len(self.deepest.order):
+                    self.deepest, self.failure = child, failure
+                self._pushed(child)
                 if len(child.order) == self.n:
                     return self._finish(child, True, -1, f"every step stands with at most "
                                         f"{max(len(h) for h in child.held)} held blocks "
                                         f"(limit {self.plan.max_held})", PLANNED)
-                failure = _Failure()
-                if len(child.order) > len(self.deepest.order):
-                    self.deepest, self.failure = child, failure
                 path.append((child, self.expand(child, failure), failure))
-                self._pushed(child)
         except _Stopped:
             return self._stopped()
         except _Budget:
             return self._failed(BUDGET_EXHAUSTED, f"no plan found within the budget "
-                                f"({self.budget} states checked; --search-budget)")
+                                f"({self.budget} states checked; --search-budget N)")
         if proven:
             return self._failed(NO_PLAN, f"no plan with at most {self.plan.max_held} held "
                                 "exists (every order searched)")
@@ -629,7 +639,7 @@ class _Planner:
                 return self._stopped()
             except _Budget:
                 return self._failed(BUDGET_EXHAUSTED, f"no plan found within the budget "
-                                    f"({self.budget} states checked; --search-budget)")
+                                    f"({self.budget} states checked; --search-budget N)")
             if not children:
                 return self._failed(DEAD_END, f"no plan found by a beam of {self.plan.beam} "
                                     "(it does not back up: --beam 1 does)")
@@ -651,12 +661,17 @@ class _Planner:
                 self._look_ahead(partial)
         if not self.backups:
             self.descent = time.perf_counter() - self.start
+            self.recent.append(self.descent)
         self._progress(True)
 
     def _backed_up(self, k: int) -> None:
         """The search backed up to a partial plan of ``k`` blocks: steps streamed beyond it
         are no longer the path's (the plan's reports are re-made at the end)."""
         self.backups += 1
+        if self.backups == 1:
+            self.backed = (time.perf_counter() - self.start, self.states)
+        if not math.isfinite(self.budget):
+            self.budget = self.states + backup_budget(self.n)
         if self.streaming and self.streamed > k:
             self.streaming, self.streamed = False, k
 
@@ -669,7 +684,9 @@ class _Planner:
         estimate, bound = self._estimate(now - self.start, k)
         self.progress(PlanProgress(k, self.n, k - 1, top.order[-1] if k else "",
                                    top.held[-1] if k else (), now - self.start, estimate,
-                                   self.checks, self.states, self.budget, self.backups,
+                                   self.checks, self.states,
+                                   self.budget if math.isfinite(self.budget) else 0,
+                                   self.backups,
                                    len(self.deepest.order), placing, bound))
 
     def _estimate(self, elapsed: float, k: int) -> tuple[float, str]:
@@ -677,11 +694,19 @@ class _Planner:
         :attr:`PlanProgress.estimate`."""
         found = []
         if k and not self.backups:
-            mean = self.descent / k             # s per block of the first descent
+            # s per block of the first descent, over its last steps (steps grow dearer)
+            times = self.recent
+            mean = ((times[-1] - times[0]) / (len(times) - 1) if len(times) > 1
+                    else self.descent / k)
             if elapsed - self.descent <= 2 * mean + HEARTBEAT:      # not stalled
                 found.append((mean * (self.n - k), "steps"))
-        if self.states:
-            found.append(((self.budget - self.states) * elapsed / self.states, "budget"))
+        if math.isfinite(self.budget):
+            # states left at the mean time per state since the first dead end (backing up
+            # costs more per state than going down), or since the start before one
+            at, since = self.backed if self.backups else (0.0, 0)
+            if self.states > since:
+                found.append(((self.budget - self.states) * (elapsed - at)
+                              / (self.states - since), "budget"))
         if math.isfinite(self.plan.time_limit):
             found.append((max(self.plan.time_limit - elapsed, 0.0), "time limit"))
         return min(found, default=(-1.0, "unknown"))
@@ -815,7 +840,8 @@ def plan_sequence(scene: Scene, max_held: int = 2, options: CheckOptions = Check
     while candidates are checked; ``should_stop`` is polled between checks, and when it
     returns True (or ``time_limit`` s have passed) the deepest partial plan is returned (not
     feasible, "stopped after K of N blocks"). ``search_budget``: the states the search may
-    check (0: :func:`default_budget`). :attr:`Plan.outcome` says how the search ended.
+    check (0: the first descent, then :func:`backup_budget` states). :attr:`Plan.outcome`
+    says how the search ended.
     ``on_report`` receives each step's full report as the plan makes it (those of steps
     the search backed up over, and a beam's, after the search). ``look_ahead(assembly,
     options)``: workers for the full checks of the steps ahead
@@ -839,4 +865,4 @@ def plan_sequence(scene: Scene, max_held: int = 2, options: CheckOptions = Check
 
 __all__ = ["BUDGET_EXHAUSTED", "DEAD_END", "HALTED", "LookAhead", "NO_PLAN", "OUTCOMES",
            "PLANNED", "Plan", "PlanOptions", "PlanProgress", "STOPPED", "TrialResult",
-           "default_budget", "plan_sequence"]
+           "backup_budget", "plan_sequence"]

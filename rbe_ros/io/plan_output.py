@@ -27,20 +27,30 @@ def step_summary(report: Report) -> dict:
 
 
 class ProgressLines:
-    """Plain progress lines on ``stream``, at most one every ``every`` seconds."""
+    """Plain progress lines on ``stream``, at most one every ``every`` seconds (a placed
+    first or last step always): blocks placed, candidate checks and states so far, and the
+    time left as far as it is known (:attr:`PlanProgress.estimate`)."""
 
     def __init__(self, stream: IO[str], every: float = PROGRESS_EVERY):
         self.stream, self.every = stream, every
-        self.last = -float("inf")
+        self.last = time.monotonic()        # a heartbeat line only after ``every`` s
 
     def __call__(self, p: PlanProgress) -> None:
         now = time.monotonic()
-        if now - self.last < self.every and 1 < p.placed < p.total:
+        if now - self.last < self.every and not (p.placing and p.placed in (1, p.total)):
             return
         self.last = now
         held = ", ".join(p.held) or "none"
-        print(f"plan: {p.placed}/{p.total} blocks placed, held: {held}, {p.elapsed:.1f} s, "
-              f"about {p.estimate:.0f} s left", file=self.stream, flush=True)
+        search = f"{p.checks} candidate checks, {p.states} states"
+        if p.budget:
+            search += f" of {p.budget}"
+        if p.backups:
+            search += f", {p.backups} dead ends backed out of (deepest {p.deepest})"
+        left = ("time left unknown" if p.estimate < 0 else
+                f"about {p.estimate:.0f} s left" if p.bound == "steps" else
+                f"at most about {p.estimate:.0f} s left ({p.bound})")
+        print(f"plan: {p.placed}/{p.total} blocks placed, held: {held}, {search}, "
+              f"{p.elapsed:.1f} s, {left}", file=self.stream, flush=True)
 
 
 class ReportLines:

@@ -4,6 +4,7 @@ capacities over the options, a time limit over ``should_stop``) and plans; it ne
 so that a goal that cannot be planned is a result, not a crash."""
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -30,7 +31,7 @@ class PlanLimits:
     hold_force_max: float = 0.0     # N; <= 0: the options'
     hold_torque_max: float = 0.0    # N m; <= 0: the options'
     time_limit: float = 0.0         # s; <= 0: none
-    search_budget: int = 0          # states checked; <= 0: the default (planning.default_budget)
+    search_budget: int = 0          # states checked; <= 0: the default (planning.backup_budget)
 
     def search(self) -> PlanOptions:
         """The planner's search (ValueError naming a limit out of its range)."""
@@ -93,7 +94,10 @@ def plan_state(read_scene: Callable[[], Scene], limits: PlanLimits,
         return plan_sequence(scene, search.max_held, plan_options(options, limits),
                              beam=search.beam, candidates=search.candidates,
                              keep_sequence=search.keep_sequence,
-                             search_budget=search.search_budget, progress=progress,
+                             search_budget=search.search_budget,
+                             # also the planner's own, for its progress to show what is left
+                             time_limit=limits.time_limit if limits.time_limit > 0
+                             else math.inf, progress=progress,
                              should_stop=stop, **extra)
     except SceneError as exc:
         return _failed(f"invalid input: {exc}")

@@ -91,7 +91,13 @@ def test_the_arch_planned_over_dds_equals_rbe_ros_plan(rbe, capsys):
     assert {stamp_of(r) for r in [*result.reports, result.plan]} == {stamp_of(goal.assembly)}
     # feedback after every placed step: placed rising to 7, the block and holds of the step
     # (feedback and result are different topics: the last feedback may come after the result)
-    wait_until(lambda: len(feedback) >= 7, what="the feedback of 7 steps")
+    wait_until(lambda: max((f.placed for f in feedback), default=0) == 7,
+               what="the feedback of 7 steps")
+    # between steps, heartbeats repeat the step with the candidate checks so far
+    checks = [f.checks for f in feedback]
+    assert checks == sorted(checks) and checks[-1] > 0
+    feedback = [f for k, f in enumerate(feedback) if f.placed and (
+        k == 0 or (f.placed, f.step) != (feedback[k - 1].placed, feedback[k - 1].step))]
     assert [f.placed for f in feedback] == list(range(1, 8))
     assert all(f.total == 7 for f in feedback)
     assert [f.block for f in feedback] == expected["order"]
@@ -182,3 +188,16 @@ def test_the_bag_replays_its_plans(rbe, capsys):
     stopped = runs[1]       # the canceled dome
     with pytest.raises(ValueError, match="the recorded plan was stopped"):
         live_goal(stopped)
+
+
+def test_a_search_budget_in_the_goal(rbe):
+    """The goal's search_budget is the plan's --search-budget: one state of the 7-voussoir
+    arch with no hold (whose search needs more) is not found within the budget."""
+    arch = generators.semicircular_arch(7)
+    handle = rbe.client.send_plan(goal_of(arch, 0, search_budget=1), [])
+    status, result = rbe.client.result(handle, timeout=60.0)
+    assert status == GoalStatus.STATUS_SUCCEEDED and not result.feasible
+    assert result.message.startswith("no plan found within the budget (1 states checked")
+    unbounded = rbe.client.send_plan(goal_of(arch, 0), [])
+    status, result = rbe.client.result(unbounded, timeout=60.0)
+    assert result.message.startswith("no plan with at most 0 held exists")

@@ -133,9 +133,14 @@ def test_greedy_dead_ends_at_step_one_and_the_search_backs_up(tmp_path, capsys):
 @pytest.mark.long
 def test_sealed_pocket_has_no_plan(capsys):
     """The trapped L can leave its pocket only through the support wall: with a budget that
-    lets the search go through every order of the rest, no plan exists."""
-    code, plan = _run(capsys, "plan", str(SUITE / "sealed_pocket.json"), "--max-held", "2",
-                      *MU, "--json", "--search-budget", "3000")
+    lets the search go through every order of the rest, no plan exists; with the default
+    budget (200 states) the search gives up first and says so."""
+    path = str(SUITE / "sealed_pocket.json")
+    code, plan = _run(capsys, "plan", path, "--max-held", "2", *MU, "--json",
+                      "--search-budget", "3000")
     assert code == 1 and plan["outcome"] == "no_plan"
     assert plan["message"].startswith("no plan with at most 2 held exists")
     assert "trapped cannot be inserted: enclosed" in plan["message"]
+    code, plan = _run(capsys, "plan", path, "--max-held", "2", *MU, "--json")
+    assert code == 1 and plan["outcome"] == "budget_exhausted"
+    assert plan["message"].startswith("no plan found within the budget")

@@ -145,9 +145,7 @@ def _scene(args) -> tuple[Scene, Assembly | None]:
                          "them, not at measured poses (--poses)")
     scene, stored = load_design(args.scene, args.density, stored=args.interfaces != "detected",
                                 supports=args.supports)
-    args.warnings = list(scene.warnings)     # what loading repaired: --json lists them too
-    for warning in scene.warnings:
-        print(f"rbe-ros: warning: {warning}", file=sys.stderr)
+    args.warnings = _warn(scene)            # what loading repaired: --json lists them too
     if args.poses:
         scene = scene_at_poses(scene, load_poses(args.poses))
     if args.interfaces == "compare":
@@ -159,6 +157,13 @@ def _scene(args) -> tuple[Scene, Assembly | None]:
             print("\n".join(diff.lines()), file=sys.stderr if as_json else sys.stdout)
         stored = None
     return scene, stored
+
+
+def _warn(scene: Scene) -> list[str]:
+    """Print what loading ``scene`` repaired (one line each on stderr); the warnings."""
+    for warning in scene.warnings:
+        print(f"rbe-ros: warning: {warning}", file=sys.stderr)
+    return list(scene.warnings)
 
 
 def _assembly(args) -> Assembly:
@@ -434,6 +439,7 @@ def _run_robust(args) -> int:
     if args.samples < 1 or args.batch < 1:
         raise ValueError("--samples and --batch must be at least 1")
     scene = load_scene(args.scene)
+    _warn(scene)
     job = RobustJob(scene, PoseNoise(*args.pose_sigma), args.seed, _options(args), args.sequence)
     pool = ProcessPool(args.workers) if args.workers > 1 and not args.ray else None
     executor = ray_cluster(args.ray) if args.ray else pool or serial

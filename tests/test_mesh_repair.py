@@ -13,6 +13,7 @@ import trimesh
 
 from rbe_ros.cli import main
 from rbe_ros.generators import semicircular_arch
+from rbe_ros.geometry.repair import repair_mesh
 from rbe_ros.interlock import cradle
 from rbe_ros.io.messages import scene_from_state_dict, state_to_dict
 from rbe_ros.io.scene_json import scene_from_dict, scene_to_dict
@@ -220,3 +221,18 @@ def test_an_assembly_state_with_an_open_mesh_is_repaired_as_a_file_is():
                               "convex hull (volumes agree within 0.0001)",)
     assert _trimesh(scene.block("v04")).volume == pytest.approx(
         _trimesh(intact.block("v04")).volume, rel=1e-12)
+
+
+def test_triangles_missing_across_an_edge_are_filled_in_their_planes():
+    """Two triangles of different faces missing along a shared edge of the cradle's base:
+    the hole is not planar; the fan whose triangles lie in the faces' planes closes it, with
+    the intact volume (trimesh); a tent over the edge would not."""
+    base = cradle(slots=2).block("base")
+    mesh = _trimesh(base)
+    square = np.abs(mesh.face_adjacency_angles - np.pi / 2) < 1e-9
+    for pair in mesh.face_adjacency[square][:3]:          # three different edges
+        faces = np.delete(mesh.faces, pair, axis=0)
+        fixed = repair_mesh(mesh.vertices, faces)
+        assert fixed.notes == ("filled 1 hole",)
+        closed = trimesh.Trimesh(fixed.vertices, _triangles(fixed.faces), process=False)
+        assert closed.is_watertight and closed.volume == pytest.approx(mesh.volume, rel=1e-12)

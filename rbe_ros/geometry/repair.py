@@ -9,15 +9,17 @@ that is one untouched, and otherwise, in this order:
 1. merges vertices closer than MERGE_TOL times the mesh's longest extent (trimesh's
    ``merge_vertices``) and drops degenerate and repeated triangles;
 2. makes the winding consistent and outward (trimesh's ``fix_winding`` and ``fix_inversion``);
-3. closes every hole whose boundary is one loop, planar within PLANAR_TOL times the extent:
+3. closes every hole whose boundary is one loop: planar within PLANAR_TOL times the extent,
    the loop becomes one polygon face (wound against its boundary edges), whatever its shape
-   (a fan of triangles would fold over a non-convex hole);
+   (a fan of triangles would fold over a non-convex hole); else (triangles missing across an
+   edge or a corner of the block) a fan from one of its vertices whose every triangle lies
+   in the plane of a face along the hole;
 4. when the closed mesh is convex (its volume within HULL_TOL of its convex hull's), replaces
    it by that hull, so that the checks treat it as the convex block it is (noise of an export
    can put a vertex just outside a face plane).
 
-What cannot be closed so (a hole that is not planar, an edge shared by more than two faces,
-no volume) stays a :class:`ValueError` with the reason, which the loader turns into
+What cannot be closed so (a hole neither planar nor such a fan, an edge shared by more than
+two faces, no volume) stays a :class:`ValueError` with the reason, which the loader turns into
 INVALID_INPUT naming the block.
 """
 from __future__ import annotations
@@ -93,15 +95,9 @@ def repair_mesh(vertices, faces) -> Repaired:
         notes.append(f"turned {flipped} triangles to a consistent winding")
     out_faces = [tuple(int(i) for i in f) for f in mesh.faces]
     holes = _boundary_loops(out_faces)
+    planes = _edge_planes(mesh, out_faces) if holes else {}
     for loop in holes:
-        points = mesh.vertices[list(loop)]
-        centred = points - points.mean(axis=0)
-        off_plane = np.linalg.svd(centred, compute_uv=False)[-1] if len(loop) > 3 else 0.0
-        # the smallest singular value bounds the rms distance from the best plane
-        if len(loop) < 3 or off_plane / np.sqrt(len(loop)) > PLANAR_TOL * scale:
-            raise ValueError(f"mesh is not closed: a hole of {len(loop)} edges is not planar "
-                             f"within {PLANAR_TOL:g} of the block's extent (cannot be filled)")
-        out_faces.append(tuple(reversed(loop)))
+        out_faces += _fill(loop, np.asarray(mesh.vertices), planes, PLANAR_TOL * scale)
     if holes:
         notes.append(f"filled {len(holes)} hole{'s' if len(holes) > 1 else ''}")
     verts = np.asarray(mesh.vertices, dtype=float)
@@ -143,6 +139,48 @@ _FEW = 256
 
 def _closed(faces) -> bool:
     return bool(faces) and all(len(f) >= 3 for f in faces) and is_closed(faces)
+
+
+def _edge_planes(mesh: trimesh.Trimesh, faces) -> dict:
+    """Per directed edge of the triangles ``faces``, the plane (unit normal, offset) of its
+    triangle."""
+    normals = np.asarray(mesh.face_normals)
+    offsets = np.einsum("ij,ij->i", normals, np.asarray(mesh.vertices)[[f[0] for f in faces]])
+    return {(f[i - 1], f[i]): (normals[k], offsets[k]) for k, f in enumerate(faces)
+            for i in range(3)}
+
+
+def _fill(loop, vertices: np.ndarray, planes: dict, tol: float) -> list[tuple[int, ...]]:
+    """Faces closing the hole bounded by ``loop``: one polygon when the loop is planar
+    within ``tol`` (m); else the fan, from one of its vertices, whose every triangle lies in
+    the plane of a face along the hole (the triangles missing across an edge or a corner of
+    the block); ValueError when neither closes it."""
+    points = vertices[list(loop)]
+    centred = points - points.mean(axis=0)
+    # the smallest singular value bounds the rms distance from the best plane
+    if np.linalg.svd(centred, compute_uv=False)[-1] / np.sqrt(len(loop)) <= tol:
+        return [tuple(reversed(loop))]
+    ring = list(reversed(loop))
+    around = [planes[(loop[i - 1], loop[i])] for i in range(len(loop))]
+    for start in range(len(ring)):
+        r = ring[start:] + ring[:start]
+        fan = [(r[0], r[i], r[i + 1]) for i in range(1, len(r) - 1)]
+        if all(_in_one(vertices[list(t)], around, tol) for t in fan):
+            return fan
+    raise ValueError(f"mesh is not closed: a hole of {len(loop)} edges is neither planar "
+                     "nor a fan of the planes around it (cannot be filled)")
+
+
+def _in_one(triangle: np.ndarray, planes, tol: float) -> bool:
+    """Whether ``triangle`` (3, 3) is non-degenerate and lies, facing the same way, in one
+    of ``planes`` within ``tol``."""
+    normal = np.cross(triangle[1] - triangle[0], triangle[2] - triangle[0])
+    length = float(np.linalg.norm(normal))
+    if length <= tol * tol:
+        return False
+    normal /= length
+    return any(normal @ n > 1 - 1e-6 and np.abs(triangle @ n - d).max() <= tol
+               for n, d in planes)
 
 
 def _fix_winding(mesh: trimesh.Trimesh) -> int:

@@ -125,7 +125,7 @@ def main(argv=None) -> int:
         "Made by `python benchmarks/insertion.py` (`make bench-insertion`, part of `make bench`).",
         "Per step, in sequence order: the step's stability check (`StepChecker.check`, local",
         "models as `check_sequence` uses them) and the placed block's insertion (cone of its",
-        "interface normals, swept path over twice its longest extent, python-fcl after a",
+        "interface normals, swept path from where it is clear of every present block, python-fcl after a",
         "bounding-box broad phase), timed in the same loop in CPU time of the process. Bar",
         "(issue 22): insertion <= 0.5x. Step ratios are of single steps (a step whose stability",
         "check is answered locally in about a millisecond makes a large ratio of a small time).",

@@ -29,6 +29,8 @@ from functools import lru_cache
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
+from ..deadline import checkpoint
+
 #: Larger meshes, or meshes needing more pieces, are not decomposed (their hull is used).
 MAX_TRIANGLES = 4000
 MAX_PIECES = 64
@@ -77,6 +79,7 @@ def _pieces(vertex_bytes: bytes, triangle_bytes: bytes, relative: float):
               corners)]
     pieces, total, cells = [], 0.0, 0
     while stack:
+        checkpoint()                            # a check's time limit covers this too
         cells += 1
         if cells > 4 * MAX_PIECES or len(pieces) > MAX_PIECES:
             return None

@@ -99,6 +99,9 @@ BACKUP_BLOCK_STATES, MIN_BACKUP = 2000, 10
 HEARTBEAT = 1.0
 #: The last steps of the first descent whose mean time estimates the time left.
 RECENT = 10
+#: Partial plans of the search's path (the deepest) that keep their step's forces for the
+#: incremental checks of their children.
+KEPT = 8
 #: A contact carries a block when its normal into the block points up by at least this
 #: cosine (87 deg from vertical).
 RESTS_ON = 0.05
@@ -258,7 +261,7 @@ class _Failure:
         self.proven = self.proven and found.proven
 
 
-@dataclass(frozen=True)
+@dataclass
 class _Partial:
     order: tuple[str, ...]
     held: tuple[tuple[str, ...], ...]
@@ -550,19 +553,27 @@ class _Planner:
             if not found.ok:
                 failure.refused(b, found)
                 continue
-            total, worst, ranks = partial.score
-            report = self.step_report(order, found.held, found.report, found.assembly)
-            report = replace(report, solve_time=time.perf_counter() - start)
-            checker = copy.copy(partial.checker)
-            checker.advance(found.assembly, report)
-            if self.streaming and len(partial.order) == self.streamed:
-                self.on_report(report)          # the next step of the path: streamed
-                self.streamed += 1
-            yield _Partial(order, (*partial.held, found.held),
-                           (total + len(found.held), len(found.held), ranks + rank),
-                           (*partial.reports, slim(report)), checker)
+            child = self._child(partial, order, found, rank, start)
+            found = None        # a suspended search keeps no full report or assembly
+            yield child
         if tried and tried == self.plan.candidates:
             failure.proven = False              # candidates beyond the limit not tried
+
+    def _child(self, partial: _Partial, order, found: TrialResult, rank: int,
+               start: float) -> _Partial:
+        """The partial plan ``order`` that ``found`` extends ``partial`` to (its report
+        streamed when it is the path's next step)."""
+        total, worst, ranks = partial.score
+        report = self.step_report(order, found.held, found.report, found.assembly)
+        report = replace(report, solve_time=time.perf_counter() - start)
+        checker = copy.copy(partial.checker)
+        checker.advance(found.assembly, report)
+        if self.streaming and len(partial.order) == self.streamed:
+            self.on_report(report)          # the next step of the path: streamed
+            self.streamed += 1
+        return _Partial(order, (*partial.held, found.held),
+                        (total + len(found.held), len(found.held), ranks + rank),
+                        (*partial.reports, slim(report)), checker)
 
     def run(self) -> Plan:
         n = self.n = len(self.free)
@@ -608,6 +619,10 @@ class _Planner:
                                         f"{max(len(h) for h in child.held)} held blocks "
                                         f"(limit {self.plan.max_held})", PLANNED)
                 path.append((child, self.expand(child, failure), failure))
+                if len(path) > KEPT:
+                    # memory linear in the blocks: the kept forces of the last KEPT partial
+                    # plans of the path only; a back-up beyond checks its trials whole
+                    path[-KEPT - 1][0].checker = StepChecker(self.options, explain=False)
         except _Stopped:
             return self._stopped()
         except _Budget:

@@ -17,7 +17,7 @@ from rbe_ros.geometry.repair import repair_mesh
 from rbe_ros.interlock import cradle
 from rbe_ros.io.messages import scene_from_state_dict, state_to_dict
 from rbe_ros.io.scene_json import scene_from_dict, scene_to_dict
-from rbe_ros.scene import SceneError
+from rbe_ros.scene import SceneError, make_block
 
 ROBOTS = (Path(__file__).parents[1] / ".venv/lib/python3.11/site-packages/compas_fab/data/"
           "robot_library")
@@ -236,3 +236,18 @@ def test_triangles_missing_across_an_edge_are_filled_in_their_planes():
         assert fixed.notes == ("filled 1 hole",)
         closed = trimesh.Trimesh(fixed.vertices, _triangles(fixed.faces), process=False)
         assert closed.is_watertight and closed.volume == pytest.approx(mesh.volume, rel=1e-12)
+
+
+def test_copies_of_a_vertex_a_little_apart_are_one():
+    """A triangle soup whose copies of each corner differ by up to 1e-8 m (float noise of an
+    export, below the merge tolerance of 1e-6 of the extent): every copy is merged (by
+    distance: rounding would split copies either side of a rounding boundary), closed."""
+    block = semicircular_arch(9).block("v04")
+    soup = _soup(block, drop=0, flip=0)
+    soup["faces"] = [list(f) for f in np.arange(len(soup["vertices"])).reshape(-1, 3)]
+    noisy = np.array(soup["vertices"]) + np.random.default_rng(3).uniform(
+        -1e-8, 1e-8, (len(soup["vertices"]), 3))
+    fixed = repair_mesh(noisy, soup["faces"])
+    assert fixed.notes[0] == "merged 28 duplicate vertices" and len(fixed.vertices) == 8
+    assert _trimesh(make_block("v04", fixed.vertices, fixed.faces, density=1.0)).volume == \
+        pytest.approx(_trimesh(block).volume, rel=1e-6)

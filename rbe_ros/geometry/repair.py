@@ -6,8 +6,8 @@ few triangles missing (open edges) or turned inside out. A block must be a close
 wound polyhedron (:mod:`rbe_ros.geometry.block`), so :func:`repair_mesh` first leaves a mesh
 that is one untouched, and otherwise, in this order:
 
-1. merges vertices closer than MERGE_TOL times the mesh's longest extent (trimesh's
-   ``merge_vertices``) and drops degenerate and repeated triangles;
+1. merges vertices closer than MERGE_TOL times the mesh's longest extent (a k-d tree) and
+   drops degenerate and repeated triangles (trimesh);
 2. makes the winding consistent and outward (trimesh's ``fix_winding`` and ``fix_inversion``);
 3. closes every hole whose boundary is one loop: planar within PLANAR_TOL times the extent,
    the loop becomes one polygon face (wound against its boundary edges), whatever its shape
@@ -29,7 +29,9 @@ from functools import lru_cache
 
 import numpy as np
 import trimesh
-from scipy.spatial import ConvexHull
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import ConvexHull, cKDTree
 
 from ..scene import Block, SceneError
 from .block import is_closed, signed_volume
@@ -78,14 +80,12 @@ def repair_mesh(vertices, faces) -> Repaired:
     scale = float(np.ptp(vertices, axis=0).max()) or 1.0
     triangles = np.array([(f[0], f[i], f[i + 1]) for f in faces for i in range(1, len(f) - 1)],
                          dtype=np.int64).reshape(-1, 3)
-    mesh = trimesh.Trimesh(vertices, triangles, process=False, validate=False)
     notes = []
-    before = len(mesh.vertices)
-    mesh.merge_vertices(merge_tex=True, merge_norm=True,
-                        digits_vertex=max(0, int(-np.floor(np.log10(MERGE_TOL * scale)))))
+    merged, triangles = _merged(vertices, triangles, MERGE_TOL * scale)
+    mesh = trimesh.Trimesh(merged, triangles, process=False, validate=False)
     mesh.remove_unreferenced_vertices()
-    if len(mesh.vertices) < before:
-        notes.append(f"merged {before - len(mesh.vertices)} duplicate vertices")
+    if len(mesh.vertices) < len(vertices):
+        notes.append(f"merged {len(vertices) - len(mesh.vertices)} duplicate vertices")
     keep = mesh.nondegenerate_faces() & mesh.unique_faces()
     if not keep.all():
         mesh.update_faces(keep)
@@ -139,6 +139,19 @@ _FEW = 256
 
 def _closed(faces) -> bool:
     return bool(faces) and all(len(f) >= 3 for f in faces) and is_closed(faces)
+
+
+def _merged(vertices: np.ndarray, triangles: np.ndarray, tol: float):
+    """Vertices within ``tol`` (m) of each other, transitively, made one (the first of each
+    group; by distance, not by rounding, so that two copies of a vertex either side of a
+    rounding boundary are one too), and the triangles on them."""
+    pairs = cKDTree(vertices).query_pairs(tol, output_type="ndarray")
+    count = len(vertices)
+    _, group = connected_components(coo_matrix((np.ones(len(pairs)), pairs.T),
+                                               shape=(count, count)), directed=False)
+    first = np.full(group.max() + 1, count)
+    np.minimum.at(first, group, np.arange(count))
+    return vertices, first[group][triangles]
 
 
 def _edge_planes(mesh: trimesh.Trimesh, faces) -> dict:

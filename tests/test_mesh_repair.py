@@ -13,6 +13,7 @@ import trimesh
 
 from rbe_ros.cli import main
 from rbe_ros.generators import semicircular_arch
+from rbe_ros.geometry.block import pose_block, signed_volume
 from rbe_ros.geometry.repair import repair_mesh
 from rbe_ros.interlock import cradle
 from rbe_ros.io.messages import scene_from_state_dict, state_to_dict
@@ -251,3 +252,25 @@ def test_copies_of_a_vertex_a_little_apart_are_one():
     assert fixed.notes[0] == "merged 28 duplicate vertices" and len(fixed.vertices) == 8
     assert _trimesh(make_block("v04", fixed.vertices, fixed.faces, density=1.0)).volume == \
         pytest.approx(_trimesh(block).volume, rel=1e-6)
+
+
+def test_an_open_mesh_with_non_convex_polygon_faces_keeps_their_shape():
+    """A U-shaped prism exported with its caps as single polygons (non-convex) and one side
+    face missing: the caps are triangulated in their planes for the repair (a fan from the
+    first corner would cover the notch), so each cap keeps the U's area, 5 (shoelace), and
+    the volume is 5 x depth (trimesh)."""
+    u = [(0, 0), (3, 0), (3, 2), (2, 2), (2, 1), (1, 1), (1, 2), (0, 2)]
+    n = len(u)
+    vertices = np.array([(x, 0, z) for x, z in u] + [(x, 1, z) for x, z in u], dtype=float)
+    faces = [tuple(range(n)), tuple(range(2 * n - 1, n - 1, -1))]
+    faces += [(i, n + i, n + (i + 1) % n, (i + 1) % n) for i in range(n)]
+    if signed_volume(vertices, faces) < 0:
+        faces = [f[::-1] for f in faces]
+    fixed = repair_mesh(vertices, faces[:4] + faces[5:])
+    assert fixed.notes == ("filled 1 hole",)
+    posed = pose_block(make_block("u", fixed.vertices, fixed.faces, density=1.0))
+    caps = [f.outline.area for f in posed.faces if abs(abs(f.frame.n[1]) - 1) < 1e-9]
+    assert caps == pytest.approx([5.0, 5.0], abs=1e-12)
+    closed = trimesh.Trimesh(posed.vertices, posed.triangles, process=False)
+    assert closed.is_watertight and closed.volume == pytest.approx(5.0, abs=1e-12)
+    assert not posed.convex

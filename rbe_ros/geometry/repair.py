@@ -28,6 +28,7 @@ from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
+import shapely
 import trimesh
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
@@ -78,7 +79,7 @@ def repair_mesh(vertices, faces) -> Repaired:
     if _sound(np.ascontiguousarray(vertices).tobytes(), faces):
         return Repaired(vertices, faces)
     scale = float(np.ptp(vertices, axis=0).max()) or 1.0
-    triangles = np.array([(f[0], f[i], f[i + 1]) for f in faces for i in range(1, len(f) - 1)],
+    triangles = np.array([t for f in faces for t in _triangles(vertices, f)],
                          dtype=np.int64).reshape(-1, 3)
     notes = []
     merged, triangles = _merged(vertices, triangles, MERGE_TOL * scale)
@@ -139,6 +140,41 @@ _FEW = 256
 
 def _closed(faces) -> bool:
     return bool(faces) and all(len(f) >= 3 for f in faces) and is_closed(faces)
+
+
+def _triangles(vertices: np.ndarray, face: tuple[int, ...]) -> list[tuple[int, int, int]]:
+    """A polygon face as triangles wound as it is: a fan when the face is convex, else a
+    constrained Delaunay triangulation in its plane (a fan would fold over a notch of an
+    L-shaped face)."""
+    if len(face) == 3:
+        return [face]
+    points = vertices[list(face)]
+    normal = np.cross(points - points.mean(axis=0), np.roll(points, -1, axis=0)
+                      - points.mean(axis=0)).sum(axis=0)     # Newell: the face's area vector
+    turns = np.cross(np.roll(points, -1, axis=0) - points,
+                     np.roll(points, -2, axis=0) - np.roll(points, -1, axis=0)) @ normal
+    fan = [(face[0], face[i], face[i + 1]) for i in range(1, len(face) - 1)]
+    if (turns >= 0).all() or not np.linalg.norm(normal) > 0:
+        return fan
+    u = points[1] - points[0]
+    u /= np.linalg.norm(u)
+    v = np.cross(normal / np.linalg.norm(normal), u)
+    flat = np.column_stack(((points - points[0]) @ u, (points - points[0]) @ v))
+    index = {tuple(p): k for k, p in enumerate(flat.tolist())}
+    try:
+        pieces = shapely.constrained_delaunay_triangles(shapely.Polygon(flat)).geoms
+    except shapely.errors.GEOSException:        # a self-intersecting outline: as given
+        return fan
+    out = []
+    for piece in pieces:
+        a, b, c = (index.get(tuple(p)) for p in piece.exterior.coords[:3])
+        if None in (a, b, c):                   # a point GEOS added: keep the fan
+            return fan
+        # counter-clockwise in (u, v) is the face's own turn (v = n x u)
+        (ux, uy), (vx, vy) = flat[b] - flat[a], flat[c] - flat[a]
+        out.append((face[a], face[b], face[c]) if ux * vy - uy * vx > 0
+                   else (face[a], face[c], face[b]))
+    return out
 
 
 def _merged(vertices: np.ndarray, triangles: np.ndarray, tol: float):

@@ -11,6 +11,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+import shapely
 import trimesh
 from scipy.spatial import ConvexHull, Delaunay
 from scipy.spatial.transform import Rotation
@@ -694,10 +695,12 @@ def _ray_parity(triangles, points):
     return ((u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)).sum(axis=1) % 2 == 1
 
 
-def test_without_a_decomposition_the_hull_is_conservative(monkeypatch):
-    """A non-convex block with no decomposition within the limits is its convex hull: the
-    block in the U's notch is refused from above (the hull covers the notch), though the
-    true shapes let it down."""
+def test_without_a_decomposition_present_is_its_mesh_moving_its_hull(monkeypatch):
+    """A non-convex block with no decomposition within the limits: present, it is its
+    triangle mesh (exact): the block in the U's notch comes straight down or along the
+    notch (the U's hull would hold it from every side); moving, it is its
+    convex hull (conservative): the inverted U lowered over a post that fits its notch is
+    refused, though the sampled sweep of the true shapes is free."""
     monkeypatch.setattr(decompose, "MAX_PIECES", 1)
     decompose._pieces.cache_clear()
     insertion_module._PRESENT.clear()
@@ -705,11 +708,21 @@ def test_without_a_decomposition_the_hull_is_conservative(monkeypatch):
         u = [(-0.3, 0), (0.3, 0), (0.3, 0.3), (0.1, 0.3), (0.1, 0.1), (-0.1, 0.1),
              (-0.1, 0.3), (-0.3, 0.3)]
         caps = [(0, 1, 4), (0, 4, 5), (1, 2, 3), (1, 3, 4), (0, 5, 6), (0, 6, 7)]
-        scene = make_scene("u", [_prism("u2", u, 0.31, caps, support=True),
-                                 box_block("b", (0.2, 0.31, 0.2), (0, 0, 0.2), density=RHO)])
-        assert decompose.convex_pieces(*_local_mesh(scene, "u2")) is None
+        scene = make_scene("u", [_prism("u", u, 0.3, caps, support=True),
+                                 box_block("b", (0.2, 0.3, 0.2), (0, 0, 0.2), density=RHO)])
+        assert decompose.convex_pieces(*_local_mesh(scene, "u")) is None
         found = _insertion(scene, "b")
-        assert not found.insertable and found.blocked_by == ("u2",)
+        np.testing.assert_allclose(found.direction, DOWN, atol=1e-12)
+        assert _insertion(scene, "b", given=np.array([0.0, 1.0, 0.0])).insertable
+        inverted = [(-0.3, 0.3), (-0.3, 0), (-0.1, 0), (-0.1, 0.2), (0.1, 0.2), (0.1, 0),
+                    (0.3, 0), (0.3, 0.3)]
+        over = _ground(box_block("post", (0.1, 0.3, 0.15), (0, 0, 0.075), support=True,
+                                 density=RHO),
+                       _prism("n", inverted, 0.3, [(0, 1, 2), (0, 2, 3), (0, 3, 7), (3, 4, 7),
+                                                    (4, 5, 6), (4, 6, 7)]))
+        assert _independent_sweep_free(over, ["ground", "post", "n"], "n", DOWN)
+        refused = _insertion(over, "n")
+        assert not refused.insertable and "post" in refused.blocked_by
     finally:
         decompose._pieces.cache_clear()
         insertion_module._PRESENT.clear()
@@ -735,3 +748,40 @@ def test_exported_meshes_with_rounding_noise_keep_their_true_shapes():
         assert decompose.convex_pieces(b.local_vertices, b.triangles) is not None, b.id
     found = block_insertion(assembly, [b.id for b in noisy.blocks], "t01", CheckOptions())
     assert found.insertable and abs(found.direction[1]) == pytest.approx(1.0)
+
+
+def _curved_cradle(facets=16):
+    """A support "cradle" (0.6 x 0.4 x 0.3) with a half-cylindrical groove of radius 0.2
+    along y, ``facets`` flat facets, and a half-round "bar" filling the groove: a non-convex
+    base whose faces are not axis-aligned."""
+    arc = [(0.2 * math.cos(math.pi * (1 + i / facets)), 0.3 + 0.2 * math.sin(
+        math.pi * (1 + i / facets))) for i in range(facets + 1)]
+    outline = [(-0.3, 0.0), (0.3, 0.0), (0.3, 0.3), *arc[::-1], (-0.3, 0.3)]
+    index = {p: i for i, p in enumerate(outline)}
+    caps = []
+    for t in shapely.constrained_delaunay_triangles(shapely.Polygon(outline)).geoms:
+        tri = [index[min(index, key=lambda q: (q[0] - x) ** 2 + (q[1] - z) ** 2)]
+               for x, z in t.exterior.coords[:3]]
+        (ax, az), (bx, bz), (cx, cz) = (outline[i] for i in tri)
+        caps.append(tuple(tri if (bx - ax) * (cz - az) - (bz - az) * (cx - ax) > 0
+                          else tri[::-1]))
+    return make_scene("curved", [_prism("cradle", outline, 0.4, caps, support=True),
+                                 _prism("bar", arc, 0.4)])
+
+
+def test_bar_in_a_curved_groove_down_and_along_it():
+    """A half-round bar in a 16-facet groove of a cradle: interfaces on every facet, so it
+    can come down or slide along the groove (+-y), nothing across; the cradle is cut into
+    one piece per facet's wedge, and the sampled sweep of the true shapes agrees on each
+    lattice direction our check accepts, and on the two across it refuses."""
+    scene = _curved_cradle()
+    posed = Assembly.from_scene(scene.subset(["cradle"])).blocks[0]
+    assert len(block_pieces(posed)) == 16
+    found = _insertion(scene, "bar")
+    np.testing.assert_allclose(found.direction, DOWN, atol=1e-12)
+    for d in ((0, 1, 0), (0, -1, 0), (0, 0.6, -0.8)):
+        assert _insertion(scene, "bar", given=np.array(d, dtype=float)).insertable, d
+        assert _independent_sweep_free(scene, ["cradle", "bar"], "bar", d)
+    for d in ((1, 0, -1), (-1, 0, -1)):
+        assert not _insertion(scene, "bar", given=np.array(d, dtype=float)).insertable
+        assert not _independent_sweep_free(scene, ["cradle", "bar"], "bar", d)

@@ -17,7 +17,9 @@ The path: a convex body translated along -d sweeps exactly the convex hull of it
 end vertices, so one discrete collision test of that body per present convex body decides the
 path (python-fcl's GJK, after a bounding-box broad phase). A non-convex block, moving or
 present, is its exact convex pieces (:mod:`rbe_ros.geometry.decompose`), so its path is exact
-too; without a decomposition it is its convex hull (conservative: a path accepted is free).
+too; without a decomposition a present block is its triangle mesh (exact, see
+:func:`_present_pieces`) and a moving one, or a present one shrunk by a declared pose
+uncertainty, its convex hull (conservative: a path accepted is free).
 The path runs from where the block is clear of every present block's bounding box to its
 pose, or over a given distance. The moving block's pieces have their faces moved in by a
 clearance first (:func:`shrunk`), so that its neighbours at contact (touching, or
@@ -195,7 +197,10 @@ _PRESENT: OrderedDict = OrderedDict()     # (mesh key, allowance) -> [(fcl objec
 def _present_pieces(block: PosedBlock, allowance: float) -> list:
     """fcl objects and bounding boxes of ``block``'s convex pieces, each shrunk by
     ``allowance`` (m) if > 0 (kept for the last 4096 blocks asked: a present block is tested
-    against many moving blocks)."""
+    against many moving blocks). A non-convex block without a decomposition is its triangle
+    mesh (a BVH) when no allowance shrinks it: a swept convex body meets the solid exactly
+    when it meets its faces, for the body ends outside the solid (at the moving block's
+    pose, shrunk by the clearance) and so cannot lie inside it."""
     key = (block.vertices.tobytes(), None if block.convex or block.triangles is None
            else block.triangles.tobytes(), allowance)
     with _LOCK:
@@ -203,11 +208,19 @@ def _present_pieces(block: PosedBlock, allowance: float) -> list:
         if found is not None:
             _PRESENT.move_to_end(key)
             return found
-    found = []
-    for piece in block_pieces(block):
-        points = shrunk(piece, allowance) if allowance > 0 else piece
-        found.append((fcl.CollisionObject(_convex(points)),
-                      np.array([points.min(axis=0), points.max(axis=0)])))
+    if (allowance == 0 and not block.convex and block.triangles is not None
+            and convex_pieces(block.local_vertices, block.triangles) is None):
+        mesh = fcl.BVHModel()
+        mesh.beginModel(len(block.vertices), len(block.triangles))
+        mesh.addSubModel(block.vertices, block.triangles)
+        mesh.endModel()
+        found = [(fcl.CollisionObject(mesh), block.aabb)]
+    else:
+        found = []
+        for piece in block_pieces(block):
+            points = shrunk(piece, allowance) if allowance > 0 else piece
+            found.append((fcl.CollisionObject(_convex(points)),
+                          np.array([points.min(axis=0), points.max(axis=0)])))
     with _LOCK:
         _PRESENT[key] = found
         if len(_PRESENT) > 4096:

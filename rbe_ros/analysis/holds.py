@@ -176,12 +176,14 @@ class StabilityOracle:
 
 def minimal_holds(assembly: Assembly, options: CheckOptions = CheckOptions(), *,
                   search: HoldSearch | None = None, prefer=(),
-                  oracle: StabilityOracle | None = None, greedy: bool = True) -> HoldResult:
+                  oracle: StabilityOracle | None = None, largest: int | None = None
+                  ) -> HoldResult:
     """The smallest set of free blocks of ``assembly`` to hold so that it stands (empty if
     it stands). ``prefer``: block ids tried first (e.g. the blocks held at the previous
-    step, so that a robot keeps its grip). ``greedy`` False: no heuristic after the exact
-    search (a planner that only asks whether a set within K exists: none found is an empty
-    set that does not stand, ``none_within`` saying what was proven). See the module
+    step, so that a robot keeps its grip). ``largest``: only sets of at most this many
+    blocks matter (a planner's K): the exact search goes that deep, the greedy heuristic
+    runs only when the exact search ran out of checks and stops beyond it, and none found
+    is a set that does not stand, ``none_within`` saying what was proven. See the module
     docstring for the method."""
     search = options.holds if search is None else search
     oracle = oracle or StabilityOracle(assembly, options)
@@ -193,7 +195,8 @@ def minimal_holds(assembly: Assembly, options: CheckOptions = CheckOptions(), *,
     budget = oracle.checks + search.max_checks
     lower = len(first)            # disjoint failing components: one block each at least
     proven = lower - 1
-    for depth in range(lower, search.max_size + 1):
+    deepest = search.max_size if largest is None else largest
+    for depth in range(lower, deepest + 1):
         try:
             found = _deepen(oracle, frozenset(), depth, preferred, budget, set())
         except _Budget:
@@ -201,10 +204,11 @@ def minimal_holds(assembly: Assembly, options: CheckOptions = CheckOptions(), *,
         if found is not None:
             return HoldResult(_names(oracle, found), True, oracle.checks)
         proven = depth
-    if not greedy:
+    if largest is not None and proven >= largest:
         return HoldResult((), False, oracle.checks, False, proven)
-    held = _greedy(oracle, preferred, search.greedy_width)
-    return HoldResult(_names(oracle, held), False, oracle.checks, oracle.stands(held), proven)
+    held = _greedy(oracle, preferred, search.greedy_width, largest)
+    stands = (largest is None or len(held) <= largest) and oracle.stands(held)
+    return HoldResult(_names(oracle, held), False, oracle.checks, stands, proven)
 
 
 def _names(oracle: StabilityOracle, held) -> tuple[str, ...]:
@@ -249,11 +253,12 @@ def _deepen(oracle, held: frozenset, depth: int, preferred, budget: int, visited
     return None
 
 
-def _greedy(oracle: StabilityOracle, preferred, width: int) -> frozenset:
+def _greedy(oracle: StabilityOracle, preferred, width: int, largest: int | None = None
+            ) -> frozenset:
     held: list[int] = []
     while True:
         fails = oracle.failing(held)
-        if not fails:
+        if not fails or (largest is not None and len(held) > largest):
             break
         candidates: list[int] = []
         for comp, report in fails:

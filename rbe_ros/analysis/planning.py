@@ -254,6 +254,7 @@ class _Failure:
     blocked: dict[str, str] = field(default_factory=dict)
     best: tuple[str, tuple[str, ...]] | None = None
     proven: bool = True
+    dead: int = 0           # candidates whose state the search found dead before
 
     def refused(self, block: str, found: TrialResult) -> None:
         if self.best is None or len(found.held) < len(self.best[1]):
@@ -468,9 +469,8 @@ class _Planner:
             return held, False
         self.poll()
         oracle = StabilityOracle(trial.assembly, trial.options, self.cache, self.checked)
-        result = minimal_holds(trial.assembly, trial.options,
-                               search=replace(trial.options.holds, max_size=k),
-                               prefer=(*previous, block), oracle=oracle, greedy=False)
+        result = minimal_holds(trial.assembly, trial.options, prefer=(*previous, block),
+                               oracle=oracle, largest=k)
         if result.stands:
             return result.blocks, False
         return held, result.none_within >= k
@@ -544,6 +544,7 @@ class _Planner:
             tried += 1
             order = (*partial.order, b)
             if frozenset(order) in self.dead:
+                failure.dead += 1
                 continue
             if self.states >= self.budget:
                 raise _Budget
@@ -748,6 +749,9 @@ class _Planner:
                 note, need = "", {}
             why += note
             details = {"block": block, "held": list(held), **need}
+        elif failure.dead:
+            why = (f"; {failure.dead} candidate{'' if failure.dead == 1 else 's'} lead to "
+                   "partial plans found dead before")
         else:
             why = "; no unplaced block touches the placed ones" if not failure.blocked else ""
         why += "".join(f"; {b} cannot be inserted: {r}" for b, r in failure.blocked.items())

@@ -163,6 +163,9 @@ def log_cabin(levels: int = 6, length: int = 5, width: int = 5, cell: float = 0.
     half-lap notches: at a corner column the courses alternate cell by cell, so every log
     is two cells high along its length and one at its ends (notched on top), and hooks over
     the crossing log below. ``length`` x ``width`` cells in plan; on a support "ground"."""
+    if levels < 1 or min(length, width) < 3:
+        raise ValueError(f"log-cabin needs levels >= 1 and length, width >= 3 cells, got "
+                         f"{levels}, {length}, {width}")
     blocks = [_ground((-cell, -cell, -cell), ((length + 1) * cell, (width + 1) * cell, 0.0),
                       density=2000.0)]
     for level in range(levels):
@@ -187,6 +190,8 @@ def cradle(slots: int = 8, depth: int = 2, cell: float = 0.1, density: float = 2
     it comes in from above or along the slot, +-y); on each T a pair of L-pieces "l{i}a"
     (lower, its upturn at +x) and "l{i}b" (upper, hooked into the lower one's notch)
     filling three cells by two."""
+    if slots < 1 or depth < 1:
+        raise ValueError(f"cradle needs slots >= 1 and depth >= 1, got {slots}, {depth}")
     n = 3 * slots
     base = [(x, y, 0) for x in range(n) for y in range(depth)]
     base += [(x, y, 1) for x in range(n) for y in range(depth) if x % 3 != 1]
@@ -216,6 +221,12 @@ def keyed_vault(voussoirs: int = 15, radius: float = 1.0, thickness: float = 0.2
     angles = np.linspace(math.pi / 2 - half, math.pi / 2 + half, voussoirs + 1)
     r_in, r_out = radius - thickness / 2, radius + thickness / 2
     w = h = key_ratio * thickness / 2        # half its width, its depth
+    # the key stone's two grooves must leave it material between them
+    if not (voussoirs >= 3 and 0 < span_deg < 180 and 0 < thickness < radius
+            and 0 < key_ratio < 1 and 2 * h < (radius - w) * (angles[1] - angles[0])):
+        raise ValueError("keyed-vault needs voussoirs >= 3, span in (0, 180) deg, thickness "
+                         "in (0, radius) and keys (key_ratio in (0, 1)) shallower than half "
+                         "a voussoir")
     mid = voussoirs / 2
 
     def joint(k: int, sign: int):

@@ -144,3 +144,15 @@ def test_sealed_pocket_has_no_plan(capsys):
     code, plan = _run(capsys, "plan", path, "--max-held", "2", *MU, "--json")
     assert code == 1 and plan["outcome"] == "budget_exhausted"
     assert plan["message"].startswith("no plan found within the budget")
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["polyomino-wall", "-p", "width=7", "-p", "height=3"], "21 cells, not a multiple of 4"),
+    (["polyomino-wall", "-p", "width=2", "-p", "height=2"], "no tiling of a 2 x 2 wall"),
+    (["log-cabin", "-p", "levels=0"], "log-cabin needs levels >= 1"),
+    (["cradle", "-p", "slots=0"], "cradle needs slots >= 1"),
+    (["keyed-vault", "-p", "voussoirs=40"], "shallower than half a voussoir")])
+def test_generate_refuses_what_cannot_be_built(tmp_path, capsys, argv, words):
+    assert main(["generate", *argv, "-o", str(tmp_path / "s.json")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("rbe-ros: error: ") and words in err and err.count("\n") == 1

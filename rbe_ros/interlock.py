@@ -149,16 +149,24 @@ def _bottom_up(blocks: list[Block]) -> list[str]:
 
 
 def polyomino_wall(width: int = 8, height: int = 6, cell: float = 0.1, seed: int = 0,
-                   density: float = 2000.0) -> Scene:
+                   framed: bool = False, density: float = 2000.0) -> Scene:
     """A wall in the xz-plane, ``width`` x ``height`` cells of ``cell`` m, one cell thick
     (y), tiled by non-convex tetrominoes (:func:`tetromino_tiling`), on a support slab
     "ground" (top at z = 0). Pieces "p00", ... in tiling order; in the wall's plane a piece
     is locked by its neighbours, so one whose neighbours above are present can only come in
-    along the wall's normal (+-y)."""
-    blocks = [_ground((-cell, -cell, -cell), ((width + 1) * cell, 2 * cell, 0.0),
+    along the wall's normal (+-y). ``framed``: an infill panel, the wall in a support frame
+    present from the start (posts "post_left" and "post_right", a beam "beam" on them
+    touching the top course), so that every piece comes in along the wall's normal."""
+    blocks = [_ground((-2 * cell, -cell, -cell), ((width + 2) * cell, 2 * cell, 0.0),
                       density=density)] + _tetrominoes(width, height, seed, cell, density)
-    return make_scene(f"polyomino-wall({width}x{height}, seed {seed})", blocks,
-                      sequence=_bottom_up(blocks))
+    if framed:
+        posts = [("post_left", -1), ("post_right", width)]
+        blocks += [polycube(bid, [(x, 0, z) for z in range(height)], cell, density=density,
+                            support=True) for bid, x in posts]
+        blocks.append(polycube("beam", [(x, 0, height) for x in range(-1, width + 1)], cell,
+                               density=density, support=True))
+    name = f"polyomino-wall({width}x{height}, seed {seed}{', framed' if framed else ''})"
+    return make_scene(name, blocks, sequence=_bottom_up(blocks))
 
 
 def log_cabin(levels: int = 6, length: int = 5, width: int = 5, cell: float = 0.1,

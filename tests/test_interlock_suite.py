@@ -31,12 +31,13 @@ from helpers import sweep_free
 SUITE = Path(__file__).parent / "data" / "interlock"
 #: Each file and the generator call that writes it.
 FILES = {"polyomino_wall_8x6": lambda: polyomino_wall(),
+         "polyomino_wall_framed": lambda: polyomino_wall(framed=True),
          "polyomino_wall_12x12": lambda: polyomino_wall(width=12, height=12, seed=2),
          "log_cabin": log_cabin, "cradle": cradle, "keyed_vault": keyed_vault,
          "greedy_trap": greedy_trap, "sealed_pocket": sealed_pocket}
 PLANNED = [name for name in FILES if name != "sealed_pocket"]
 #: The one planned in ``make test``; the others are long.
-SMALL = "polyomino_wall_8x6"
+SMALL = "polyomino_wall_framed"
 MU = ("--mu", str(SUITE_MU))
 
 
@@ -87,16 +88,19 @@ def _planned_and_verified(tmp_path, capsys, name: str) -> dict:
 
 
 def test_small_assembly_planned_rechecked_and_swept(tmp_path, capsys):
-    """The tetromino wall (12 pieces, each locked in the wall's plane by its neighbours),
-    built without a hold; the true shapes matter: swept as convex hulls, as before issue
-    28, pieces of it collide along their planned paths."""
+    """The framed tetromino wall (an infill panel: 12 pieces, each locked in the wall's
+    plane by its neighbours, a support beam over the top course from the start): every
+    piece comes in along the wall's normal, without a hold; the true shapes matter: swept
+    as convex hulls, as before issue 28, pieces collide along their planned paths."""
     plan = _planned_and_verified(tmp_path, capsys, SMALL)
     assert plan["holds"] == []
     scene = load_scene(tmp_path / f"{SMALL}_planned.json")
+    assert all(abs(abs(d[1]) - 1) < 1e-9 for d in scene.approach)
     assembly = Assembly.from_scene(scene)
+    frame = ["ground", "post_left", "post_right", "beam"]
     hull_blocked = [block for k, (block, d) in enumerate(zip(scene.sequence, scene.approach))
-                    if not sweep_free(assembly, ["ground", *scene.sequence[:k]], block, d,
-                                       hulls=True)]
+                    if not sweep_free(assembly, [*frame, *scene.sequence[:k]], block, d,
+                                      hulls=True)]
     assert len(hull_blocked) >= 3
 
 

@@ -25,8 +25,8 @@ from oracles import plane_blocks
 from rbe_ros import generators
 from rbe_ros.analysis.assembly import Assembly
 from rbe_ros.analysis.options import CheckOptions
-from rbe_ros.analysis.planning import (BUDGET_EXHAUSTED, NO_PLAN, PLANNED, PlanProgress,
-                                       plan_sequence)
+from rbe_ros.analysis.planning import (BUDGET_EXHAUSTED, DEAD_END, NO_PLAN, PLANNED,
+                                       PlanProgress, plan_sequence)
 from rbe_ros.analysis.steps import gripped, sequence_steps
 from rbe_ros.analysis.verdict import check
 from rbe_ros.cli import main
@@ -141,6 +141,9 @@ def test_no_plan_exists_with_no_hold():
     # the deepest partial plan: Y, then X cannot be inserted
     assert plan.order == ["Y"] and plan.failed_step == 1
     assert "X cannot be inserted" in plan.message
+    # a beam does not back up: its dead end is no proof
+    beam = plan_sequence(pocket(), 0, beam=2)
+    assert beam.outcome == DEAD_END and beam.order == ["Y"] and "--beam 1" in beam.message
     # without the insertion check Y, X is a plan (it is the path that has none)
     loose = plan_sequence(pocket(), 0, _no_insertion())
     assert loose.feasible and loose.order == ["Y", "X"]

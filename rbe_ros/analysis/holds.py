@@ -181,7 +181,8 @@ def minimal_holds(assembly: Assembly, options: CheckOptions = CheckOptions(), *,
     """The smallest set of free blocks of ``assembly`` to hold so that it stands (empty if
     it stands). ``prefer``: block ids tried first (e.g. the blocks held at the previous
     step, so that a robot keeps its grip). ``largest``: only sets of at most this many
-    blocks matter (a planner's K): the exact search goes that deep, the greedy heuristic
+    blocks matter (a planner's K): the exact search goes that deep (at most
+    ``search.max_size``), the greedy heuristic
     runs only when the exact search ran out of checks and stops beyond it, and none found
     is a set that does not stand, ``none_within`` saying what was proven. See the module
     docstring for the method."""
@@ -195,7 +196,7 @@ def minimal_holds(assembly: Assembly, options: CheckOptions = CheckOptions(), *,
     budget = oracle.checks + search.max_checks
     lower = len(first)            # disjoint failing components: one block each at least
     proven = lower - 1
-    deepest = search.max_size if largest is None else largest
+    deepest = search.max_size if largest is None else min(search.max_size, largest)
     for depth in range(lower, deepest + 1):
         try:
             found = _deepen(oracle, frozenset(), depth, preferred, budget, set())

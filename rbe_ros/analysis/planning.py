@@ -101,7 +101,7 @@ HEARTBEAT = 1.0
 RECENT = 10
 #: Partial plans of the search's path (the deepest) that keep their step's forces for the
 #: incremental checks of their children.
-KEPT = 8
+KEPT = 3
 #: A contact carries a block when its normal into the block points up by at least this
 #: cosine (87 deg from vertical).
 RESTS_ON = 0.05

@@ -221,64 +221,68 @@ def cradle(slots: int = 8, depth: int = 2, cell: float = 0.1, density: float = 2
 
 def keyed_vault(voussoirs: int = 15, radius: float = 1.0, thickness: float = 0.25,
                 depth: float = 0.4, span_deg: float = 120.0, key_ratio: float = 0.25,
-                density: float = 2000.0) -> Scene:
+                rings: int = 1, density: float = 2000.0) -> Scene:
     """A segmental arch ("vault", extruded along y) of ``voussoirs`` "v00" (at +x) ...
     over ``span_deg`` degrees of a circle of centre-line ``radius``, with shear keys: every
     joint carries a tongue (``key_ratio`` of the thickness wide, half that deep, mid thickness)
     of the voussoir nearer its springing in a groove of the one nearer the key, so the key
     stone is grooved on both sides and can only come in along y. On supports
-    "springing_right" and "springing_left", whose tops are the springing joints."""
+    "springing_right" and "springing_left", whose tops are the springing joints.
+    ``rings`` > 1: a barrel vault of that many rings along +y, ``depth`` each, in bond (ring
+    r's voussoirs "r{r}_v00", ...; every other ring's joints halfway between the first
+    ring's, a half voussoir at each springing)."""
     half = math.radians(span_deg) / 2
     angles = np.linspace(math.pi / 2 - half, math.pi / 2 + half, voussoirs + 1)
     r_in, r_out = radius - thickness / 2, radius + thickness / 2
     w = h = key_ratio * thickness / 2        # half its width, its depth
-    # the key stone's two grooves must leave it material between them
-    if not (voussoirs >= 3 and 0 < span_deg < 180 and 0 < thickness < radius
-            and 0 < key_ratio < 1 and 2 * h < (radius - w) * (angles[1] - angles[0])):
-        raise ValueError("keyed-vault needs voussoirs >= 3, span in (0, 180) deg, thickness "
-                         "in (0, radius) and keys (key_ratio in (0, 1)) shallower than half "
-                         "a voussoir")
-    mid = voussoirs / 2
+    # the key stone's two grooves must leave it material between them, a half voussoir's
+    # one groove too
+    step = angles[1] - angles[0]
+    if not (voussoirs >= 3 and rings >= 1 and 0 < span_deg < 180 and 0 < thickness < radius
+            and 0 < key_ratio < 1 and 2 * h < (radius - w) * step):
+        raise ValueError("keyed-vault needs voussoirs >= 3, rings >= 1, span in (0, 180) deg,"
+                         " thickness in (0, radius) and keys (key_ratio in (0, 1)) shallower "
+                         "than half a voussoir")
 
-    def joint(k: int, sign: int):
-        """Points across joint k from intrados to extrados, the key bulging by sign * h
-        towards growing angle (tongue +1, groove -1, flat 0)."""
-        a = angles[k]
+    def joint(a: float, sign: int):
+        """Points across the joint at angle a from intrados to extrados, the key bulging by
+        sign * h towards growing angle (tongue +1, groove -1, flat 0)."""
         d = np.array([math.cos(a), math.sin(a)])
         t = np.array([-math.sin(a), math.cos(a)])
         pts = [r_in * d, (radius - w) * d, (radius - w) * d + sign * h * t,
                (radius + w) * d + sign * h * t, (radius + w) * d, r_out * d]
         return pts if sign else [pts[0], pts[-1]]
 
-    def key_sign(k: int) -> int:
-        """Joint k's key bulges towards growing angle (+1) when the voussoir at the smaller
-        angle is the nearer its springing (right half), else back (-1); none at springings."""
-        if k in (0, voussoirs):
-            return 0
-        return 1 if k <= mid else -1
-
+    y0, y1 = -depth / 2, depth / 2 + (rings - 1) * depth
     blocks = []
-    for side, k in (("right", 0), ("left", voussoirs)):
+    for side, a in (("right", angles[0]), ("left", angles[-1])):
         # below the springing joint, down to 0.3 m under its lower end, vertical sides
-        d = np.array([math.cos(angles[k]), math.sin(angles[k])])
+        d = np.array([math.cos(a), math.sin(a)])
         low = min(r_in * d[1], r_out * d[1]) - 0.3
         profile = [r_in * d, r_out * d, (r_out * d[0], low), (r_in * d[0], low)]
-        blocks.append(extruded_block(f"springing_{side}", profile, -depth / 2, depth / 2,
-                                     density=density, support=True))
-    ids = [f"v{i:02d}" for i in range(voussoirs)]
-    for i, bid in enumerate(ids):
-        lower = joint(i, key_sign(i))            # at the smaller angle
-        upper = joint(i + 1, key_sign(i + 1))
-        profile = lower + upper[::-1]
-        blocks.append(extruded_block(bid, profile, -depth / 2, depth / 2, density=density))
+        blocks.append(extruded_block(f"springing_{side}", profile, y0, y1, density=density,
+                                     support=True))
     order = []
-    left, right = 0, voussoirs - 1
-    while left <= right:
-        order.append(ids[left])
-        if left != right:
-            order.append(ids[right])
-        left, right = left + 1, right - 1
-    return make_scene(f"keyed-vault({voussoirs})", blocks, sequence=order)
+    for ring in range(rings):
+        joints = angles if ring % 2 == 0 else \
+            np.concatenate(([angles[0]], angles[:-1] + step / 2, [angles[-1]]))
+        count = len(joints) - 1
+        # a joint's key bulges towards growing angle (+1) when the voussoir at the smaller
+        # angle is the nearer its springing (right half), else back (-1); none at springings
+        signs = [0] + [1 if k <= count / 2 else -1 for k in range(1, count)] + [0]
+        ids = [f"v{i:02d}" if ring == 0 else f"r{ring}_v{i:02d}" for i in range(count)]
+        for i, bid in enumerate(ids):
+            profile = joint(joints[i], signs[i]) + joint(joints[i + 1], signs[i + 1])[::-1]
+            blocks.append(extruded_block(bid, profile, y0 + ring * depth,
+                                         y0 + (ring + 1) * depth, density=density))
+        left, right = 0, count - 1
+        while left <= right:            # from both springings to the key
+            order.append(ids[left])
+            if left != right:
+                order.append(ids[right])
+            left, right = left + 1, right - 1
+    name = f"keyed-vault({voussoirs}{f' x {rings} rings' if rings > 1 else ''})"
+    return make_scene(name, blocks, sequence=order)
 
 
 def greedy_trap(levels: int = 5, cell: float = 0.1, density: float = 2000.0) -> Scene:

@@ -34,6 +34,7 @@ FILES = {"polyomino_wall_8x6": lambda: polyomino_wall(),
          "polyomino_wall_framed": lambda: polyomino_wall(framed=True),
          "polyomino_wall_12x12": lambda: polyomino_wall(width=12, height=12, seed=2),
          "log_cabin": log_cabin, "cradle": cradle, "keyed_vault": keyed_vault,
+         "keyed_vault_2rings": lambda: keyed_vault(rings=2),
          "greedy_trap": greedy_trap, "sealed_pocket": sealed_pocket}
 PLANNED = [name for name in FILES if name != "sealed_pocket"]
 #: The one planned in ``make test``; the others are long.

@@ -8,20 +8,24 @@ the same load, in CPU time of this process (``time.process_time``: the machine i
 wall time counts the other users' load). The bar of issue 22: insertion at most 0.5x the stability check.
 
 Per plan of non-convex assemblies (walls of T tetrominoes, a row of bars in a comb cradle
-under inverted U caps, and the interlocking suite of tests/data/interlock/ when the tree has
-it: exact paths of the true shapes), ``plan_sequence`` with at most 2
+under inverted U caps: exact paths of the true shapes), ``plan_sequence`` with at most 2
 held, the time in the path checks (every ``block_insertion`` the planner asks) against the
 time in its stability checks (``StepChecker.attempt`` and ``check`` as the planner calls
 them; the hold search's own checks are left out, so the ratio is if anything too high).
 The bar of issue 28: at most 1x.
 
-    python benchmarks/insertion.py [--out docs]      (make bench-insertion, part of make bench)
+    python benchmarks/insertion.py [--out docs] [--interlock-only]
+                                     (make bench-insertion, part of make bench)
+
+The interlocking suite (tests/data/interlock), each assembly planned as its test plans it,
+with the plan's time and holds: docs/INTERLOCK.md (:func:`interlock_suite`).
 """
 from __future__ import annotations
 
 import argparse
 import os
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +38,7 @@ from rbe_ros.analysis.insertion import block_insertion
 from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.analysis.steps import sequence_step, step_count
 from rbe_ros.analysis.validate import validated_assembly
+from rbe_ros.interlock import SUITE_MU, log_cabin
 from rbe_ros.io.scene_json import load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -57,8 +62,9 @@ def step_times(scene, options: CheckOptions) -> tuple[np.ndarray, np.ndarray, in
     return np.array(stability), np.array(insertion), insertable
 
 
-def plan_times(scene, max_held: int = 2) -> tuple[float, float, int, int, bool]:
-    """(stability s, path checks s, stability checks, path checks, planned) of one plan."""
+def plan_times(scene, max_held: int = 2, options: CheckOptions = CheckOptions()
+               ) -> tuple[float, float, int, int, planning.Plan]:
+    """(stability s, path checks s, stability checks, path checks, the plan) of one plan."""
     spent = {"stability": 0.0, "insertion": 0.0}
     calls = {"stability": 0, "insertion": 0}
 
@@ -77,17 +83,22 @@ def plan_times(scene, max_held: int = 2) -> tuple[float, float, int, int, bool]:
     planning.check = timed("stability", saved[1])
     StepChecker.attempt = timed("stability", saved[2])
     try:
-        plan = planning.plan_sequence(scene, max_held=max_held)
+        plan = planning.plan_sequence(scene, max_held=max_held, options=options)
     finally:
         planning.block_insertion, planning.check, StepChecker.attempt = saved
     return (spent["stability"], spent["insertion"], calls["stability"], calls["insertion"],
-            plan.feasible)
+            plan)
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=ROOT / "docs")
+    parser.add_argument("--interlock-only", action="store_true",
+                        help="only the interlocking suite (docs/INTERLOCK.md)")
     args = parser.parse_args(argv)
+    if args.interlock_only:
+        interlock_suite(args.out)
+        return 0
     rows = []
     for name, scene in (("dome 14x10 (140 blocks)", gen.dome()),
                         ("wall 40x25 running bond (1,020 blocks)",
@@ -99,15 +110,11 @@ def main(argv=None) -> int:
                     f"| {np.median(ratio):.3f} | {np.percentile(ratio, 95):.3f} |")
         print(rows[-1], flush=True)
     plans = []
-    assemblies = [("T tetromino wall 3x2 squares (24 pieces)", gen.tetromino_wall(3, 2)),
-                  ("T tetromino wall 4x3 squares (48 pieces)", gen.tetromino_wall(4, 3)),
-                  ("cradle row, 8 bars and 8 caps (17 blocks)", gen.cradle_row(8))]
-    # the interlocking suite, when the tree has it
-    assemblies += [(f"interlock/{path.name}", load_scene(path))
-                   for path in sorted((ROOT / "tests" / "data" / "interlock").glob("*.json"))]
-    for name, scene in assemblies:
-        stability, insertion, n_stability, n_insertion, planned = plan_times(scene)
-        plans.append(f"| {name} | {'yes' if planned else 'no'} | {n_stability} | "
+    for name, scene in (("T tetromino wall 3x2 squares (24 pieces)", gen.tetromino_wall(3, 2)),
+                        ("T tetromino wall 4x3 squares (48 pieces)", gen.tetromino_wall(4, 3)),
+                        ("cradle row, 8 bars and 8 caps (17 blocks)", gen.cradle_row(8))):
+        stability, insertion, n_stability, n_insertion, plan = plan_times(scene)
+        plans.append(f"| {name} | {'yes' if plan.feasible else 'no'} | {n_stability} | "
                      f"{1e3 * stability:.0f} | {n_insertion} | {1e3 * insertion:.0f} | "
                      f"{insertion / stability:.3f} |")
         print(plans[-1], flush=True)
@@ -130,8 +137,8 @@ def main(argv=None) -> int:
         "",
         "## Plans of non-convex assemblies",
         "",
-        "Per plan (`plan_sequence`, at most 2 held; the interlocking suite's assemblies",
-        "of tests/data/interlock/ too when the tree has them), the time in its path checks (every",
+        "Per plan (`plan_sequence`, at most 2 held; the interlocking suite of",
+        "tests/data/interlock/ as its tests plan it: docs/INTERLOCK.md), the time in its path checks (every",
         "`block_insertion` the planner asks: cone, candidate directions, the swept convex",
         "pieces of the true shapes until clear of every present block) against the time in",
         "its stability checks (`StepChecker.attempt` and `check` as the planner calls them),",
@@ -149,7 +156,59 @@ def main(argv=None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "INSERTION.md").write_text(text)
     print(f"wrote {args.out / 'INSERTION.md'}")
+    interlock_suite(args.out)
     return 0
+
+
+def interlock_suite(out: Path) -> None:
+    """docs/INTERLOCK.md: every planned assembly of tests/data/interlock planned as its test
+    plans it (insertion on, at most 2 held, mu 0.55), with the plan's wall time, its path
+    checks' CPU time against its stability checks' and the holds it uses."""
+    options = replace(CheckOptions(), solve=replace(CheckOptions().solve, mu=SUITE_MU))
+    rows = []
+    suite = [(path.stem, load_scene(path))
+             for path in sorted((ROOT / "tests" / "data" / "interlock").glob("*.json"))
+             if path.stem != "sealed_pocket"]   # no plan exists: not a plan's cost
+    # the size of the largest published assembly the issue names (148 parts)
+    suite.append(("log_cabin, 37 levels (generated, not a file)", log_cabin(levels=37)))
+    for name, scene in suite:
+        stability, insertion, n_stability, n_insertion, plan = plan_times(scene, 2, options)
+        held = max((len(h) for h in plan.held), default=0)
+        rows.append(f"| {name} | {sum(not b.support for b in scene.blocks)} | "
+                    f"{'yes' if plan.feasible else 'no'} | {plan.time:.1f} | {n_stability} | "
+                    f"{1e3 * stability:.0f} | {n_insertion} | {1e3 * insertion:.0f} | "
+                    f"{insertion / stability:.3f} | {held} | "
+                    f"{sum(len(h) for h in plan.held)} |")
+        print(rows[-1], flush=True)
+    text = "\n".join([
+        "# The interlocking suite: plans and their cost",
+        "",
+        "Made by `python benchmarks/insertion.py` (`make bench-insertion`). The assemblies of",
+        "tests/data/interlock (non-convex parts, tests/data/interlock/README.md), each planned",
+        "with insertion on, at most 2 held, mu 0.55 (`plan_sequence`, as `rbe-ros plan",
+        "--max-held 2 --mu 0.55`). Plan s: the plan's wall time (bar, issue 28: under 60 s).",
+        "Path checks (every `block_insertion` the planner asks: the swept convex pieces of the",
+        "true shapes) against stability checks (`StepChecker.attempt` and `check`), CPU time of",
+        "the process in the same run; ratio: path / stability (bar: at most 1). Holds: the most",
+        "blocks held at one step, and block-steps held in all. tests/test_interlock_suite.py",
+        "re-checks every plan with `check --sequence` and sweeps every path with trimesh.",
+        "The sealed pocket, which has no plan, is left out (its proof costs a search of every",
+        "order: `rbe-ros plan sealed_pocket.json --max-held 2 --mu 0.55 --search-budget 3000`).",
+        "The last row is a scale point: a log cabin of 148 logs, the size of the largest",
+        "published assembly of issue 28 (`rbe-ros generate log-cabin -p levels=37`).",
+        "",
+        "| assembly | parts | planned | plan s | stability checks | stability ms "
+        "| path checks | path ms | ratio | most held | held block-steps |",
+        "| --- | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+        *rows,
+        "",
+        f"Load average at the end of the run: {os.getloadavg()[0]:.1f} (a shared machine: "
+        "ratios, not times).",
+        "",
+        machine_summary(),
+        ""])
+    (out / "INTERLOCK.md").write_text(text)
+    print(f"wrote {out / 'INTERLOCK.md'}")
 
 
 if __name__ == "__main__":

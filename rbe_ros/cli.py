@@ -38,6 +38,7 @@ from .analysis.verdict import check
 from .analysis.virtual import ANALYSES, virtual_assembly
 from .cell import cell_to_dict
 from .generators import GENERATORS
+from .interlock import INTERLOCK_GENERATORS
 from .io import lmgc90
 from .io.figures import draw_report
 from .io.cell_file import parse_cell, read_cell
@@ -161,6 +162,7 @@ def _scene(args) -> tuple[Scene, Assembly | None]:
                          "them, not at measured poses (--poses)")
     scene, stored = load_design(args.scene, args.density, stored=args.interfaces != "detected",
                                 supports=args.supports)
+    args.warnings = _warn(scene)            # what loading repaired: --json lists them too
     if args.poses:
         scene = scene_at_poses(scene, load_poses(args.poses))
     if args.interfaces == "compare":
@@ -172,6 +174,13 @@ def _scene(args) -> tuple[Scene, Assembly | None]:
             print("\n".join(diff.lines()), file=sys.stderr if as_json else sys.stdout)
         stored = None
     return scene, stored
+
+
+def _warn(scene: Scene) -> list[str]:
+    """Print what loading ``scene`` repaired (one line each on stderr); the warnings."""
+    for warning in scene.warnings:
+        print(f"rbe-ros: warning: {warning}", file=sys.stderr)
+    return list(scene.warnings)
 
 
 def _assembly(args) -> Assembly:
@@ -239,7 +248,7 @@ def build_parser() -> argparse.ArgumentParser:
     figure.set_defaults(run=_run_figure)
 
     generate = sub.add_parser("generate", help="write a parametric scene as JSON")
-    generate.add_argument("name", choices=sorted(GENERATORS))
+    generate.add_argument("name", choices=sorted({**GENERATORS, **INTERLOCK_GENERATORS}))
     generate.add_argument("-p", "--param", action="append", default=[], metavar="KEY=VALUE",
                           help="generator parameter (JSON value), e.g. -p n=15 "
                           "-p thickness_ratio=0.12")
@@ -386,6 +395,7 @@ def _run_check(args) -> int:
     else:
         reports = [check_scene(scene, options, stored)]
         out = {"scene": scene.name, **report_json(reports[0])}
+    out["warnings"] = args.warnings
     if args.interfaces == "compare":
         out["interfaces_compare"] = args.interfaces_compare.to_json()
     opinions = lmgc90.second_opinions(
@@ -463,7 +473,7 @@ def _run_figure(args) -> int:
 
 
 def _run_generate(args) -> int:
-    make = GENERATORS[args.name]
+    make = {**GENERATORS, **INTERLOCK_GENERATORS}[args.name]
     allowed = inspect.signature(make).parameters
     params = {}
     for item in args.param:
@@ -490,6 +500,7 @@ def _run_robust(args) -> int:
     if args.samples < 1 or args.batch < 1:
         raise ValueError("--samples and --batch must be at least 1")
     scene = load_scene(args.scene)
+    _warn(scene)
     job = RobustJob(scene, PoseNoise(*args.pose_sigma), args.seed, _options(args), args.sequence)
     pool = ProcessPool(args.workers) if args.workers > 1 and not args.ray else None
     executor = ray_cluster(args.ray) if args.ray else pool or serial
@@ -645,7 +656,7 @@ def _run_plan(args) -> int:
                "search_checks": plan.checks, "models": plan.models, "time": plan.time,
                "prefer": args.prefer, "min_margin": args.min_margin,
                "weakest_step": weakest_json(plan.weakest),
-               "steps": [step_summary(r) for r in plan.reports]}
+               "steps": [step_summary(r) for r in plan.reports], "warnings": args.warnings}
         if plan.timeline is not None:
             out["robots"] = list(plan.timeline.robots)
             out["timeline"] = json_safe(timeline_to_dicts(plan.timeline, header_dict("world", 0)))

@@ -167,6 +167,8 @@ class Scene:
     #: Per step of ``sequence``: the unit direction the block arrives along (checked, not
     #: chosen), or None (the check chooses one); empty: choose at every step.
     approach: tuple[np.ndarray | None, ...] = ()
+    #: What loading changed and the user should know (a repaired mesh, naming the block).
+    warnings: tuple[str, ...] = ()
 
     def approach_of(self, block_id: str) -> np.ndarray | None:
         """The given approach of ``block_id``'s step (None: none given)."""
@@ -280,7 +282,7 @@ def finite_array(value, shape, what: str) -> np.ndarray:
 
 
 def make_scene(name: str, blocks, gravity=DEFAULT_GRAVITY, sequence=(), holds=(),
-               pose_uncertainty=None, approach=()) -> Scene:
+               pose_uncertainty=None, approach=(), warnings=()) -> Scene:
     """A validated scene: unique ids, a support, a sequence of existing free blocks, holds of
     existing blocks within the steps, a pose uncertainty of two numbers >= 0 (or None), an
     approach per step of the sequence (a non-zero vector, made unit, or None) or none."""
@@ -311,7 +313,8 @@ def make_scene(name: str, blocks, gravity=DEFAULT_GRAVITY, sequence=(), holds=()
         seq_seen.add(s)
     steps = len(seq) or sum(not b.support for b in blocks)
     return Scene(str(name), blocks, g, seq, _check_holds(holds, seen, steps),
-                 _check_uncertainty(pose_uncertainty), _check_approach(approach, seq))
+                 _check_uncertainty(pose_uncertainty), _check_approach(approach, seq),
+                 tuple(str(w) for w in warnings))
 
 
 def _check_approach(approach, sequence: tuple[str, ...]) -> tuple[np.ndarray | None, ...]:

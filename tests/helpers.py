@@ -4,6 +4,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import trimesh
 from scipy.spatial.transform import Rotation
 
 from rbe_ros.analysis.options import CheckOptions
@@ -105,3 +106,52 @@ def inclined_block(angle_deg: float):
         box_block("slope", (4, 4, 0.2), rot.apply([0, 0, -0.1]), q, support=True, density=DENSITY),
         box_block("box", (1, 1, 0.5), rot.apply([0, 0, 0.25]), q, density=DENSITY),
     ])
+
+
+def true_mesh(block) -> trimesh.Trimesh:
+    """The mesh of a posed block, each face a fan of triangles (exact for convex faces, as
+    all of the interlocking suite's are)."""
+    return trimesh.Trimesh(block.vertices, block.triangles, process=False)
+
+
+def _inward(mesh: trimesh.Trimesh, offset: float) -> trimesh.Trimesh:
+    """``mesh`` with every face moved in by ``offset``: each vertex solves n . m = 1 over the
+    distinct planes of its faces (exact where at most three meet, as at every vertex of a
+    polycube or a prism) and moves by -offset m."""
+    normals = np.round(mesh.face_normals, 9)
+    moved = mesh.vertices.copy()
+    for v, faces in enumerate(mesh.vertex_faces):
+        distinct = np.unique(normals[faces[faces >= 0]], axis=0)
+        m = np.linalg.lstsq(distinct, np.ones(len(distinct)), rcond=None)[0]
+        moved[v] -= offset * m
+    return trimesh.Trimesh(moved, mesh.faces, process=False)
+
+
+def sweep_free(assembly, present: list[str], block: str, direction, hulls: bool = False,
+               offset: float = 5e-4, spacing: float = 5e-3,
+               distance: float | None = None) -> bool:
+    """The oracle of an insertion path (trimesh's collision manager, not our convex
+    decomposition): ``block``'s true mesh, its faces moved in by ``offset`` (m), at every
+    ``spacing`` (m) along its path (arriving along ``direction``) from where it is clear of
+    the present blocks' boxes (or over ``distance``), collides with no present block's true
+    mesh (``hulls``: every mesh its convex hull, as the check before issue 28 swept them)."""
+    by_id = {b.id: b for b in assembly.blocks}
+    manager = trimesh.collision.CollisionManager()
+    for bid in present:
+        mesh = true_mesh(by_id[bid])
+        manager.add_object(bid, mesh.convex_hull if hulls else mesh)
+    moving = _inward(true_mesh(by_id[block]), offset)
+    if hulls:
+        moving = moving.convex_hull
+    d = np.asarray(direction, dtype=float)
+    if distance is None:
+        corners = np.array([[x, y, z] for bid in present for lo, hi in [by_id[bid].aabb]
+                            for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                            for z in (lo[2], hi[2])])
+        distance = max(0.0, float(np.max(corners @ -d) - np.min(moving.vertices @ -d)))
+    for t in np.append(np.arange(0.0, distance, spacing), distance):
+        shift = np.eye(4)
+        shift[:3, 3] = -t * d
+        if manager.in_collision_single(moving, transform=shift):
+            return False
+    return True

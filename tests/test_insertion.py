@@ -34,6 +34,8 @@ from rbe_ros.io.scene_json import scene_from_dict, scene_to_dict
 from rbe_ros.io.table import approach_text, format_table
 from rbe_ros.scene import SceneError, box_block, box_vertices, make_block, make_scene
 
+from helpers import sweep_free
+
 DOWN = np.array([0.0, 0.0, -1.0])
 RHO = 2000.0
 
@@ -501,48 +503,14 @@ LATTICE = [np.array(v, dtype=float) / np.linalg.norm(v)
            for v in itertools.product((-1, 0, 1), repeat=3) if any(v)]
 
 
-def _mesh(scene, block_id):
-    posed = Assembly.from_scene(scene.subset([block_id])).blocks[0]
-    return trimesh.Trimesh(posed.vertices, posed.triangles, process=False)
-
-
-def _inward(mesh, offset):
-    """An orthogonal polyhedron (every face normal a +-axis) with every face moved in by
-    ``offset``: each vertex moves by -offset times the sum of the distinct normals of its
-    faces (exact where at most three orthogonal planes meet, convex corner or reflex)."""
-    normals = np.round(mesh.face_normals, 9)
-    assert np.all(np.sort(np.abs(normals), axis=1)[:, :2] == 0)      # axis-aligned
-    moved = mesh.vertices.copy()
-    for v, faces in enumerate(mesh.vertex_faces):
-        distinct = np.unique(normals[faces[faces >= 0]], axis=0)
-        moved[v] -= offset * distinct.sum(axis=0)
-    return trimesh.Trimesh(moved, mesh.faces, process=False)
-
-
 def _sweep_free(scene, block_id, direction, distance=None, step=0.004) -> bool:
-    """The oracle: the block's true mesh, faces moved in by 0.5 mm, at positions every
-    ``step`` m along its path (from where it is clear of every other block's bounding box
-    along the direction, or over ``distance``) collides with no other block's true mesh."""
-    manager = trimesh.collision.CollisionManager()
-    boxes = []
-    for b in scene.blocks:
-        if b.id != block_id:
-            other = _mesh(scene, b.id)
-            manager.add_object(b.id, other)
-            boxes.append(other.bounds)
-    moving = _inward(_mesh(scene, block_id), 5e-4)
-    d = np.asarray(direction, dtype=float)
-    if distance is None:        # clear: past every box corner along -d
-        corners = np.array([[x, y, z] for lo, hi in boxes
-                            for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
-                            for z in (lo[2], hi[2])])
-        distance = max(0.0, float(np.max(corners @ -d) - np.min(moving.vertices @ -d)))
-    for t in np.append(np.arange(0.0, distance, step), distance):
-        tf = np.eye(4)
-        tf[:3, 3] = -t * d
-        if manager.in_collision_single(moving, transform=tf):
-            return False
-    return True
+    """The oracle (:func:`helpers.sweep_free`): the block's true mesh, faces moved in by
+    0.5 mm, at positions every ``step`` m along its path (from where it is clear of every
+    other block's bounding box along the direction, or over ``distance``) collides with no
+    other block's true mesh."""
+    others = [b.id for b in scene.blocks if b.id != block_id]
+    return sweep_free(Assembly.from_scene(scene), others, block_id, direction, spacing=step,
+                      distance=distance)
 
 
 def _free_of_lattice(scene, block_id, options=CheckOptions()):

@@ -11,8 +11,10 @@ from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "rbe_ros"
 
-#: Layers by module name prefix; the longest matching prefix decides.
+#: Layers by module name prefix; the longest matching prefix decides. The interlocking
+#: suite's generators use the geometry (a prism's signed volume): layer 1.
 LAYERS = {"rbe_ros": 0, "rbe_ros.scene": 0, "rbe_ros.cell": 0, "rbe_ros.generators": 0,
+          "rbe_ros.interlock": 1,
           "rbe_ros.deadline": 0, "rbe_ros.geometry": 1, "rbe_ros.rbe": 2, "rbe_ros.analysis": 3,
           "rbe_ros.io": 4, "rbe_ros.ros": 5, "rbe_ros.cli": 6}
 #: Ranks inside analysis; a module not listed is an analysis (rank 3): it may use the

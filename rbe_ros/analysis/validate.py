@@ -9,8 +9,11 @@ invalid: the check's verdict says so (INFEASIBLE).
 """
 from __future__ import annotations
 
+import math
+
 from ..deadline import stage
 from ..geometry.contacts import ContactOptions
+from ..geometry.block import PosedBlock
 from ..geometry.overlap import find_penetration
 from ..geometry.uncertainty import allowances
 from ..scene import Scene, SceneError, ValidationLimits, validate_scene
@@ -36,8 +39,27 @@ def validate_assembly(assembly: Assembly, limits: ValidationLimits = ValidationL
         a, b = assembly.blocks[hit.a], assembly.blocks[hit.b]
         raise SceneError(f"blocks {a.id!r} and {b.id!r} interpenetrate: they overlap by "
                          f"{hit.depth:.4g} m, more than the tolerance {hit.tol:.4g} m"
-                         + (" (with the declared pose uncertainty)" if contact.uncertain else ""),
+                         + (" (with the declared pose uncertainty)" if contact.uncertain else "")
+                         + f"; --pose-uncertainty {accepting_uncertainty(a, b, hit.depth, contact)}"
+                         " would make it a contact (if the poses are measured that well)",
                          [a.id, b.id])
+
+
+def accepting_uncertainty(a: PosedBlock, b: PosedBlock, depth: float,
+                          contact: ContactOptions) -> str:
+    """The smallest ``--pose-uncertainty POS_M[,ANGLE_DEG]`` (the position rounded up to
+    0.1 mm, a declared angle kept) under which blocks ``a`` and ``b`` overlapping by
+    ``depth`` are in contact: the contact detection accepts a gap of -(its distance
+    tolerance plus both blocks' allowances), and each allowance grows by the added position
+    uncertainty (then the validation, whose tolerance is larger, accepts it too)."""
+    have = float(allowances([a, b], contact.pose_uncertainty_m,
+                            contact.pose_uncertainty_deg).sum())
+    base = contact.distance_tol * min(a.size, b.size)
+    needed = contact.pose_uncertainty_m + 0.5 * (depth - base - have)
+    # a hair more, so that the gap, computed with rounding, is within the suggestion
+    position = math.ceil(needed * 1e4 * (1 + 1e-6)) / 1e4
+    angle = contact.pose_uncertainty_deg
+    return f"{position:g}" + (f",{angle:g}" if angle > 0 else "")
 
 
 def validated_assembly(scene: Scene, limits: ValidationLimits | None = ValidationLimits(),

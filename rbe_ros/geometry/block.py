@@ -180,6 +180,18 @@ def _shape(vertex_bytes: bytes, count: int, faces) -> _Shape:
     return _Shape(*planes, volume, centroid, extents, convex, vertices, triangles)
 
 
+def is_closed(faces) -> bool:
+    """Whether the polygon ``faces`` (vertex index lists) close a consistently wound mesh."""
+    return _is_closed(_Ragged(faces).fans())
+
+
+def signed_volume(vertices: np.ndarray, faces) -> float:
+    """The volume the polygon ``faces`` enclose, positive when they are wound outward (fans
+    from each face's first vertex: exact for planar faces, any origin)."""
+    tri = np.asarray(vertices, dtype=float)[_Ragged(faces).fans()]
+    return float(np.einsum("ij,ij->", tri[:, 0], np.cross(tri[:, 1], tri[:, 2]))) / 6.0
+
+
 def _is_closed(tri: np.ndarray) -> bool:
     """Every directed edge appears once and its reverse once: closed and consistently wound."""
     edges = np.concatenate((tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]))

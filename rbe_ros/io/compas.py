@@ -21,6 +21,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..analysis.assembly import Assembly
+from ..geometry.repair import repair_block
 from ..scene import Block, Scene, SceneError, make_block, make_scene, turned
 from .scene_json import read_json
 
@@ -182,6 +183,7 @@ def compas_scene(doc: dict, stem: str, supports=None, density: float | None = No
         raise SceneError(f"{stem}: support nodes {sorted(wanted - keys, key=_key_order)} are"
                          f" not in the assembly")
     blocks: list[Block] = []
+    warnings: list[str] = []
     for key, attr in nodes:
         name = attr.get("name")
         bid = str(name) if isinstance(name, str) and name else key
@@ -193,11 +195,14 @@ def compas_scene(doc: dict, stem: str, supports=None, density: float | None = No
         # block frame: world axes at the mean of its vertices, so that a measured pose (and
         # a declared rotation uncertainty) turns the block about itself, not the world origin
         origin = vertices.mean(axis=0)
-        blocks.append(make_block(bid, vertices - origin, faces, origin, density=float(rho),
-                                 support=support))
+        block, warning = repair_block(make_block(bid, vertices - origin, faces, origin,
+                                                 density=float(rho), support=support))
+        blocks.append(block)
+        if warning:
+            warnings.append(warning)
     attributes = _unwrap(doc).get("attributes") or {}
     name = attributes.get("name") if attributes.get("name") not in (None, "Assembly") else stem
-    return make_scene(str(name), blocks)
+    return make_scene(str(name), blocks, warnings=warnings)
 
 
 def compas_interfaces(path) -> list[CompasInterface]:

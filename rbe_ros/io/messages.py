@@ -20,6 +20,7 @@ import numpy as np
 
 from ..analysis.planning import Plan, PlanProgress
 from ..analysis.timeline import Timeline
+from ..geometry.repair import repair_block
 from ..rbe.result import NOT_COMPUTED, HoldWrench, InterfaceResult, NearContact, Report, Status
 from ..scene import (BOX_FACES, Hold, Scene, SceneError, blame, box_vertices, make_block,
                      make_scene)
@@ -186,24 +187,30 @@ def _block_from_dict(index: int, raw):
             raise SceneError(f"{where}: a BOX needs 3 positive finite dimensions (full edge "
                              f"lengths), got {dims!r}")
         vertices, faces = box_vertices(size), BOX_FACES
-    return make_block(bid, vertices, faces, position, orientation,
-                      density=_number(raw, "density", where), mass=_number(raw, "mass", where),
-                      support=bool(_field(raw, "support", False, where)))
+    block = make_block(bid, vertices, faces, position, orientation,
+                       density=_number(raw, "density", where), mass=_number(raw, "mass", where),
+                       support=bool(_field(raw, "support", False, where)))
+    return repair_block(block) if triangles else (block, None)
 
 
 def scene_from_state_dict(d) -> Scene:
     """The validated scene of an rbe_msgs/AssemblyState dict (raises :class:`SceneError`).
 
-    Mesh blocks keep their triangles as faces (no merging of coplanar triangles here).
+    Mesh blocks keep their triangles as faces (no merging of coplanar triangles here); an
+    open or inconsistently wound mesh is repaired, the scene's ``warnings`` say so
+    (:func:`rbe_ros.geometry.repair.repair_block`).
     The scene is named after the header frame ("assembly" when empty).
     """
     if not isinstance(d, Mapping):
         raise SceneError("an AssemblyState must be a mapping (message dict), "
                          f"got {type(d).__name__}")
-    blocks = []
+    blocks, warnings = [], []
     for i, b in enumerate(_list(d, "blocks", "AssemblyState")):
         with blame(b.get("id") if isinstance(b, Mapping) else ""):
-            blocks.append(_block_from_dict(i, b))
+            block, warning = _block_from_dict(i, b)
+        blocks.append(block)
+        if warning:
+            warnings.append(warning)
     sequence = _list(d, "sequence", "AssemblyState")
     if not all(isinstance(s, str) for s in sequence):
         raise SceneError("AssemblyState.sequence must be a list of block ids (strings)")
@@ -214,7 +221,8 @@ def scene_from_state_dict(d) -> Scene:
     approach = [_xyz(v, "AssemblyState.approach") for v in _list(d, "approach", "AssemblyState")
                 if sequence]
     return make_scene(str(name) or "assembly", blocks, gravity, sequence,  # zero gravity: default
-                      holds, approach=[v if any(v) else None for v in approach])
+                      holds, approach=[v if any(v) else None for v in approach],
+                      warnings=warnings)
 
 
 def _hold_from_dict(index: int, raw) -> Hold:

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..geometry.repair import repair_block
 from ..scene import (BOX_FACES, Block, DEFAULT_GRAVITY, Hold, Scene, SceneError, box_vertices,
                      finite_array, make_block, make_scene)
 
@@ -18,7 +19,12 @@ def scene_from_dict(data: dict, base_dir: Path | None = None) -> Scene:
     raw_blocks = data.get("blocks")
     if not isinstance(raw_blocks, list):
         raise SceneError('a scene needs a "blocks" list')
-    blocks = [_block_from_dict(i, b, base_dir) for i, b in enumerate(raw_blocks)]
+    blocks, warnings = [], []
+    for i, raw in enumerate(raw_blocks):
+        block, warning = _block_from_dict(i, raw, base_dir)
+        blocks.append(block)
+        if warning:
+            warnings.append(warning)
     seq = data.get("sequence") or ()
     if not isinstance(seq, (list, tuple)):
         raise SceneError('"sequence" must be a list of block ids')
@@ -27,7 +33,8 @@ def scene_from_dict(data: dict, base_dir: Path | None = None) -> Scene:
         raise SceneError('"holds" must be a list of {"block", "from_step", "until_step"}')
     return make_scene(data.get("name", "scene"), blocks, data.get("gravity", DEFAULT_GRAVITY), seq,
                       [_hold_from_dict(i, h) for i, h in enumerate(holds)],
-                      data.get("pose_uncertainty"), _approach_from(data.get("approach")))
+                      data.get("pose_uncertainty"), _approach_from(data.get("approach")),
+                      warnings)
 
 
 def _approach_from(raw) -> tuple:
@@ -53,7 +60,9 @@ def _hold_from_dict(index: int, raw) -> Hold:
 _HOLD_EXTRA = ("grip", "max_force", "max_torque")
 
 
-def _block_from_dict(index: int, raw, base_dir: Path | None) -> Block:
+def _block_from_dict(index: int, raw, base_dir: Path | None) -> tuple[Block, str | None]:
+    """The block of one entry of "blocks", its mesh repaired if it is open or wound
+    inconsistently (:func:`rbe_ros.geometry.repair.repair_block`), and the warning of it."""
     if not isinstance(raw, dict):
         raise SceneError(f"block #{index} must be a JSON object")
     if "id" not in raw:
@@ -67,16 +76,20 @@ def _block_from_dict(index: int, raw, base_dir: Path | None) -> Block:
         if np.any(size <= 0):
             raise SceneError(f"block {bid!r}: box edge lengths must be positive")
         vertices, faces = box_vertices(size), BOX_FACES
+        repair = False
     elif "mesh" in raw:
         mesh = raw["mesh"]
         if not isinstance(mesh, dict) or "vertices" not in mesh or "faces" not in mesh:
             raise SceneError(f'block {bid!r}: "mesh" needs "vertices" and "faces"')
         vertices, faces = mesh["vertices"], mesh["faces"]
+        repair = True
     else:
         vertices, faces = _load_mesh_file(bid, raw["mesh_file"], base_dir)
-    return make_block(bid, vertices, faces, raw.get("position", (0, 0, 0)),
-                      raw.get("orientation", (0, 0, 0, 1)), density=raw.get("density", 0.0),
-                      mass=raw.get("mass", 0.0), support=bool(raw.get("support", False)))
+        repair = True
+    block = make_block(bid, vertices, faces, raw.get("position", (0, 0, 0)),
+                       raw.get("orientation", (0, 0, 0, 1)), density=raw.get("density", 0.0),
+                       mass=raw.get("mass", 0.0), support=bool(raw.get("support", False)))
+    return repair_block(block) if repair else (block, None)
 
 
 def _load_mesh_file(bid: str, rel: str, base_dir: Path | None):

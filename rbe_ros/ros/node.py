@@ -664,7 +664,8 @@ class RbeChecks:
         sent: list[bytes] = []
 
         def read(with_sequence: bool) -> Scene:
-            return scene_from_msg(state, sequence=with_sequence, limits=options.limits)
+            return self._repaired(scene_from_msg(state, sequence=with_sequence,
+                                                 limits=options.limits))
 
         def publish(report: Report, scene: Scene, total: int) -> None:
             report = self._second_opinion(scene, report, sequence, options)
@@ -891,10 +892,18 @@ class RbeChecks:
             self._workers = Workers()
         return self._workers
 
+    def _repaired(self, scene: Scene) -> Scene:
+        """``scene``, its repaired meshes logged (WARN, each naming the block)."""
+        for warning in scene.warnings:
+            self.get_logger().warning(warning)
+        return scene
+
     def design_message(self, path: str) -> AssemblyState:
         """The design of ``design_file`` as the message a pipeline would send on ~/design
         (SceneError if it cannot be read)."""
         scene, _ = load_design(path)
+        for warning in scene.warnings:
+            self.get_logger().warning(f"design_file {path!r}: {warning}")
         if scene.pose_uncertainty is not None:
             self.get_logger().warning(
                 f"design_file {path!r} declares pose_uncertainty {list(scene.pose_uncertainty)}"

@@ -23,7 +23,7 @@ sys.path.insert(0, str(ROOT))
 
 from machine import machine_summary  # noqa: E402
 from rbe_ros import generators  # noqa: E402
-from rbe_ros.analysis.lookahead import look_ahead  # noqa: E402
+from rbe_ros.analysis.lookahead import as_built_plan, look_ahead  # noqa: E402
 from rbe_ros.analysis.planning import plan_sequence  # noqa: E402
 from rbe_ros.analysis.repair import repair_plan  # noqa: E402
 from rbe_ros.io.inputs import load_design  # noqa: E402
@@ -101,7 +101,9 @@ def one_dome(name: str, scene, window: int = 0) -> list[str]:
         timed[steps].time = time.perf_counter() - start
         print(f"  repair (window {steps}): {timed[steps].time:.2f} s: "
               f"{timed[steps].message}", flush=True)
-    fixed = replace(built, sequence=tuple(plan.order[:half]), holds=())
+    # every block (the placed ones at their measured poses), the placed ones a fixed prefix
+    fixed = replace(as_built_plan(planned, built), sequence=tuple(plan.order[:half]),
+                    holds=(), approach=())
     start = time.perf_counter()
     again = plan_sequence(fixed, 2, keep_sequence=True)
     replan_time = time.perf_counter() - start

@@ -320,10 +320,11 @@ def test_type_b_turned_about_xy30_falls_as_the_block_slides_out_of_its_self_lock
     0.75 deg in 0.1 s and falls, at 1.3 it falls, at 1.6 and above it jams within 1 cm and
     stands. An explicit penalty simulation (penalty_motion, trimesh's inertia) gives 1.7%
     and 0.7 deg at 0.1 s at mu 0.84 and 15% at 0.3 s (LMGC90 15%), 6% at 1.3, at 2.5 0.2%. The
-    fixed point of the caps, started from none, creeps instead into the squeeze at mu 0.84:
-    friction turns the block onto support 1's face, whose normal force raises the friction
-    on support 0's, which raises it again, the caps growing by ever larger steps; the
-    test stops there: a loop of friction that feeds itself is a squeeze."""
+    fixed point of the caps, started from none, crept instead into the squeeze (at 0.84 in
+    12 steps): friction turns the block onto support 1's face, whose normal force raises the
+    friction on support 0's, which raises it again, the caps growing by ever larger steps
+    (at 0.84 from the fifth change, at 1.3 from the third); the test stops there: a loop of
+    friction that feeds itself is a squeeze."""
     scene = rotated_as_example(load_compas_assembly(samples / "type-b.json",
                                                     supports=["0", "1"], density=2000.0),
                                [math.sqrt(3.0), 1.0, 0.0], 90.0)

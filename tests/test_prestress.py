@@ -20,6 +20,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
+from scipy.spatial.transform import Rotation
+from trimesh.triangles import mass_properties
 
 from placement_scenes import (bar_between_free_pillars, bar_between_leaning_posts,
                               bar_between_posts, flat_arch, incline_with_bar, leaning_block,
@@ -32,7 +34,7 @@ from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.analysis.pipeline import check_scene, check_sequence
 from rbe_ros.analysis.verdict import is_stable
 from rbe_ros.generators import _box, running_bond_wall, two_blocks
-from rbe_ros.io.compas import load_compas_assembly
+from rbe_ros.io.compas import load_compas_assembly, rotated_as_example
 from rbe_ros.io.inputs import load_design
 from rbe_ros.rbe.model import build_model
 from rbe_ros.rbe.prestress import accelerations, inertia_metric, placed
@@ -270,6 +272,83 @@ def test_type_b_turned_about_y_stands(samples, degrees, mu):
                     (0, 1, 0), degrees)
     report = check_scene(scene, options(mu))
     assert report.stable, report.message
+
+
+def penalty_motion(block, faces, gravity, mu, duration, stiffness=1e9, creep=1e-4):
+    """An explicit simulation, independent of the solver: the block from rest on the
+    support planes of ``faces`` [(its vertices there, the plane's normal, pushing along
+    it)], each vertex a spring-dashpot contact (half-critical damping) with Coulomb friction
+    regularised below ``creep`` m/s, rigid-body motion with trimesh's inertia of the block's
+    mesh, semi-implicit Euler at 1/20 of the contact period. Returns the displacement (m)
+    and the rotation (deg) after ``duration`` s."""
+    inertia = np.asarray(mass_properties(block.vertices[block.triangles],
+                                         density=block.mass / block.volume)["inertia"])
+    mass = block.mass
+    arms = np.array([q - block.centroid for points, _ in faces for q in points])
+    normals = np.array([n for points, n in faces for _ in points])
+    origins = block.centroid + arms
+    damping = math.sqrt(stiffness * mass / len(arms))
+    dt = 0.05 * math.sqrt(mass / stiffness)
+    x, v, turn, w = np.zeros(3), np.zeros(3), np.eye(3), np.zeros(3)
+    for _ in range(int(duration / dt)):
+        r = arms @ turn.T
+        velocity = v + np.cross(w, r)
+        gap = np.einsum("ij,ij->i", block.centroid + x + r - origins, normals)
+        closing = np.einsum("ij,ij->i", velocity, normals)
+        normal = np.where(gap < 0, np.maximum(0.0, -stiffness * gap - damping * closing), 0.0)
+        slip = velocity - closing[:, None] * normals
+        speed = np.sqrt(np.einsum("ij,ij->i", slip, slip) + creep ** 2)
+        force = normal[:, None] * normals - (mu * normal / speed)[:, None] * slip
+        world = turn @ inertia @ turn.T
+        v += dt * (np.asarray(gravity) + force.sum(axis=0) / mass)
+        w += dt * np.linalg.solve(world, np.cross(r, force).sum(axis=0)
+                                  - np.cross(w, world @ w))
+        x += dt * v
+        turn = Rotation.from_rotvec(w * dt).as_matrix() @ turn
+    return np.linalg.norm(x), math.degrees(np.linalg.norm(Rotation.from_matrix(turn).as_rotvec()))
+
+
+@pytest.mark.parametrize("mu, falls", [(0.84, True), (1.3, True), (2.5, False)])
+def test_type_b_turned_about_xy30_falls_as_the_block_slides_out_of_its_self_locking_groove(
+        samples, mu, falls):
+    """compas_cra's type-b turned 90 deg about [sqrt 3, 1, 0] (its examples/05_wedge.py).
+    The block lies on support 0's face, 64.3 deg steep (tan 2.08), under support 1's face,
+    which gravity alone pulls it away from; the faces make a 60 deg groove, self-locking
+    for mu > tan 30 (a squeeze holds the block there: RBE's field), but no load makes the
+    squeeze. LMGC90 (docs/lmgc90_verdicts.json; 1.3 and 2.5 run by hand with
+    ``rbe-ros check --second-opinion lmgc90``): at mu 0.84 it moves 1.6% of its size and
+    0.75 deg in 0.1 s and falls, at 1.3 it falls, at 1.6 and above it jams within 1 cm and
+    stands. An explicit penalty simulation (penalty_motion, trimesh's inertia) gives 1.7%
+    and 0.7 deg at 0.1 s at mu 0.84 and 15% at 0.3 s (LMGC90 15%), 6% at 1.3, at 2.5 0.2%. The
+    fixed point of the caps, started from none, crept instead into the squeeze (at 0.84 in
+    12 steps): friction turns the block onto support 1's face, whose normal force raises the
+    friction on support 0's, which raises it again, the caps growing by ever larger steps
+    (at 0.84 from the fifth change, at 1.3 from the third); the test stops there: a loop of
+    friction that feeds itself is a squeeze."""
+    scene = rotated_as_example(load_compas_assembly(samples / "type-b.json",
+                                                    supports=["0", "1"], density=2000.0),
+                               [math.sqrt(3.0), 1.0, 0.0], 90.0)
+    a = Assembly.from_scene(scene)
+    model = build_model(a.blocks, a.interfaces, a.gravity)
+    lower, upper = model.interfaces
+    assert (lower.a, lower.b, upper.a, upper.b) == (0, 2, 1, 2)
+    assert math.degrees(math.acos(lower.frame.n[2])) == pytest.approx(64.34, abs=0.01)
+    assert math.degrees(math.acos(-lower.frame.n @ upper.frame.n)) == pytest.approx(60.0)
+    block = model.blocks[2]
+    faces = [(np.asarray(lower.points), lower.frame.n),
+             (np.asarray(upper.points), upper.frame.n)]
+    moved, _ = penalty_motion(block, faces, a.gravity, mu, 0.3)
+    assert (moved > 0.01 * block.size) == falls
+    if mu == 0.84:
+        assert moved / block.size == pytest.approx(0.15, abs=0.01)
+        moved, turned = penalty_motion(block, faces, a.gravity, mu, 0.1)
+        assert moved / block.size == pytest.approx(0.016, abs=0.002)
+        assert turned == pytest.approx(0.75, abs=0.1)
+    assert rbe_alone_solves(scene, mu)
+    report = check_scene(scene, options(mu))
+    assert report.stable != falls, report.message
+    if falls:
+        assert report.status == Status.FRICTION_EXCEEDED and report.unstable_blocks == ("2",)
 
 
 def test_our_verdicts_are_lmgc90s_on_the_scenes_it_ran(samples):

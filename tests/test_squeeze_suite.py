@@ -29,6 +29,9 @@ MANIFEST = {e["name"]: e for e in json.loads((SUITE / "manifest.json").read_text
 LMGC90 = json.loads((SUITE / "lmgc90_verdicts.json").read_text())
 VERDICTS = LMGC90["scenes"]
 DECIDED = sorted(n for n, r in VERDICTS.items() if r["lmgc90"] in ("stands", "falls"))
+#: Where we knowingly differ from LMGC90, on the safe side (a false alarm), with our status:
+#: docs/METHOD.md's limits of the placement test name each and say why.
+SAFE_SIDE = {"leaning_posts15_mu5.00": "FRICTION_EXCEEDED"}
 
 
 def _script():
@@ -77,12 +80,31 @@ def test_lmgc90s_verdicts_do_not_hang_on_the_duration():
         {n: r["lmgc90"] for n, r in VERDICTS.items()}
 
 
-@pytest.mark.parametrize("name", DECIDED)
+def check(name: str):
+    entry = MANIFEST[name]
+    return check_scene(load_scene(SUITE / entry["file"]),
+                       replace(CheckOptions(), solve=SolveOptions(mu=entry["mu"])))
+
+
+@pytest.mark.parametrize("name", [n for n in DECIDED if n not in SAFE_SIDE])
 def test_our_verdict_is_lmgc90s(name):
     entry = MANIFEST[name]
-    report = check_scene(load_scene(SUITE / entry["file"]),
-                         replace(CheckOptions(), solve=SolveOptions(mu=entry["mu"])))
+    report = check(name)
     expected = VERDICTS[name]["lmgc90"]
     assert report.stable == (expected == "stands"), (
         f"{name} (mu {entry['mu']}): LMGC90 {expected}, closed form {entry['closed_form']}"
         f" ({entry['why']}); rbe_ros {report.status.name}: {report.message}")
+
+
+@pytest.mark.parametrize("name", sorted(SAFE_SIDE))
+def test_a_known_disagreement_is_a_documented_false_alarm(name):
+    """Free posts leaning 15 deg onto a bar at mu 5: LMGC90 and statics without pre-load
+    (mu >= 4.367) stand, the falling posts wedge the bar a moment later; in the first
+    instant from rest the bar drops away from the posts' overhanging faces faster than they
+    close on it, so the placement test, which is that instant, lets it fall for any mu.
+    Never an unsafe STABLE; METHOD.md's limits name the scene."""
+    assert VERDICTS[name]["lmgc90"] == "stands" and MANIFEST[name]["closed_form"] == "stands"
+    report = check(name)
+    assert report.status.name == SAFE_SIDE[name], report.message
+    assert set(report.unstable_blocks) == {"bar", "post_l", "post_r"}
+    assert f"`{name}`" in (ROOT / "docs" / "METHOD.md").read_text()

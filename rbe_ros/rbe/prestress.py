@@ -24,7 +24,11 @@ from zero), each step a convex problem:
    a field), the blocks stand: that field is reached from rest. Else the caps become mu
    times the step's normal resultants, and 2 again, until they no longer change: then the
    blocks fall, those left with an acceleration are the ones that move, and the interfaces
-   across which they slide are named.
+   across which they slide are named. They fall too when, from the third step on, the
+   caps change by more than they changed at the step before: friction is then making the
+   normal forces that raise its own caps, ever faster, a loop through the contacts that
+   only a squeeze closes (a block sliding out of a self-locking groove, which the caps
+   would otherwise creep into).
 
 A normal force that only a squeeze gives never enters a cap: the step from rest has no
 reason to produce it, and a cap fixed before a step cannot grow with the squeeze of that
@@ -60,6 +64,10 @@ NOISE_SHARE = 1e-2
 #: At most this many steps: the fixed point's caps converge geometrically; a case that has
 #: not converged by then is judged on its last step.
 MAX_STEPS = 40
+#: From this step on, caps that change by more than at the step before are friction
+#: feeding its own normal forces: the first change is the frictionless step's normal
+#: forces, the second those of the contacts that the first friction closes, the loads'.
+FEEDS_FROM = 3
 #: A block moves when its acceleration (|a| + |alpha| times its size) exceeds this share of
 #: the largest one and MOVING_G of g; an interface slides when its blocks' relative
 #: tangential acceleration at its centre exceeds the same share and the normal one.
@@ -115,7 +123,7 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
     load = model.dead_load if load is None else np.asarray(load, dtype=float)
     caps = np.zeros(len(model.interfaces))
     floor = _noise_floor(model)
-    motion = None
+    motion, change_before = None, math.inf
     for count in range(1, MAX_STEPS + 1):
         bound = caps * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
         if solution is not None and solution.solved and _within(
@@ -137,9 +145,11 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
         if not forces.solved:
             break
         normal = options.mu * _above_noise(_sums(model, forces.forces[0]), floor)
-        if np.abs(normal - caps).max(initial=0.0) <= CONVERGED * model.force_scale:
-            break
-        caps = normal
+        change = np.abs(normal - caps).max(initial=0.0)
+        if change <= CONVERGED * model.force_scale or (
+                count >= FEEDS_FROM and change > change_before + CONVERGED * model.force_scale):
+            break       # converged, or friction raising its own caps ever faster: a squeeze
+        caps, change_before = normal, change
     return _moved(model, motion, count)
 
 

@@ -21,7 +21,9 @@ demo: setup
 test: setup browser ray
 	@echo "[test] ROS_DOMAIN_ID=$(ROS_DOMAIN_ID) ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST"
 	ROS_DOMAIN_ID=$(ROS_DOMAIN_ID) ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST \
-		$(PY) -m pytest tests -q -m "not long"
+		$(PY) -m pytest tests -q -m "not long" --ignore=tests/ros -n 2
+	ROS_DOMAIN_ID=$(ROS_DOMAIN_ID) ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST \
+		$(PY) -m pytest tests/ros -q -m "not long"
 
 # The whole suite 5 times in a row with 2 busy processes beside it (one per core here):
 # no timing assert may fail under load (scripts/suite_under_load.sh; 30-50 minutes).

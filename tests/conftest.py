@@ -11,7 +11,9 @@ uses .venv-compas, which scripts/setup.sh builds, unless $RBE_COMPAS_VENV and
 $RBE_COMPAS_SAMPLES name others; those tests fail, never skip, when it is missing.
 
 Tests marked ``long`` (minutes each: whole suites planned or checked against references) are
-left out of ``make test`` (``-m "not long"``) and run by ``make test-long``.
+left out of ``make test`` (``-m "not long"``) and run by ``make test-long``. ``make test`` runs
+the core tests on both cores (pytest-xdist), then the ROS tests (tests/ros) one at a time:
+they start nodes and time their answers.
 """
 import os
 from pathlib import Path
@@ -28,7 +30,6 @@ settings.register_profile("long", max_examples=2000, **_COMMON)
 settings.register_profile("dev", max_examples=20, **_COMMON)
 settings.register_profile("mutation", max_examples=10, derandomize=True, **_COMMON)  # make mutation
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
-
 
 
 def pytest_configure(config):

@@ -115,7 +115,7 @@ def test_bridge_sample_loads_and_checks(samples):
     assert_physical(scene, report, mu=0.6)
 
 
-def test_armadillo_sample_loads_and_checks(samples):
+def test_armadillo_sample_loads_and_its_interfaces_are_compas_cras(samples):
     stored = compas_interfaces(samples / "armadillo_cra.json")
     supports = {b.id for b in load_compas_assembly(samples / "armadillo_cra.json").blocks if b.support}
     assert len(stored) == 1014 and len(supports) == 33
@@ -127,9 +127,22 @@ def test_armadillo_sample_loads_and_checks(samples):
     ids = [b.id for b in assembly.blocks]
     ours = {frozenset((ids[it.a], ids[it.b])) for it in assembly.interfaces}
     assert {frozenset((it.a, it.b)) for it in stored} <= ours
+
+
+@pytest.mark.long
+def test_armadillo_verdict_of_the_placement_test(samples):
+    """The armadillo as compas_cra's tolerance detects it (faces a few percent of a block
+    apart): RBE finds a field, but block 238's needs friction that the loads do not press into
+    its interfaces, so the placement test refuses it. No oracle decides it here (LMGC90 takes
+    one convex polyhedron per block, and most of these are not): an open question, on the safe
+    side, stated in docs/METHOD.md's limits."""
+    supports = {b.id for b in load_compas_assembly(samples / "armadillo_cra.json").blocks
+                if b.support}
+    scene = load_compas_assembly(samples / "armadillo.json", supports=supports)
+    contact = ContactOptions(distance_tol=0.05, angle_tol_deg=5.0)
     report = check_scene(scene, CheckOptions(SolveOptions(mu=0.6), contact=contact))
-    assert report.status == Status.STABLE and report.num_blocks == 399
-    assert_physical(scene, report, mu=0.6)
+    assert report.status == Status.FRICTION_EXCEEDED and report.num_blocks == 399
+    assert "block 238 would slide at interface 228|238" in report.message
 
 
 def test_supports_flag_of_the_command_line(capsys):

@@ -68,6 +68,7 @@ def test_dome_is_planned_with_the_holds_it_needs():
     assert top[-1].held == ()                           # the closed ring stands
 
 
+@pytest.mark.long
 def test_the_papers_dome_is_planned_with_at_most_two_holds():
     """The full 14 x 10 dome (126 blocks to place): every step of the plan stands by the plain
     checker, with at most two blocks held at once (about 30 s)."""

@@ -31,10 +31,11 @@ ROOT = Path(__file__).resolve().parents[1]
 @pytest.mark.parametrize("scene, max_held, shortcuts", [
     # 40 free blocks, held from the second course on: a held block's neighbours could be
     # squeezed against it (rbe/prestress.py), so no local proof stands in for the full check
-    (generators.dome(slices=10, courses=5), 2, {"relaxed"}),
+    pytest.param(generators.dome(slices=10, courses=5), 2, {"relaxed"},
+                 marks=pytest.mark.long),
     (generators.semicircular_arch(7), 1, set()),     # one small component: full checks
-    (generators.side_by_side(generators.dome(slices=8, courses=4), 2, 12.0), 2,
-     {"local", "relaxed"}),
+    pytest.param(generators.side_by_side(generators.dome(slices=8, courses=4), 2, 12.0), 2,
+                 {"local", "relaxed"}, marks=pytest.mark.long),
 ])
 def test_every_candidate_verdict_is_the_full_checks(scene, max_held, shortcuts, monkeypatch):
     """Each set of holds tried for each candidate step, checked again in full (the plain

@@ -1,4 +1,4 @@
-"""The 70-block dome of the robot-cell issue (/work/shared/data/dome10x8.json, 10 slices x
+"""The 70-block dome of the robot-cell issue (tests/data/issue31/dome10x8.json, 10 slices x
 8 courses, radius 3 m) planned for the cells of examples/cells/: three robots give a plan
 whose every state between actions ``rbe-ros check --timeline`` re-checks stable, never more
 than three robots busy (counted from the actions), every grip on a face free of the other
@@ -28,7 +28,7 @@ from test_cell import assert_grips_free, assert_joint_solutions, busy_per_state
 
 pytestmark = pytest.mark.long
 
-DOME = Path("/work/shared/data/dome10x8.json")
+DOME = Path(__file__).resolve().parent / "data" / "issue31" / "dome10x8.json"
 CELLS = Path(__file__).resolve().parents[1] / "examples" / "cells"
 G = 9.81
 

@@ -1,8 +1,9 @@
 """ROS 2 tests: own DDS domain per run, discovery on this host only; skipped without ROS.
 
-ROS_DOMAIN_ID comes from the Makefile (``make test``) or is drawn here (1..100) when unset;
-ROS_AUTOMATIC_DISCOVERY_RANGE is LOCALHOST. Both are set before rclpy is initialised and are
-inherited by the node processes the tests start.
+ROS_DOMAIN_ID comes from the Makefile (``make test``) or is drawn here (1..50) when unset;
+each pytest-xdist worker N (``make test`` runs two) adds 50 N to it, so the workers' nodes never
+meet. ROS_AUTOMATIC_DISCOVERY_RANGE is LOCALHOST. Both are set before rclpy is initialised
+and are inherited by the node processes the tests start.
 """
 from __future__ import annotations
 
@@ -12,7 +13,10 @@ import random
 import pytest
 
 if not os.environ.get("ROS_DOMAIN_ID", "").strip():
-    os.environ["ROS_DOMAIN_ID"] = str(random.randint(1, 100))
+    os.environ["ROS_DOMAIN_ID"] = str(random.randint(1, 50))
+_WORKER = os.environ.get("PYTEST_XDIST_WORKER", "gw0")  # "gwN" under pytest-xdist
+os.environ["ROS_DOMAIN_ID"] = str((int(os.environ["ROS_DOMAIN_ID"]) - 1) % 50 + 1
+                                  + 50 * int(_WORKER.removeprefix("gw") or 0))
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 
 

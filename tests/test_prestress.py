@@ -386,7 +386,7 @@ def test_min_friction_of_a_bar_between_posts_is_infinite():
 
 def test_a_held_dome_block_beyond_its_capacity_is_hold_exceeded_with_the_wrench_it_needs():
     """tests/data/issue31/dome10x8_state40.json (issue 31): capped at 1200 N / 200 N m it is
-    HOLD_EXCEEDED naming the wrench the uncapped test's field needs (2398 N: RBE's own field
+    HOLD_EXCEEDED naming the wrench the uncapped test's field needs (1410 N: RBE's own field
     needs 1163 N, but with friction only where the loads press, more); with that much it
     stands."""
     scene = load_design(DATA.parent / "issue31" / "dome10x8_state40.json")

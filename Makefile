@@ -18,6 +18,8 @@ demo: setup
 	$(VENV)/bin/rbe-ros view out/demo -o out/demo/report.html
 	@echo "[demo] open out/demo/report.html in a browser (3D view, step slider, table of steps)"
 
+# The core tests on both cores (pytest-xdist), then the ROS tests (tests/ros) one at a time:
+# they start nodes and time their answers, so they run with no other test beside them.
 test: setup browser ray
 	@echo "[test] ROS_DOMAIN_ID=$(ROS_DOMAIN_ID) ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST"
 	ROS_DOMAIN_ID=$(ROS_DOMAIN_ID) ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST \

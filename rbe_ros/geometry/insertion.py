@@ -40,6 +40,7 @@ import threading
 from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import fcl
 import numpy as np
@@ -268,7 +269,7 @@ class PathCheck:
     def __init__(self, moving: PosedBlock, present: Sequence[PosedBlock],
                  distance: float | None, clearance: float, boxes: np.ndarray | None = None,
                  allowances: np.ndarray | None = None):
-        self.ends = [shrunk(p, clearance) for p in block_pieces(moving)]
+        self.moving, self.clearance = moving, clearance
         self.vertices = moving.vertices
         self.present = list(present)
         self.boxes = (np.array([b.aabb for b in self.present]).reshape(-1, 2, 3)
@@ -276,6 +277,12 @@ class PathCheck:
         self.allowances = (np.zeros(len(self.present)) if allowances is None
                            else np.asarray(allowances, dtype=float))
         self.distance = distance
+
+    @cached_property
+    def ends(self) -> list[np.ndarray]:
+        """The moving block's convex pieces, shrunk by the clearance: made at the first sweep
+        only (a step whose cone is empty, or a robot's approach length, needs none)."""
+        return [shrunk(p, self.clearance) for p in block_pieces(self.moving)]
 
     def length(self, direction: np.ndarray) -> float:
         """m the block travels along unit ``direction`` into its pose: the given distance,

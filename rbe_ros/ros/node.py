@@ -1012,10 +1012,8 @@ class RbeChecks:
         self.get_logger().info(f"plan of {header['frame_id']} ({len(goal.assembly.blocks)} "
                                f"blocks, at most {limits.max_held} held) in "
                                f"{time.monotonic() - start:.1f} s: {plan.message}")
-        invalid_cell = plan.message.startswith(INVALID_CELL)
-        if not invalid_cell:
-            self._adopt(plan, header)
-        if invalid_cell:
+        self._adopt(plan, header)       # only a feasible plan: never one refused for its cell
+        if plan.message.startswith(INVALID_CELL):
             goal_handle.abort()         # a cell the plan cannot use: the reason in the result
         elif not plan.message.startswith(STOPPED) or not stopped():
             goal_handle.succeed()       # planned, infeasible, invalid, or its time limit

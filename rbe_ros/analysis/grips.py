@@ -139,13 +139,6 @@ class GripChooser:
                           default=0.0) + 2 * STANDOFF
 
     @cached_property
-    def _solids(self) -> list[list[fcl.CollisionObject]]:
-        """Each block as the insertion check sees a present block (its convex pieces, exact
-        for a non-convex block), shrunk by the standoff."""
-        return [[piece for piece, _ in present_pieces(b, STANDOFF)]
-                for b in self.assembly.blocks]
-
-    @cached_property
     def _boxes(self) -> np.ndarray:
         return np.array([b.aabb for b in self.assembly.blocks])
 
@@ -196,9 +189,11 @@ class GripChooser:
         ``grip`` touches."""
         box, request = self._box(robot, grip), fcl.CollisionRequest()
         others = self.near(grip.block) if present is None else self.near(grip.block) & present
+        # each block as the insertion check sees a present one (its convex pieces, exact for
+        # a non-convex block; kept there), shrunk by the standoff
         return tuple(sorted(b for b in others if any(
             fcl.collide(box, piece, request, fcl.CollisionResult())
-            for piece in self._solids[self.index[b]])))
+            for piece, _ in present_pieces(self.assembly.blocks[self.index[b]], STANDOFF))))
 
     def in_the_way(self, block: str, robot: Robot, grip: GripFrame) -> bool:
         """Whether placing ``block`` lands on the face ``robot`` grips at ``grip`` or hits

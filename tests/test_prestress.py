@@ -33,7 +33,7 @@ from rbe_ros.analysis.incremental import StepChecker
 from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.analysis.pipeline import check_scene, check_sequence
 from rbe_ros.analysis.verdict import is_stable
-from rbe_ros.generators import _box, running_bond_wall, two_blocks
+from rbe_ros.generators import _box, running_bond_wall, squeeze, two_blocks
 from rbe_ros.io.compas import load_compas_assembly, rotated_as_example
 from rbe_ros.io.inputs import load_design
 from rbe_ros.rbe.model import build_model
@@ -261,6 +261,24 @@ def test_a_leaner_names_the_interface_that_slides():
     assert "block leaner would slide at interface ground|leaner" in report.message
     assert "inf" not in report.message
     assert check_scene(leaning_block(), options(0.6)).stable
+
+
+@pytest.mark.parametrize("mu", [5.0, 10.0])
+def test_a_shelf_beyond_its_tipping_limit_falls_for_any_mu(mu):
+    """The squeeze suite's shelf60: a board 0.6 m long on a 0.15 m corbel against a wall, a
+    block on it over the corbel. The weights tip it about the corbel's edge (0.08 x 0.6 x
+    0.15 against 0.06 x 0.075 per unit rho g depth) and the wall's face carries nothing
+    without pre-load: falls for any mu (LMGC90: falls at 3, 5 and 10, tests/data/squeeze/
+    variants). The frictionless first step pressed the wall (the board slides on its corbel
+    towards it), and the caps of that step held the blocks still from mu 3.5 on; with the
+    corbel's friction the board tips away from the wall, which the step from rest without
+    friction at the wall shows, and the caps come down to it."""
+    scene = squeeze("shelf", overhang=0.6)
+    assert 0.08 * 0.6 * (0.3 - 0.15) > 0.06 * (0.15 - 0.075)          # it tips
+    report = check_scene(scene, options(mu))
+    assert rbe_alone_solves(scene, mu)          # a squeezed field holds it: RBE says stands
+    assert report.status == Status.FRICTION_EXCEEDED, report.message
+    assert "top" in report.unstable_blocks
 
 
 @pytest.mark.parametrize("degrees", [90.0, -90.0])

@@ -30,6 +30,12 @@ from zero), each step a convex problem:
    only a squeeze closes (a block sliding out of a self-locking groove, which the caps
    would otherwise creep into).
 
+Blocks that a step leaves still stand only on friction from normal forces of their own
+(:func:`_own_caps`): a cap from an earlier step's motion can hold a normal force that
+friction takes away (a shelf's board slides into the wall only without friction), and where
+the field within the caps rubs beyond mu times its own normal force, the step from rest
+without friction there gives the caps instead.
+
 A normal force that only a squeeze gives never enters a cap: the step from rest has no
 reason to produce it, and a cap fixed before a step cannot grow with the squeeze of that
 step. Normal forces that the load's moment produces (a block turning onto a face) enter.
@@ -77,6 +83,9 @@ MOVING_G = 1e-4
 #: of the solver's normal forces).
 CONE_TOL = 1e-6
 SHARE_TOL = 1e-7
+#: A vertex whose friction is within this share of mu fn binds its cone (an interior-point
+#: solution comes no closer to a cone it sits on than about 1e-4).
+CONE_SLACK = 1e-2
 
 
 @dataclass(frozen=True)
@@ -113,6 +122,8 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
         field = solution if solution is not None and solution.solved else \
             solve(model, options, load=load)
         return Placement(field if field.solved else None)
+    # the check's field is the least |f|^2 of the steps' problem (see _own_caps)
+    least = options.objective == "qp" and options.friction == "net" and not model.grips
     options = replace(options, objective="qp", friction="net")
     metric = inertia_metric(model)
     # a robot keeps its block where it is (its arm is position-controlled): during the
@@ -128,8 +139,13 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
         bound = caps * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
         if solution is not None and solution.solved and _within(
                 model, solution, bound if caps.any() else bound + floor, options.cone):
-            return (Placement(solution, steps=count - 1) if _held(model, solution)
-                    else Placement(None, steps=count - 1, beyond=solution))
+            own = _own_caps(model, rigid, options, load, caps, floor, metric,
+                            solution if least else None)
+            if own is None:
+                return (Placement(solution, steps=count - 1) if _held(model, solution)
+                        else Placement(None, steps=count - 1, beyond=solution))
+            caps, motion = own
+            bound = caps * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
         frictionless = not caps.any()       # the first step: no variables of friction
         motion = solve(rigid, options, load=load, friction_cap=bound, inertia=metric,
                        frictionless=frictionless)
@@ -138,7 +154,12 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
         if _still(model, motion):
             settled = _settled(model, rigid, options, load, caps, floor)
             if settled is not None:
-                return replace(settled, steps=count)
+                own = _own_caps(model, rigid, options, load, caps, floor, metric,
+                                None if model.grips else settled.field)
+                if own is None:
+                    return replace(settled, steps=count)
+                caps, motion = own
+                continue
         # the least forces that leave the motion found: its normal forces, none by squeeze
         forces = solve(rigid, options, load=load - _scaled(model, motion.unbalanced),
                        friction_cap=bound, inertia=metric, frictionless=frictionless)
@@ -151,6 +172,101 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
             break       # converged, or friction raising its own caps ever faster: a squeeze
         caps, change_before = normal, change
     return _moved(model, motion, count)
+
+
+def _own_caps(model: EquilibriumModel, rigid: EquilibriumModel, options: SolveOptions, load,
+              caps: np.ndarray, floor: np.ndarray, metric, field: Solution | None):
+    """None when the blocks, still under ``caps``, get their friction from normal forces
+    the loads make; else lower caps for the next step and the motion they leave. The caps
+    came from a step's motion, the frictionless one above all, and a normal force there can
+    be one that friction takes away (a board that slides on its corbel without friction
+    presses the wall; with the corbel's friction it tips away from it, and the shelf falls
+    for any mu). Where the least field within the caps alone (no cones: they would make the
+    normal forces that friction asks for, a squeeze) rubs beyond mu times its normal
+    resultant, the step from rest without friction there tells: the blocks stand without
+    it, or the least normal forces of its motion there (those the loads press there: type-b
+    turned about y, whose load's moment presses the upper face) give at least the caps, or
+    those become the caps. ``field``: the least field within the caps and the cones, if
+    known (skips the solves when no cone binds it)."""
+    if not caps.any():          # friction within the noise floor: nothing leans on caps
+        return None
+    if field is not None and not _at_cone(model, field, options):
+        return None             # the least field within the caps alone: the same one
+    bound = caps * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
+    field = solve(rigid, replace(options, mu=math.inf), load=load, friction_cap=bound)
+    if not field.solved:
+        return None
+    friction = _tangential(*(_sums(model, field.forces[k]) for k in (2, 3)), options.cone)
+    # friction below the floor is rounding (not mu x the floor: at mu 13 a shelf's wall
+    # would carry 13% of a block's weight on no normal force)
+    rubbing = friction > options.mu * _above_noise(_sums(model, field.forces[0]), floor) \
+        * (1.0 + CONE_TOL) + floor + SHARE_TOL * model.force_scale
+    if not rubbing.any():
+        return None
+    without = np.where(rubbing, 0.0, caps) * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
+    step = solve(rigid, options, load=load, friction_cap=without, inertia=metric)
+    if not step.solved:
+        return np.where(rubbing, 0.0, caps), None
+    if _still(model, step):
+        return None
+    least = _least_normals(rigid, options, load - _scaled(model, step.unbalanced),
+                           without, np.flatnonzero(rubbing))
+    if least is None:
+        return np.where(rubbing, 0.0, caps), step
+    pressed = np.where(rubbing, options.mu * _above_noise(least, floor), caps)
+    short = rubbing & (pressed < caps - CONVERGED * model.force_scale)
+    return (np.where(short, pressed, caps), step) if short.any() else None
+
+
+def _at_cone(model: EquilibriumModel, field: Solution, options: SolveOptions) -> bool:
+    """Whether a vertex of ``field`` rubs within CONE_SLACK of its cone. When none does, the
+    cones do not bind the least |f|^2 within the caps, and without them its least is the
+    same field: its normal forces are its own."""
+    friction = _tangential(field.forces[2], field.forces[3], options.cone)
+    return bool(np.any((friction >= (1.0 - CONE_SLACK) * options.mu * field.forces[0])
+                       & (friction > SHARE_TOL * model.force_scale)))
+
+
+def _least_normals(model: EquilibriumModel, options: SolveOptions, load, caps: np.ndarray,
+                   interfaces: np.ndarray) -> np.ndarray | None:
+    """Per interface of ``interfaces`` (N, per interface of the model, 0 elsewhere) the
+    least normal resultant of the forces that leave the net wrenches of ``load`` (a step's
+    motion taken out of it): the normal force the motion makes there, not a share of one
+    that friction elsewhere could make as well (the least |f|^2 splits a force between
+    them). A linear program each (HiGHS), in cones relaxed to their circumscribed octagon
+    (the soc) and caps likewise: the least is never above the exact one. None when a grip
+    or a failed program leaves it open."""
+    if model.grips:
+        return None
+    from scipy.optimize import linprog
+    nv = model.num_vertices
+    angles, h = pyramid_facets("pyramid8-outer" if options.cone == "soc" else options.cone)
+    c, s = np.cos(angles), np.sin(angles)
+    rows = []
+    if math.isfinite(options.mu):       # c fu + s fv - h mu fn <= 0 per vertex and facet
+        eye = sp.identity(nv, format="csr")
+        rows += [sp.hstack([-h * options.mu * eye, ck * eye, sk * eye]) for ck, sk in zip(c, s)]
+    capped = np.flatnonzero(np.isfinite(caps))
+    bounds_up = [np.zeros(len(rows) * nv)]
+    if len(capped):                     # c sum fu + s sum fv <= h cap per capped interface
+        member = sp.csr_matrix((np.ones(nv), (model.vertex_interface, np.arange(nv))),
+                               shape=(len(model.interfaces), nv))[capped]
+        zero = sp.csr_matrix((len(capped), nv))
+        rows += [sp.hstack([zero, ck * member, sk * member]) for ck, sk in zip(c, s)]
+        bounds_up += [np.tile(h * caps[capped] / model.force_scale, len(angles))]
+    a = model.a_eq
+    equal = sp.hstack([a[:, :nv], a[:, 2 * nv:4 * nv]]).tocsc()
+    bounds = [(0, None)] * nv + [(None, None)] * (2 * nv)
+    out = np.zeros(len(model.interfaces))
+    for k in interfaces:
+        cost = np.concatenate([(model.vertex_interface == k).astype(float), np.zeros(2 * nv)])
+        res = linprog(cost, A_ub=sp.vstack(rows).tocsc() if rows else None,
+                      b_ub=np.concatenate(bounds_up) if rows else None, A_eq=equal,
+                      b_eq=-np.asarray(load, dtype=float), bounds=bounds, method="highs")
+        if res.status != 0:
+            return None
+        out[k] = max(res.fun, 0.0) * model.force_scale
+    return out
 
 
 def _settled(model: EquilibriumModel, rigid: EquilibriumModel, options: SolveOptions, load,

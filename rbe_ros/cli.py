@@ -443,7 +443,8 @@ def _run_min_friction(args) -> int:
         print(json.dumps(json_safe({"mu_min": mu})))
     else:
         print(f"minimum friction coefficient: {mu:.4f}" if math.isfinite(mu)
-              else "no friction coefficient makes the assembly stand (it needs tension)")
+              else "no friction coefficient makes the assembly stand (it needs tension, or a"
+                   " squeeze that blocks set one at a time without pre-load never get)")
     return 0
 
 

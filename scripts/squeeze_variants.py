@@ -258,6 +258,12 @@ def suite(samples: Path | None = None) -> list[dict]:
     add("v_incline_pressed40_suite", "incline-pressed", squeeze("incline-pressed",
                                                                 angle_deg=40.0), (0.78, 0.81),
         "falls", f"the suite's incline_pressed40 near its limit: stands iff mu >= {tan40:.4f}")
+    for angle, mus in ((50.0, (1.042,)), (60.0, (1.25, 1.354))):
+        add(f"v_incline_pressed{angle:.0f}_suite", "incline-pressed",
+            squeeze("incline-pressed", angle_deg=angle), mus, None,
+            f"the suite's pressed incline at {angle:.0f} deg below tan: the base friction's"
+            f" moment nearly tips the block (0.3 x 0.2) into the bar, whose normal force the"
+            f" load then makes; no closed form")
     add("v_incline30", "incline", incline(30.0, bar=None), (0.55,), "falls",
         f"the block alone on the ramp: stands iff mu >= tan 30 deg = {tan30:.4f}")
     add("v_incline_freebar30", "incline", incline(30.0, bar="free", bar_length=0.4),

@@ -325,11 +325,13 @@ def dome_plan():
 def test_the_dome_plan_holds_the_third_rings_first_block_alone_with_6_4_kn(dome_plan):
     """The 8 x 5 dome's plan holds the first block of the third ring alone as it is placed
     (step 16), with 6.4 kN (5.6 kN in RBE's least field, which takes friction where the
-    loads set in place without pre-load give none: rbe/prestress.py)."""
+    loads set in place without pre-load give none: rbe/prestress.py; the least wrench within
+    the settled caps, |F| 6401 N and |M| 2423 N m, where the settled field of least forces
+    took 6391 N and 2465 N m: the solver's hold measure trades force for torque)."""
     _, plan = dome_plan
     assert plan.feasible
     assert plan.held[16] == (plan.order[16],) == ("course3_slice00",)
-    assert largest_hold_force(plan.reports[16]) == pytest.approx(6391, rel=1e-3)
+    assert largest_hold_force(plan.reports[16]) == pytest.approx(6401, rel=1e-3)
 
 
 @pytest.mark.long

@@ -78,8 +78,8 @@ MOVING_G = 1e-4
 CONE_TOL = 1e-6
 SHARE_TOL = 1e-7
 #: The settled caps' least hold: the check's objective scaled by this against the robots'
-#: wrenches (10 x HOLD_WEIGHT's lexicographic bound; the dome state of issue 31: 1378.14 N,
-#: 0.08 N m, against 1378.13 N, 0.008 N m at 1e-4).
+#: wrenches, so that solver.HOLD_WEIGHT's bound on how far the wrench is from the least,
+#: O(g / w), is this much tighter (docs/METHOD.md, Holds: the dome state of issue 31).
 LEAST_HOLD = 1e-3
 
 

@@ -9,6 +9,7 @@ none can grip. Long: each plan takes 10-40 s."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -17,12 +18,15 @@ import yaml
 
 from rbe_ros.analysis.assembly import Assembly
 from rbe_ros.analysis.planning import plan_sequence
+from rbe_ros.analysis.options import CheckOptions
+from rbe_ros.analysis.planning import NO_PLAN
 from rbe_ros.analysis.steps import gripped
-from rbe_ros.analysis.verdict import check
+from rbe_ros.analysis.verdict import check, model_of
 from rbe_ros.cli import main
 from rbe_ros.io.cell_file import parse_cell
 from rbe_ros.io.scene_json import load_scene
 from rbe_ros.rbe.result import Status
+from rbe_ros.rbe.solver import solve
 
 from test_cell import assert_grips_free, assert_joint_solutions, busy_per_state
 
@@ -80,7 +84,10 @@ def test_the_dome_for_three_robots(tmp_path, capsys):
 def test_the_dome_for_two_robots_fails_naming_the_step(capsys):
     """The K = 2 plan (three robots) holds two blocks after steps 41 and 65; two robots must
     let one go before the next placement, and either hand-over state falls
-    (FRICTION_EXCEEDED, a robot's grip on the other); the cell of two fails at step 41."""
+    (FRICTION_EXCEEDED, a robot's grip on the other). The cell of two fails within its
+    default budget at step 32 naming the block, the robot, the wrench it needs and its
+    payload less the gripper's weight (2500 N - 20 kg g); no payload would do
+    (test_two_robots_cannot_build_the_fifth_course_whatever_the_order_or_payload)."""
     scene = load_scene(DOME)
     plan = plan_sequence(scene, 2)
     full = Assembly.from_scene(scene)
@@ -94,9 +101,12 @@ def test_the_dome_for_two_robots_fails_naming_the_step(capsys):
     assert main(["plan", str(DOME), "--cell", str(CELLS / "dome_2robots.yaml"),
                  "--json"]) == 1
     result = json.loads(capsys.readouterr().out)
-    assert not result["feasible"] and result["failed_step"] == 41
-    assert "needs 2 held blocks (course5_slice00, course5_slice01)" in result["message"]
-    assert result["message"].endswith("(a cell of 2 robots: at most 1 hold while one places)")
+    assert not result["feasible"] and result["failed_step"] == 32
+    assert result["outcome"] == "budget_exhausted"
+    message = result["message"]
+    assert "is HOLD_EXCEEDED (r1 holding course6_slice00 beyond its payload)" in message
+    assert "block course6_slice00 needs |F| " in message and "(capacity 2304 N)" in message
+    assert message.endswith("(a cell of 2 robots: at most 1 hold while one places)")
     assert max(busy_per_state(result["timeline"])) == 2
 
 
@@ -114,3 +124,34 @@ def test_the_dome_with_ur10s_names_the_block_none_can_grip(capsys):
     assert all(f"{r} cannot grip block {block}" in message for r in ("ur1", "ur2", "ur3"))
     cell = parse_cell(cell_path.read_text(), cell_path.parent)
     assert assert_joint_solutions(cell, result["timeline"]) >= 1
+
+
+def course(c: int) -> list[str]:
+    return [f"course{c}_slice{j:02d}" for j in range(10)]
+
+
+def test_two_robots_cannot_build_the_fifth_course_whatever_the_order_or_payload():
+    """Why no cell of two robots builds the dome, whatever their payload: two robots are one
+    hold plus the placing robot, and after the second block of the fifth course is placed one
+    of them must let go before anything else is placed. With every course below fixed (a
+    relaxation: supports in place of blocks that could move or be missing), two blocks of
+    the fifth course with either held have no admissible force field at all (RBE, an
+    unbounded robot that may squeeze: infeasible), one alone has none unheld; and the
+    planner, with at most one hold and every order of the 30 blocks above the fourth course
+    searched, proves that none exists (no_plan, not a budget)."""
+    scene = load_scene(DOME)
+    below = {b for c in range(1, 5) for b in course(c)}
+    top = replace(scene, blocks=tuple(replace(b, support=b.support or b.id in below)
+                                      for b in scene.blocks),
+                  sequence=tuple(b for b in scene.sequence if b not in below))
+    base = tuple(b.id for b in top.blocks if b.support)
+    full = Assembly.from_scene(top)
+    options = CheckOptions()
+    for present, held in ((course(5)[:1], ()), (course(5)[:2], course(5)[:1]),
+                          (course(5)[:2], course(5)[1:2]), (course(5)[:9], course(5)[4:5])):
+        state = gripped(full, base + tuple(present), held)
+        assert not solve(model_of(state, options), options.deciding).solved
+        assert not check(state, options).stable
+    plan = plan_sequence(top, 1, search_budget=100000)
+    assert plan.outcome == NO_PLAN and not plan.feasible
+    assert "needs 2 held blocks" in plan.message

@@ -425,6 +425,7 @@ class _Planner:
         self.streamed = 0                       # steps of the path streamed to on_report
         self.streaming = False                  # the stream is the path's so far
         self.start = self.beat = time.perf_counter()
+        self.stopping = False                   # stopped: the failure's message is made
         self.descent = 0.0                      # s to the last step of the first descent
         self.backed = (0.0, 0)                  # (s, states) at the first dead end
         self.recent: collections.deque = collections.deque(maxlen=RECENT)   # s of steps
@@ -433,7 +434,7 @@ class _Planner:
         """Raise _Stopped when the time limit ran out or the caller asks to stop; a
         progress heartbeat at most every :data:`HEARTBEAT` s."""
         now = time.perf_counter()
-        if (now - self.start > self.plan.time_limit
+        if not self.stopping and (now - self.start > self.plan.time_limit
                 or (self.should_stop is not None and self.should_stop())):
             raise _Stopped
         if now - self.beat >= HEARTBEAT:
@@ -820,9 +821,19 @@ class _Planner:
         return min(found, default=(-1.0, "unknown"))
 
     def _stopped(self) -> Plan:
-        k = len(self.deepest.order)
-        return self._finish(self.deepest, False, k, f"{STOPPED} {k} of {self.n} blocks (time "
-                            f"limit or asked to stop); step {k} not placed", HALTED)
+        """The deepest partial plan, and when candidates of its next step were refused before
+        the stop, why the best of them was (as a failed plan says: the holds it needs, a
+        robot's wrench against the capacity; the one trial with unbounded robots that this
+        takes runs past the stop)."""
+        partial, failure = self.deepest, self.failure
+        k = len(partial.order)
+        head = (f"{STOPPED} {k} of {self.n} blocks (time limit or asked to stop); step {k} "
+                "not placed")
+        if failure.best is None:
+            return self._finish(partial, False, k, head, HALTED)
+        self.stopping = True
+        why, details = self._why(partial, failure)
+        return self._finish(partial, False, k, head + why, HALTED, details)
 
     def _failed(self, outcome: str, head: str) -> Plan:
         """The plan that failed with ``outcome``: the deepest partial plan, and why no block
@@ -830,6 +841,15 @@ class _Planner:
         the capacity)."""
         partial, failure = self.deepest, self.failure
         k = len(partial.order)
+        why, details = self._why(partial, failure)
+        message = (f"{head}: the deepest partial plan places {k} of {self.n} blocks "
+                   f"({self.states} states checked, {self.backups} dead ends backed out of); "
+                   f"no block can be placed at step {k} with at most {self.plan.max_held} "
+                   f"held{why}")
+        return self._finish(partial, False, k, message, outcome, details)
+
+    def _why(self, partial: _Partial, failure: _Failure) -> tuple[str, dict]:
+        """Why no block followed ``partial`` (a message tail) and the failure's details."""
         details = {}
         if failure.best is not None:
             block, held = failure.best
@@ -852,11 +872,7 @@ class _Planner:
         else:
             why = "; no unplaced block touches the placed ones" if not failure.blocked else ""
         why += "".join(f"; {b} cannot be inserted: {r}" for b, r in failure.blocked.items())
-        message = (f"{head}: the deepest partial plan places {k} of {self.n} blocks "
-                   f"({self.states} states checked, {self.backups} dead ends backed out of); "
-                   f"no block can be placed at step {k} with at most {self.plan.max_held} "
-                   f"held{why}")
-        return self._finish(partial, False, k, message, outcome, details)
+        return why, details
 
     def _look_ahead(self, partial: _Partial) -> None:
         """Full checks of the next steps as a held course goes on (the first hold kept, the

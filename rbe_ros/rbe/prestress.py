@@ -50,7 +50,7 @@ import scipy.sparse as sp
 
 from .cones import pyramid_facets
 from .model import EquilibriumModel
-from .solver import Solution, SolveOptions, solve
+from .solver import Solution, SolveOptions, Weights, solve
 
 #: Weight of the kinetic energy of the motion against the check's objective 1/2 |f|^2 (both
 #: in units of the free weight W): the step's forces are those of the motion to about
@@ -86,6 +86,10 @@ SHARE_TOL = 1e-7
 #: A vertex whose friction is within this share of mu fn binds its cone (an interior-point
 #: solution comes no closer to a cone it sits on than about 1e-4).
 CONE_SLACK = 1e-2
+#: The settled caps' least hold: the check's objective scaled by this against the robots'
+#: wrenches, so that solver.HOLD_WEIGHT's bound on how far the wrench is from the least,
+#: O(g / w), is this much tighter (docs/METHOD.md, Holds: the dome state of issue 31).
+LEAST_HOLD = 1e-3
 
 
 @dataclass(frozen=True)
@@ -275,7 +279,9 @@ def _settled(model: EquilibriumModel, rigid: EquilibriumModel, options: SolveOpt
     (None if there is none). With grips, again with caps from its own normal forces until
     they settle: a robot's wrench is a load, and the normal forces it makes give friction
     (else a robot that holds its block still would carry all of it without friction).
-    Beyond the grips' capacities (``beyond``) unless a field within the caps keeps them."""
+    Of the fields within the settled caps, the robots' is the least wrench that any of them
+    needs (_least_hold). Beyond the grips' capacities (``beyond``, that least wrench) unless
+    a field within the caps keeps them."""
     field = None
     for _ in range(MAX_STEPS):
         bound = caps * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
@@ -290,10 +296,25 @@ def _settled(model: EquilibriumModel, rigid: EquilibriumModel, options: SolveOpt
         caps = normal
     if field is None:
         return None
+    if model.grips:
+        field = _least_hold(rigid, options, load, bound, field)
     if _held(model, field):
         return Placement(field)
     capped = solve(model, options, load=load, friction_cap=bound)
     return Placement(capped) if capped.solved else Placement(None, beyond=field)
+
+
+def _least_hold(rigid: EquilibriumModel, options: SolveOptions, load, bound: np.ndarray,
+                field: Solution) -> Solution:
+    """The field within ``bound`` whose robots' wrenches are least (the solver's hold term,
+    the check's objective only a tie-break): a robot's wrench is whatever the contacts leave
+    it, and any field within the settled caps is one the test accepts (a capped check takes
+    it), so the wrench a robot needs is the least of them. ``field`` if the solve fails."""
+    w = options.weights
+    least = solve(rigid, replace(options, weights=Weights(
+        w.compression * LEAST_HOLD, w.tension * LEAST_HOLD, w.friction * LEAST_HOLD)),
+        load=load, friction_cap=bound)
+    return least if least.solved else field
 
 
 def _held(model: EquilibriumModel, solution: Solution) -> bool:

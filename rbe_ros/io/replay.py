@@ -57,6 +57,7 @@ from ..analysis.planning import STOPPED
 from ..analysis.steps import final_state, sequence_steps
 from ..geometry.block import pose_block
 from ..rbe.result import NOT_COMPUTED, Report
+from ..cell import Cell, cell_from_dict, cell_to_dict
 from ..scene import Scene, SceneError
 from .bag import BagWriter, read_custom_data, read_raw, typestore
 from .cdr import Repeats
@@ -107,12 +108,21 @@ IGNORED = frozenset({"solve_time", "dropped_states"})
 
 # --- check options <-> JSON ------------------------------------------------------------------
 
-def settings_dict(options: CheckOptions, frame_id: str, execution: Settings) -> dict:
+def settings_dict(options: CheckOptions, frame_id: str, execution: Settings,
+                  cell: Cell | None = None) -> dict:
     """What the node records on ~/settings: its check options, frame_id and execution
-    parameters."""
+    parameters, and the robot cell of the plan it executes (recorded before the design that
+    brings the plan: its replay executes it for that cell)."""
     return {"options": json.loads(options_to_json(options)), "frame_id": frame_id,
             "execution": {"lookahead_steps": execution.lookahead_steps,
-                          "min_margin_g": execution.min_margin_g}}
+                          "min_margin_g": execution.min_margin_g,
+                          **({"cell": cell_to_dict(cell)} if cell is not None else {})}}
+
+
+def settings_cell(settings: dict | None) -> Cell | None:
+    """The cell of the plan executed in recorded ``settings`` (None: none)."""
+    cell = ((settings or {}).get("execution") or {}).get("cell")
+    return None if cell is None else cell_from_dict(cell)
 
 
 def bag_options(path) -> CheckOptions:
@@ -745,7 +755,7 @@ def replay_execution(tracker: Execution, run: Run, reports: list[dict],
             design = scene_from_state_dict(run.state)
         except SceneError:
             design = None
-        tracker.set_design(design)
+        tracker.set_design(design, settings_cell(run.settings))
     if run.kind not in (DESIGN, POSES) or not run.execution:
         return []
     run_options, frame_id = run_settings(run, options)
@@ -1090,5 +1100,6 @@ __all__ = ["DESIGN", "Difference", "KEPT_DIFFERENCES", "OPTIONS_KEY", "PLAN", "P
            "merge_message",
            "offline_reports", "options_from_json", "options_to_json", "read_runs", "record_bag",
            "replay_bag", "replay_execution", "replay_plan", "replay_run", "report_repeats",
-           "run_settings", "SETTINGS_TYPE", "settings_dict", "state_reports", "step_stamps",
+           "run_settings", "SETTINGS_TYPE", "settings_cell", "settings_dict", "state_reports",
+           "step_stamps",
            "stopped_at", "write_runs"]

@@ -46,7 +46,8 @@ class RbeLifecycleNode(RbeChecks, LifecycleNode):
         try:
             self.check_options()
             self._open_bag()
-            self._design = self.design_message(path) if path else None
+            self._design = (self.design_message(path), self.design_cell(path)) if path \
+                else None
             self._asbuilt = AsBuilt()
             self._execution = Execution()
         except (ConfigurationError, SceneError, ValueError) as exc:
@@ -62,7 +63,7 @@ class RbeLifecycleNode(RbeChecks, LifecycleNode):
         self._start_interfaces()
         if self._design is not None:    # once: a second activate keeps the measured poses
             design, self._design = self._design, None
-            self._send_design(design)
+            self._send_design(*design)
         self.get_logger().info("activated")
         return super().on_activate(state)
 

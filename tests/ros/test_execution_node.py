@@ -146,34 +146,131 @@ def rbe_check(capsys, path, poses: dict, tmp_path, name: str, sequence: bool = F
     return json.loads(capsys.readouterr().out)
 
 
+#: A cell of one robot: a plan for it holds nothing (K = 0), so only an order repairs it.
+ONE_ROBOT = {"robots": [{"name": "r1", "base": [0.8, -0.8, 0.0], "reach": 2.0,
+                         "payload_force": 300, "payload_torque": 60,
+                         "tool": {"box": [0.08, 0.08, 0.1], "tcp": [0.0, 0.0, 0.1],
+                                  "mass": 1.0}}]}
+#: The stack: which block each rests on.
+RESTS = {"s1": "ground", "s2": "s1", "s3": "s2", "c": "s2"}
+
+
+def stack():
+    """A stack near its overhang limit: s1 on the ground, s2 on s1 reaching 0.122 m out, s3
+    on s2 0.15 m further out: s2 and s3 together 3 mm inside s1's edge (the common centroid
+    of two equal boxes, 0.122 + 0.15 / 2 = 0.197 of 0.2 m). The counterweight c on s2's left
+    end (half their mass) goes last; placed before s3 it keeps s2 and s3 well inside."""
+    blocks = [box_block("ground", (1.2, 0.6, 0.1), (0, 0, -0.05), support=True,
+                        density=DENSITY),
+              box_block("s1", (0.4, 0.3, 0.1), (0, 0, 0.05), density=DENSITY),
+              box_block("s2", (0.4, 0.3, 0.1), (0.122, 0, 0.15), density=DENSITY),
+              box_block("s3", (0.4, 0.3, 0.1), (0.272, 0, 0.25), density=DENSITY),
+              box_block("c", (0.1, 0.3, 0.2), (-0.028, 0, 0.3), density=DENSITY)]
+    return make_scene("stack", blocks, sequence=["s1", "s2", "s3", "c"])
+
+
+def footprint(design, block: str, poses: dict):
+    """The outline (shapely) of a box seen from above at its measured pose (else design)."""
+    from shapely.geometry import MultiPoint
+
+    b = design.block(block)
+    p, q = poses.get(block, (b.position, b.orientation))
+    return MultiPoint((Rotation.from_quat(q).apply(b.vertices) + p)[:, :2]).convex_hull
+
+
+def stack_stands(design, poses: dict, free: list[str]) -> bool:
+    """Closed form (the oracle): boxes of one density stacked on flat faces stand iff at each
+    interface the common centroid of the block above and of all resting on it lies within
+    the interface (where the two boxes overlap, seen from above)."""
+    from shapely.geometry import Point
+
+    volume = {b.id: float(np.prod(np.ptp(b.vertices, axis=0))) for b in design.blocks}
+    at = {b: np.asarray(poses.get(b, (design.block(b).position,))[0]) for b in free}
+
+    def load(b):
+        on = [b] + [x for y in free if RESTS.get(y) == b for x in load(y)]
+        return on
+
+    for b in free:
+        on = load(b)
+        w = np.array([volume[x] for x in on])
+        centre = (w[:, None] * np.array([at[x] for x in on])).sum(0) / w.sum()
+        contact = footprint(design, b, poses).intersection(footprint(design, RESTS[b], poses))
+        if not contact.contains(Point(centre[:2])):
+            return False
+    return True
+
+
+def cell_plan_file(design, cell: dict, path) -> dict:
+    """The plan of ``design`` in its order for ``cell``, written as ``rbe-ros plan --cell -o``
+    writes it (the planned scene, the cell, the timeline); the file's JSON."""
+    from rbe_ros.analysis.options import CheckOptions
+    from rbe_ros.analysis.planning import plan_sequence
+    from rbe_ros.cell import cell_from_dict
+    from rbe_ros.io.plan_export import plan_export
+
+    plan = plan_sequence(design, 0, CheckOptions(), cell=cell_from_dict(cell),
+                         keep_sequence=True)
+    assert plan.feasible and plan.order == list(design.sequence), plan.message
+    doc = plan_export(plan, CheckOptions())
+    path.write_text(json.dumps(doc))
+    return doc
+
+
+#: The two structures executed: the block that lands off (after the blocks before it, at
+#: design), how, and the look-ahead's (current step, first failing step) then.
+CASES = {
+    # a stack near its overhang limit, planned for one robot: s2 lands 10 mm out and turned
+    # 2 deg; s3 next would tip s2 and s3 over s1's edge; no robot is free to hold: only the
+    # order (the counterweight first) saves it
+    "stack": dict(design=stack, cell=ONE_ROBOT, stands=stack_stands, before=["s1"],
+                  block="s2", offset=[0.01, 0.0, 0.0], failing=(2, 2), next_block="s3",
+                  repair="swap"),
+    # a plank on a pier with a robot to hold (K = 1): the plank lands 10 mm left and turned
+    # 2 deg; the middle block next stands, the left one after it would tip the plank; no
+    # order does: only a hold
+    "plank": dict(design=lambda: plank(0.2, 1, mid=True), cell=None, stands=stands,
+                  before=[], block="plank", offset=[-0.01, 0.0, 0.0], failing=(1, 2),
+                  next_block="left", repair="hold"),
+}
+
+
 @pytest.mark.long       # 10-15 s each: a node, its repair process, a replay
-@pytest.mark.parametrize("counterweight, robots, orders", [
-    (0.1, 0, {("right", "left")}),              # a swap saves it, no robot free
-    (0.2, 1, set()),                            # no order does: only a hold
-], ids=["swap", "hold"])
+@pytest.mark.parametrize("case", list(CASES))
 def test_block_lands_off_a_later_step_fails_and_the_plan_is_repaired(
-        rclpy_context, tmp_path, capsys, counterweight, robots, orders):
-    design = plank(counterweight, robots, mid=True)
+        rclpy_context, tmp_path, capsys, case):
+    c = CASES[case]
+    design = c["design"]()
     path = tmp_path / "planned.json"
-    path.write_text(json.dumps(scene_to_dict(design)))
-    # the plank lands 10 mm left and turned 2 deg: the middle block next stands, the left
-    # block after it would tip the plank (the oracle, and `rbe-ros check` on the measured
-    # plank with the others at design)
-    off = {"plank": ([-0.01, 0.0, 0.55],
-                     Rotation.from_euler("z", 2, degrees=True).as_quat().tolist())}
-    at_design = {b: (design.block(b).position.tolist(), [0, 0, 0, 1])
-                 for b in ("mid", "left", "right")}
-    assert stands(design, {**off, **at_design}, ["plank", "mid"])
-    assert not stands(design, {**off, **at_design}, ["plank", "mid", "left"])
-    assert stands(design, {**off, **at_design}, ["plank", "mid", "left", "right"])
-    assert stands(design, at_design | {"plank": ([0, 0, 0.55], [0, 0, 0, 1])},
-                  ["plank", "mid", "left"])                      # as designed it stands
-    check = rbe_check(capsys, path, {**off, "mid": at_design["mid"], "left": at_design["left"]},
-                      tmp_path, "left_next")
+    if c["cell"] is not None:
+        planned = cell_plan_file(design, c["cell"], path)
+    else:
+        path.write_text(json.dumps(scene_to_dict(design)))
+    at_design = {b.id: (b.position.tolist(), list(b.orientation)) for b in design.blocks
+                 if not b.support}
+    off = {c["block"]: ((design.block(c["block"]).position + c["offset"]).tolist(),
+                        Rotation.from_euler("z", 2, degrees=True).as_quat().tolist())}
+    order = list(design.sequence)
+    k_off = order.index(c["block"])
+    failing_step = c["failing"][1]
+    # the oracle: as designed every step stands; with the block off the failing step
+    # falls, the steps before it and the whole stand
+    for k in range(len(order)):
+        assert c["stands"](design, at_design, order[:k + 1])
+    measured = {**at_design, **off}
+    assert c["stands"](design, measured, order[:failing_step])
+    assert not c["stands"](design, measured, order[:failing_step + 1])
+    assert c["stands"](design, measured, order)
+    # and `rbe-ros check` of the failing step's state (the block off, the others at design)
+    check = rbe_check(capsys, path, {b: measured[b] for b in order[:failing_step + 1]},
+                      tmp_path, "failing_next")
     assert check["stable"] is False and check["status"] == 1      # TENSION_REQUIRED
-    # which orders of the two blocks left stand without a hold (the oracle)
-    assert {o for o in [("left", "right"), ("right", "left")]
-            if stands(design, {**off, **at_design}, ["plank", "mid", o[0]])} == orders
+    # which orders of the blocks left stand without a hold (the oracle)
+    rest = order[failing_step:]
+    saving = [o for o in ([rest[1], rest[0], *rest[2:]],)
+              if all(c["stands"](design, measured, order[:failing_step] + o[:j + 1])
+                     for j in range(len(o)))]
+    assert bool(saving) == (c["repair"] == "swap")
 
     bag = tmp_path / "bag"
     proc = NodeProcess(["-p", f"design_file:={path}", "-p", f"mcap_path:={bag}"],
@@ -183,32 +280,47 @@ def test_block_lands_off_a_later_step_fails_and_the_plan_is_repaired(
         wait_until(lambda: proc.proc.poll() is None and camera.ready(), 60.0, "the node")
         wait_until(lambda: camera.states, 30.0, "the design's execution state")
         start = camera.states[-1][1]
-        assert (start.active, start.current_step, start.total_steps) == (True, 0, 4)
-        assert start.first_failing_step == -1 and [s.block for s in start.lookahead] == \
-            ["plank", "mid", "left", "right"]
-        camera.place(design, "plank", STAMP0, offset=[-0.01, 0.0, 0.0], yaw_deg=2.0)
-        received, failing = wait_until(lambda: camera.state(STAMP0), 30.0, "execution")
-        assert received - camera.sent[STAMP0] < 2.0
-        # the step after next fails: the look-ahead says so now
-        assert (failing.current_step, failing.first_failing_step) == (1, 2)
-        assert [(s.block, s.stable) for s in failing.lookahead[:2]] == \
-            [("mid", True), ("left", False)]
-        assert "step 2 (left)" in failing.message
+        assert (start.active, start.current_step, start.total_steps) == (True, 0, len(order))
+        assert start.first_failing_step == -1 and [s.block for s in start.lookahead] == order
+        sec = STAMP0
+        for block in c["before"]:
+            camera.place(design, block, sec)
+            wait_until(lambda: camera.state(sec), 30.0, f"{block}")
+            sec += 1
+        camera.place(design, c["block"], sec, offset=c["offset"], yaw_deg=2.0)
+        received, failing = wait_until(lambda: camera.state(sec), 30.0, "execution")
+        assert received - camera.sent[sec] < 2.0
+        # a later step fails: the look-ahead says so now
+        assert (failing.current_step, failing.first_failing_step) == c["failing"]
+        assert [(s.block, s.stable) for s in failing.lookahead][
+            failing_step - failing.current_step] == (c["next_block"], False)
+        assert f"step {failing_step} ({c['next_block']})" in failing.message
         update = wait_until(lambda: camera.updates, 60.0, "the plan update")[0]
-        assert update.feasible and update.changed_step == 2
-        assert list(update.order[:2]) == ["plank", "mid"]
-        assert update.reason.startswith("step 2 (left) fails at the measured poses")
-        assert update.repair == ("swap" if orders else "hold")
+        assert update.feasible and update.changed_step == failing_step
+        assert list(update.order[:failing_step]) == order[:failing_step]
+        assert update.reason.startswith(f"step {failing_step} ({c['next_block']}) fails at "
+                                        "the measured poses")
+        assert update.repair == c["repair"]
         # the repaired plan's execution state: nothing fails ahead any more
-        repaired = wait_until(lambda: len(camera.states) >= 3 and camera.state(STAMP0, True),
-                              30.0, "the repaired plan's state")[1]
+        repaired = wait_until(lambda: len([m for _, m in camera.states
+                                           if m.header.stamp.sec == sec]) >= 2
+                              and camera.state(sec, True), 30.0, "the repaired plan's state")[1]
         assert repaired.first_failing_step == -1 and repaired.active
-        order = list(update.order)
+        new_order = list(update.order)
         holds = [message_to_dict(h) for h in update.holds]
+        if c["cell"] is not None:
+            # the cell's plan: the repaired timeline (the robot places each block in the new
+            # order), beside the timeline of the file it started from
+            assert [a.block for a in update.timeline if a.action == "place"] == new_order
+            assert {a.robot for a in update.timeline} == {"r1"}
+            assert all(a.stable for a in update.timeline if a.step >= failing_step)
+            assert [a["block"] for a in planned["timeline"] if a["action"] == "place"] == order
+        else:
+            assert not update.timeline
         # the camera follows the repaired plan
-        for k, block in enumerate(order[1:], start=1):
-            camera.place(design, block, STAMP0 + k)
-            got = wait_until(lambda: camera.state(STAMP0 + k, True), 30.0, f"step {k}")[1]
+        for k, block in enumerate(new_order[k_off + 1:], start=k_off + 1):
+            camera.place(design, block, sec + k)
+            got = wait_until(lambda: camera.state(sec + k, True), 30.0, f"step {k}")[1]
             assert got.current_step == k + 1 and got.first_failing_step == -1
     finally:
         camera.close()
@@ -219,32 +331,32 @@ def test_block_lands_off_a_later_step_fails_and_the_plan_is_repaired(
     # every remaining step of the repaired plan stands at the measured poses: a held block
     # is a support (the plank then rests on the pier and it); the oracle on the free ones
     measured = camera.measured
-    for k in range(1, len(order)):
+    for k in range(k_off, len(new_order)):
         held = {h["block"] for h in holds if h["from_step"] <= k and
                 (h["until_step"] < 0 or k < h["until_step"])}
-        assert held or stands(design, measured, order[:k + 1]), f"step {k}"
-    if not orders:
+        assert held or c["stands"](design, measured, new_order[:k + 1]), f"step {k}"
+    if c["repair"] == "hold":
         assert holds, "no order stands: the repair must hold a block"
     else:
-        assert tuple(order[2:]) in orders or holds
+        assert new_order[failing_step:] in saving and not holds
     # and by `rbe-ros check --sequence` on the repaired plan, its blocks at the measured poses
     # (--poses would drop the holds: they count the design's steps)
     repaired_path = tmp_path / "repaired.json"
     doc = scene_to_dict(replace(design, blocks=tuple(
         make_block(b.id, b.vertices, b.faces, *measured.get(b.id, (b.position, b.orientation)),
                    density=DENSITY, support=b.support) for b in design.blocks)))
-    doc["sequence"] = order
+    doc["sequence"] = new_order
     doc["holds"] = [{"block": h["block"], "from_step": h["from_step"],
                      **({"until_step": h["until_step"]} if h["until_step"] >= 0 else {})}
                     for h in holds]
     repaired_path.write_text(json.dumps(doc))
     steps = rbe_check(capsys, repaired_path, {}, tmp_path, "all", sequence=True)
     assert [r["stable"] for r in steps["reports"]] == [True] * len(steps["reports"]), steps
-    assert len(steps["reports"]) >= len(order)
+    assert len(steps["reports"]) >= len(new_order)
     # the bag: every execution state and the update recorded, and `replay --compare`
     topics = [m.topic for m in read_bag(bag)]
     assert topics.count("/rbe_node/plan_update") == 1
-    assert topics.count("/rbe_node/execution") >= len(order) + 2
+    assert topics.count("/rbe_node/execution") >= len(new_order) + 2
     result = assert_bag_replays(bag)
     assert sum(len(r.execution) for r in result.runs) == topics.count("/rbe_node/execution") + 1
 

@@ -1,0 +1,167 @@
+"""A cell's plan under execution: the states between its robots' actions at the measured
+poses.
+
+A plan for a cell (an order and holds by step) has one timeline, the planner's
+(:func:`rbe_ros.analysis.timeline.plan_actions` over the design's finished assembly): the
+timeline ``rbe-ros plan --cell`` exported, and that of a repaired order made the same way,
+the steps done keeping their robots and grips. While the plan is built, a robot grips a
+placed block where it landed: each grip moves with its block to the measured pose. A step
+ahead passes the look-ahead when, beyond its own check (:class:`rbe_ros.analysis.lookahead.
+StepRunner`), a free robot can do each of its actions and the state after each stands at the
+measured poses with the robots' grips and payloads, the hand-over state after a release (the
+step's block absent) included, as the planner checked them at design.
+
+A repair (:func:`repair_cell`) is :func:`rbe_ros.analysis.repair.repair_plan`'s within the
+cell's K (its robots less the one that places); its timeline is then checked the same way,
+and a repair whose timeline falls is no repair.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ..cell import Cell
+from ..scene import Scene, make_scene
+from .assembly import Assembly
+from .grips import GripFrame
+from .lookahead import StepAhead, StepRunner, held_by_step, plan_order, where
+from .options import CheckOptions
+from .repair import Repair, repair_plan
+from .timeline import (Action, Busy, CellSteps, StateChecks, Timeline, check_action,
+                       plan_actions, scene_with_grips, state_fell)
+
+
+class CellPlan:
+    """A cell and the design its plans are for: the timeline of any order of its blocks,
+    derived as the planner derives it (grip choices kept across orders)."""
+
+    def __init__(self, cell: Cell, design: Scene, options: CheckOptions):
+        supports = {b.id for b in design.blocks if b.support}
+        self.cell, self.contact = cell, options.contact
+        # as the planner has it: no sequence, the holds of supports (scaffolds) only
+        self.base = make_scene(design.name, design.blocks, design.gravity, (),
+                               [h for h in design.holds if h.block in supports])
+        self.assembly = Assembly.from_scene(self.base, options.contact)
+        self.steps = CellSteps(cell, self.assembly,
+                               {b.id: k for k, b in enumerate(self.assembly.blocks)})
+        self._actions: dict[tuple, tuple[list[Action], str, int]] = {}
+
+    def actions(self, plan: Scene) -> tuple[list[Action], str, int]:
+        """The actions of ``plan`` (a scene over the design's blocks: sequence and holds),
+        unchecked, and why no robot can do step k and k ("" and -1 when every step can be
+        done)."""
+        order = tuple(plan_order(plan))
+        held = tuple(held_by_step(plan))
+        key = (order, held)
+        found = self._actions.get(key)
+        if found is None:
+            found = self._actions[key] = plan_actions(self.steps, self.base, order, held)
+        return found
+
+    def ahead(self, runner: StepRunner) -> "CellAhead":
+        """The cell's checks at the as-built state of ``runner``."""
+        return CellAhead(self, runner)
+
+
+class CellAhead:
+    """The cell's checks of a plan's steps at one as-built state (the scene and options of a
+    :class:`StepRunner`): each state after an action once."""
+
+    def __init__(self, plan: CellPlan, runner: StepRunner):
+        self.plan = plan
+        self.states = StateChecks(plan.cell, runner.full, plan.base, runner.options)
+        design = {b.id: b for b in plan.base.blocks}
+        # block -> (rotation, design position, measured position) of the blocks moved
+        self.moves: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        for b in runner.scene.blocks:
+            d = design[b.id]
+            if not (np.allclose(b.position, d.position, atol=1e-12)
+                    and np.allclose(b.orientation, d.orientation, atol=1e-12)):
+                turn = Rotation.from_quat(b.orientation) * Rotation.from_quat(d.orientation).inv()
+                self.moves[b.id] = (turn.as_matrix(), d.position, b.position)
+
+    def grip(self, g: GripFrame) -> GripFrame:
+        """``g`` moved with its block to the block's measured pose."""
+        move = self.moves.get(g.block)
+        if move is None:
+            return g
+        turn, before, after = move
+        return GripFrame(g.block, g.face, turn @ (g.point - before) + after, turn @ g.rotation,
+                         turn @ g.normal)
+
+    def moved(self, a: Action) -> Action:
+        """``a`` with every grip moved with its block."""
+        return replace(a, grip=self.grip(a.grip),
+                       busy=tuple((b, Busy(h.robot, self.grip(h.grip))) for b, h in a.busy))
+
+    def __call__(self, plan: Scene, step: StepAhead) -> StepAhead:
+        """``step`` of ``plan`` with the cell's checks of it: it fails when no free robot can
+        do it or the state after one of its actions falls (the first, named); its largest
+        hold force over those states."""
+        actions, error, failed = self.plan.actions(plan)
+        if error and step.step >= failed:
+            return step if not step.passes else replace(step, message=error)
+        order = plan.sequence
+        force = step.max_hold_force
+        for a in actions:
+            if a.step != step.step:
+                continue
+            a = check_action(self.moved(a), order, self.states)
+            report = a.report
+            force = max([force, *(float(np.linalg.norm(w.force))
+                                  for w in report.hold_wrenches)])
+            if not report.stable and step.passes:
+                return replace(step, stable=False, status=report.status, report=report,
+                               max_hold_force=force,
+                               message=state_fell(a, report, step.block))
+        return replace(step, max_hold_force=force)
+
+    def timeline(self, plan: Scene, checked: range) -> Timeline:
+        """The timeline of ``plan`` at the measured poses, the actions of the steps
+        ``checked`` checked (their robots' wrenches with them), infeasible at the first of
+        them that falls or no robot can do."""
+        actions, error, failed = self.plan.actions(plan)
+        order = plan.sequence
+        out = Timeline(self.plan.cell)
+        for a in actions:
+            a = self.moved(a)
+            if a.step in checked:
+                a = check_action(a, order, self.states, plan.approach)
+                if not a.report.stable and out.feasible:
+                    block = order[a.step] if a.step < len(order) else ""
+                    out.feasible = False
+                    out.message = f"{where(a.step, block)}: {state_fell(a, a.report, block)}"
+            out.actions.append(a)
+        if error and failed in checked and out.feasible:
+            out.feasible, out.message = False, error
+        return out
+
+
+def repair_cell(plan: Scene, built: Scene, options: CheckOptions, cell: CellPlan, *,
+                min_margin_g: float = 0.0, lookahead_steps: int = 0
+                ) -> tuple[Repair, Timeline | None]:
+    """Repair ``plan`` from the as-built scene ``built`` for ``cell`` (see the module
+    docstring): the repair, its holds at the robots' grips, and the repaired plan's timeline
+    at the measured poses (None when no repair was found)."""
+    found = repair_plan(plan, built, options, max_held=len(cell.cell.robots) - 1,
+                        min_margin_g=min_margin_g, lookahead_steps=lookahead_steps)
+    if not found.feasible or found.scene is None:
+        return found, None
+    runner = StepRunner(found.scene, options, found.placed, min_margin_g)
+    total = len(held_by_step(found.scene))
+    stop = total if not lookahead_steps else min(total, found.placed + lookahead_steps)
+    timeline = cell.ahead(runner).timeline(found.scene, range(found.placed, stop))
+    if not timeline.feasible:
+        what = f"the repaired plan ({found.kind})" if found.changed else "the plan"
+        return replace(found, feasible=False, changed=False, changed_step=-1,
+                       kind="none", scene=None, order=list(plan_order(plan)),
+                       held=held_by_step(plan), holds=plan.holds,
+                       message=f"{found.reason or timeline.message}; {what} fails for the "
+                               f"cell's robots: {timeline.message}"), None
+    holds = scene_with_grips(found.scene, timeline).holds
+    return replace(found, holds=holds, scene=replace(found.scene, holds=holds)), timeline
+
+
+__all__ = ["CellAhead", "CellPlan", "repair_cell"]

@@ -12,11 +12,13 @@ measured poses with the robots' grips and payloads, the hand-over state after a 
 step's block absent) included, as the planner checked them at design.
 
 A repair (:func:`repair_cell`) is :func:`rbe_ros.analysis.repair.repair_plan`'s within the
-cell's K (its robots less the one that places); its timeline is then checked the same way,
-and a repair whose timeline falls is no repair.
+cell's K (its robots less the one that places); its timeline is then checked the same way;
+when a state of it falls, the remainder is planned again for the cell (the planner checks
+the states between actions) and checked so.
 """
 from __future__ import annotations
 
+import time
 from dataclasses import replace
 
 import numpy as np
@@ -26,11 +28,16 @@ from ..cell import Cell
 from ..scene import Scene, make_scene
 from .assembly import Assembly
 from .grips import GripFrame
-from .lookahead import StepAhead, StepRunner, held_by_step, plan_order, where
+from .lookahead import StepAhead, StepRunner, held_by_step, plan_order, where, with_plan
 from .options import CheckOptions
+from .planning import plan_sequence
 from .repair import Repair, repair_plan
 from .timeline import (Action, Busy, CellSteps, StateChecks, Timeline, check_action,
                        plan_actions, scene_with_grips, state_fell)
+
+
+#: Seconds a re-plan of the remainder for a cell may take.
+REPLAN_TIME_LIMIT = 60.0
 
 
 class CellPlan:
@@ -132,7 +139,8 @@ class CellAhead:
                 if not a.report.stable and out.feasible:
                     block = order[a.step] if a.step < len(order) else ""
                     out.feasible = False
-                    out.message = f"{where(a.step, block)}: {state_fell(a, a.report, block)}"
+                    out.message = f"{where(a.step, block)} fails at the measured poses: " \
+                                  f"{state_fell(a, a.report, block)}"
             out.actions.append(a)
         if error and failed in checked and out.feasible:
             out.feasible, out.message = False, error
@@ -140,11 +148,14 @@ class CellAhead:
 
 
 def repair_cell(plan: Scene, built: Scene, options: CheckOptions, cell: CellPlan, *,
-                min_margin_g: float = 0.0, lookahead_steps: int = 0
-                ) -> tuple[Repair, Timeline | None]:
+                min_margin_g: float = 0.0, lookahead_steps: int = 0,
+                time_limit: float = REPLAN_TIME_LIMIT) -> tuple[Repair, Timeline | None]:
     """Repair ``plan`` from the as-built scene ``built`` for ``cell`` (see the module
     docstring): the repair, its holds at the robots' grips, and the repaired plan's timeline
-    at the measured poses (None when no repair was found)."""
+    at the measured poses (None when no repair was found). When the hold, swap or re-plan
+    of :func:`repair_plan` (blind to the states between actions) leaves a state of the
+    timeline falling, the remainder is planned again for the cell (within ``time_limit``
+    s) and checked the same way."""
     found = repair_plan(plan, built, options, max_held=len(cell.cell.robots) - 1,
                         min_margin_g=min_margin_g, lookahead_steps=lookahead_steps)
     if not found.feasible or found.scene is None:
@@ -153,15 +164,60 @@ def repair_cell(plan: Scene, built: Scene, options: CheckOptions, cell: CellPlan
     total = len(held_by_step(found.scene))
     stop = total if not lookahead_steps else min(total, found.placed + lookahead_steps)
     timeline = cell.ahead(runner).timeline(found.scene, range(found.placed, stop))
-    if not timeline.feasible:
-        what = f"the repaired plan ({found.kind})" if found.changed else "the plan"
-        return replace(found, feasible=False, changed=False, changed_step=-1,
-                       kind="none", scene=None, order=list(plan_order(plan)),
-                       held=held_by_step(plan), holds=plan.holds,
-                       message=f"{found.reason or timeline.message}; {what} fails for the "
-                               f"cell's robots: {timeline.message}"), None
-    holds = scene_with_grips(found.scene, timeline).holds
-    return replace(found, holds=holds, scene=replace(found.scene, holds=holds)), timeline
+    if timeline.feasible:
+        holds = scene_with_grips(found.scene, timeline).holds
+        return replace(found, holds=holds, scene=replace(found.scene, holds=holds)), timeline
+    reason = found.reason or timeline.message
+    what = f"the repaired plan ({found.kind})" if found.changed else "the plan"
+    if timeline.message != reason:
+        what += f" ({timeline.message})"
+    replanned = _replan(plan, found, options, cell, reason, min_margin_g, time_limit)
+    if isinstance(replanned, tuple):
+        return replanned
+    return replace(found, feasible=False, changed=False, changed_step=-1, kind="none",
+                   scene=None, order=list(plan_order(plan)), held=held_by_step(plan),
+                   holds=plan.holds, reason=reason,
+                   message=f"{reason}; {what} fails for the cell's robots, and {replanned}"), \
+        None
 
 
-__all__ = ["CellAhead", "CellPlan", "repair_cell"]
+def _replan(plan: Scene, found: Repair, options: CheckOptions, cell: CellPlan, reason: str,
+            min_margin_g: float, time_limit: float) -> tuple[Repair, Timeline] | str:
+    """The remainder of ``plan`` planned again for the cell from the as-built state of
+    ``found`` (the placed blocks a fixed prefix, at their measured poses; the holds of the
+    steps done kept), every remaining step and state between actions re-checked; or why
+    not."""
+    start = time.perf_counter()
+    placed = found.placed
+    original = (list(plan_order(plan)), held_by_step(plan))
+    scene = found.scene
+    supports = {b.id for b in scene.blocks if b.support}
+    fixed = Scene(scene.name, scene.blocks, scene.gravity, tuple(original[0][:placed]),
+                  tuple(h for h in scene.holds if h.block in supports), scene.pose_uncertainty)
+    new = plan_sequence(fixed, len(cell.cell.robots) - 1, options, keep_sequence=True,
+                        cell=cell.cell, time_limit=time_limit, min_margin=min_margin_g)
+    if not new.feasible:
+        return f"re-planning the remaining {len(original[0]) - placed} blocks for the cell " \
+               f"failed: {new.message}"
+    repaired = with_plan(scene, new.order, [*original[1][:placed], *new.held[placed:]])
+    runner = StepRunner(repaired, options, placed, min_margin_g)
+    runner.extra = cell.ahead(runner)
+    total = len(held_by_step(repaired))
+    steps = runner.scan(repaired, placed, total, runner.checker)
+    if steps and not steps[-1].passes:
+        s = steps[-1]
+        return f"the re-planned remainder fails at {where(s.step, s.block)}: {s.message}"
+    timeline = runner.extra.timeline(repaired, range(placed, total))
+    holds = scene_with_grips(repaired, timeline).holds
+    held = held_by_step(repaired)
+    changed = next((k for k in range(placed, max(len(held), len(original[1])))
+                    if (original[0][k:k + 1], original[1][k:k + 1])
+                    != (list(repaired.sequence[k:k + 1]), held[k:k + 1])), -1)
+    return Repair(True, changed >= 0, list(repaired.sequence), held, holds, changed, "replan",
+                  f"{reason}; re-planned for the cell from step {changed}: every remaining "
+                  "step and state between the robots' actions passes at the measured poses",
+                  reason, replace(repaired, holds=holds), steps, placed, runner.checks,
+                  time.perf_counter() - start), timeline
+
+
+__all__ = ["CellAhead", "CellPlan", "REPLAN_TIME_LIMIT", "repair_cell"]

@@ -18,6 +18,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from scipy.spatial.transform import Rotation
 
+from helpers import ONE_ROBOT, overhang_stack, stack_stands
 from rbe_client import NodeProcess, wait_until
 from rbe_ros import cli
 from rbe_ros.io.bag import read_bag
@@ -146,61 +147,6 @@ def rbe_check(capsys, path, poses: dict, tmp_path, name: str, sequence: bool = F
     return json.loads(capsys.readouterr().out)
 
 
-#: A cell of one robot: a plan for it holds nothing (K = 0), so only an order repairs it.
-ONE_ROBOT = {"robots": [{"name": "r1", "base": [0.8, -0.8, 0.0], "reach": 2.0,
-                         "payload_force": 300, "payload_torque": 60,
-                         "tool": {"box": [0.08, 0.08, 0.1], "tcp": [0.0, 0.0, 0.1],
-                                  "mass": 1.0}}]}
-#: The stack: which block each rests on.
-RESTS = {"s1": "ground", "s2": "s1", "s3": "s2", "c": "s2"}
-
-
-def stack():
-    """A stack near its overhang limit: s1 on the ground, s2 on s1 reaching 0.122 m out, s3
-    on s2 0.15 m further out: s2 and s3 together 3 mm inside s1's edge (the common centroid
-    of two equal boxes, 0.122 + 0.15 / 2 = 0.197 of 0.2 m). The counterweight c on s2's left
-    end (half their mass) goes last; placed before s3 it keeps s2 and s3 well inside."""
-    blocks = [box_block("ground", (1.2, 0.6, 0.1), (0, 0, -0.05), support=True,
-                        density=DENSITY),
-              box_block("s1", (0.4, 0.3, 0.1), (0, 0, 0.05), density=DENSITY),
-              box_block("s2", (0.4, 0.3, 0.1), (0.122, 0, 0.15), density=DENSITY),
-              box_block("s3", (0.4, 0.3, 0.1), (0.272, 0, 0.25), density=DENSITY),
-              box_block("c", (0.1, 0.3, 0.2), (-0.028, 0, 0.3), density=DENSITY)]
-    return make_scene("stack", blocks, sequence=["s1", "s2", "s3", "c"])
-
-
-def footprint(design, block: str, poses: dict):
-    """The outline (shapely) of a box seen from above at its measured pose (else design)."""
-    from shapely.geometry import MultiPoint
-
-    b = design.block(block)
-    p, q = poses.get(block, (b.position, b.orientation))
-    return MultiPoint((Rotation.from_quat(q).apply(b.vertices) + p)[:, :2]).convex_hull
-
-
-def stack_stands(design, poses: dict, free: list[str]) -> bool:
-    """Closed form (the oracle): boxes of one density stacked on flat faces stand iff at each
-    interface the common centroid of the block above and of all resting on it lies within
-    the interface (where the two boxes overlap, seen from above)."""
-    from shapely.geometry import Point
-
-    volume = {b.id: float(np.prod(np.ptp(b.vertices, axis=0))) for b in design.blocks}
-    at = {b: np.asarray(poses.get(b, (design.block(b).position,))[0]) for b in free}
-
-    def load(b):
-        on = [b] + [x for y in free if RESTS.get(y) == b for x in load(y)]
-        return on
-
-    for b in free:
-        on = load(b)
-        w = np.array([volume[x] for x in on])
-        centre = (w[:, None] * np.array([at[x] for x in on])).sum(0) / w.sum()
-        contact = footprint(design, b, poses).intersection(footprint(design, RESTS[b], poses))
-        if not contact.contains(Point(centre[:2])):
-            return False
-    return True
-
-
 def cell_plan_file(design, cell: dict, path) -> dict:
     """The plan of ``design`` in its order for ``cell``, written as ``rbe-ros plan --cell -o``
     writes it (the planned scene, the cell, the timeline); the file's JSON."""
@@ -223,7 +169,7 @@ CASES = {
     # a stack near its overhang limit, planned for one robot: s2 lands 10 mm out and turned
     # 2 deg; s3 next would tip s2 and s3 over s1's edge; no robot is free to hold: only the
     # order (the counterweight first) saves it
-    "stack": dict(design=stack, cell=ONE_ROBOT, stands=stack_stands, before=["s1"],
+    "stack": dict(design=overhang_stack, cell=ONE_ROBOT, stands=stack_stands, before=["s1"],
                   block="s2", offset=[0.01, 0.0, 0.0], failing=(2, 2), next_block="s3",
                   repair="swap"),
     # a plank on a pier with a robot to hold (K = 1): the plank lands 10 mm left and turned
@@ -558,3 +504,88 @@ def test_a_step_ahead_below_min_margin_g_is_repaired(make_node, tmp_path):
     assert repaired["first_failing_step"] == -1
     assert all(s["margin_g"] >= 0.1 for s in repaired["lookahead"])
     assert_bag_replays(tmp_path / "bag")
+
+
+def test_a_cell_plan_file_is_executed_its_robots_drawn_bad_poses_refused(make_node, tmp_path):
+    """A design_file planned for a cell (the overhang stack, two robots) is executed as its
+    timeline: s2 lands 10 mm out and turned 2 deg, the repair holds s2 while s3 is placed
+    (its timeline on ~/plan_update), and with s3 measured ~/markers draws the robots as the
+    HTML view does (the same gripper box at the holder's moved grip). Poses out of the
+    plan's order, of a block not in the design, and a design that is not the plan's: a
+    reason on ~/execution, the step reached kept, everything in the bag, which replays."""
+    from rclpy.serialization import serialize_message
+
+    from rbe_msgs.msg import AssemblyState
+    from rbe_ros.cell import cell_from_dict
+    from rbe_ros.io.execution import repair
+    from rbe_ros.io.markers import gripper_box
+    from rbe_ros.io.messages import state_to_dict
+
+    from test_cell_execution import TWO_ROBOTS
+
+    design = overhang_stack()
+    path = tmp_path / "planned.json"
+    cell_plan_file(design, TWO_ROBOTS, path)
+    node = make_node(design_file=str(path), mcap_path=str(tmp_path / "bag"))
+    states: list[tuple[str, dict]] = []
+    drawn: list[dict] = []
+    node._send_execution = (lambda send: lambda kind, m: (states.append((kind, m)),
+                                                          send(kind, m)))(node._send_execution)
+    node._encode_markers = (lambda encode: lambda m: (drawn.append(m), encode(m))[1])(
+        node._encode_markers)
+    node._repair = repair       # here, not in a worker process (spawning one takes seconds)
+
+    def poses(sec: int, measured: dict, answers: int = 1) -> list[dict]:
+        node._on_poses(serialize_message(dict_to_message(
+            poses_to_dict(measured, "cell", sec * 1_000_000_000), BlockPoses)))
+        return wait_until(lambda: [m for _, m in states if m["header"]["stamp"]["sec"] == sec]
+                          if len([m for _, m in states if m["header"]["stamp"]["sec"] == sec])
+                          >= answers else None, 60.0, f"the execution state of {sec}")
+
+    at = {b.id: (b.position.tolist(), [0, 0, 0, 1]) for b in design.blocks}
+    off = ((design.block("s2").position + [0.01, 0, 0]).tolist(),
+           Rotation.from_euler("z", 2, degrees=True).as_quat().tolist())
+    [first] = poses(1, {"s1": at["s1"]})
+    assert first["active"] and first["current_step"] == 1 and first["first_failing_step"] == -1
+    [wrong] = poses(2, {"s3": at["s3"]})                  # s2 comes first
+    assert not wrong["active"] and wrong["current_step"] == 1 and wrong["message"] == (
+        "measured blocks are not a prefix of the plan's order: 's3' (step 2) is measured but "
+        "'s2' (step 1) is not")
+    [ghost] = poses(3, {"ghost": at["s2"]})
+    assert not ghost["active"] and ghost["current_step"] == 1 and "'ghost'" in ghost["message"]
+    # the as-built state kept s3 as measured: the design again forgets the poses
+    sent = len(states)
+    node._send_design(node.design_message(str(path)), node.design_cell(str(path)))
+    wait_until(lambda: len(states) > sent, 30.0, "the design's state")
+    assert states[-1][1]["active"] and states[-1][1]["current_step"] == 0, states[-1][1]["message"]
+    poses(31, {"s1": at["s1"]})
+    failing, update, repaired = poses(4, {"s2": off}, answers=3)
+    assert failing["current_step"] == 2 and failing["first_failing_step"] == 2
+    assert update["repair"] == "hold" and update["feasible"] and update["timeline"]
+    assert repaired["first_failing_step"] == -1
+    drawn.clear()
+    [built] = poses(5, {"s3": at["s3"]})
+    assert built["active"] and built["current_step"] == 3
+    wait_until(lambda: any(m["ns"] == "grippers" for a in drawn for m in a["markers"]), 30.0,
+               "the robots' markers")
+    robots = next(a["markers"] for a in drawn
+                  if any(m["ns"] == "grippers" for m in a["markers"]))
+    assert sum(m["ns"] == "robots" for m in robots) == 2
+    # s2's holder: its gripper box where the HTML view draws it from the repaired timeline
+    holder = next(a for a in update["timeline"] if a["action"] == "hold" and a["block"] == "s2")
+    centre, quat = gripper_box(holder, cell_from_dict(TWO_ROBOTS).robot(holder["robot"]))
+    [box] = [m for m in robots if m["ns"] == "grippers"]
+    assert [box["pose"]["position"][k] for k in "xyz"] == pytest.approx(centre)
+    assert [box["pose"]["orientation"][k] for k in "xyzw"] == pytest.approx(quat)
+    other = make_scene("other", [design.block("ground"), design.block("s1")])
+    node._on_design(serialize_message(dict_to_message(state_to_dict(other, "cell", 6 * 10**9),
+                                                      AssemblyState)))
+    [mismatch] = wait_until(lambda: [m for _, m in states if m["header"]["stamp"]["sec"] == 6],
+                            30.0, "6")
+    assert not mismatch["active"] and "does not match the design" in mismatch["message"]
+    node.destroy_node()
+    topics = [m.topic.rsplit("/", 1)[1] for m in read_bag(tmp_path / "bag")]
+    assert topics.count("poses") == 6 and topics.count("design") == 3
+    assert topics.count("execution") + topics.count("plan_update") >= len(states)
+    result = assert_bag_replays(tmp_path / "bag")
+    assert result.executed == topics.count("execution") + topics.count("plan_update")

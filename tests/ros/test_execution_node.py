@@ -589,3 +589,48 @@ def test_a_cell_plan_file_is_executed_its_robots_drawn_bad_poses_refused(make_no
     assert topics.count("execution") + topics.count("plan_update") >= len(states)
     result = assert_bag_replays(tmp_path / "bag")
     assert result.executed == topics.count("execution") + topics.count("plan_update")
+
+
+def test_a_cell_plan_of_the_node_is_executed_for_its_cell(make_node, tmp_path):
+    """A ~/plan result for a cell is executed for that cell: the cell recorded with the
+    settings before the plan's design, so that the replay repairs as the node did (a hold
+    at the robot's grip, the repaired timeline)."""
+    from rclpy.serialization import serialize_message
+
+    from rbe_msgs.msg import AssemblyState
+    from rbe_ros.analysis.planning import plan_sequence
+    from rbe_ros.cell import cell_from_dict
+    from rbe_ros.io.execution import repair
+    from rbe_ros.io.messages import scene_from_state_dict, state_to_dict
+    from rbe_ros.io.replay import settings_cell
+
+    from test_cell_execution import TWO_ROBOTS
+
+    cell = cell_from_dict(TWO_ROBOTS)
+    design = scene_from_state_dict(state_to_dict(replace(overhang_stack(), sequence=())))
+    plan = plan_sequence(design, 1, cell=cell)
+    assert plan.feasible and plan.order == ["s1", "s2", "s3", "c"]
+    node = make_node(mcap_path=str(tmp_path / "bag"))
+    node._repair = repair       # here, not in a worker process (spawning one takes seconds)
+    states: list[dict] = []
+    node._send_execution = (lambda send: lambda kind, m: (states.append(m), send(kind, m)))(
+        node._send_execution)
+    node._on_design(serialize_message(dict_to_message(state_to_dict(design, "cell", 10**9),
+                                                      AssemblyState)))
+    node._adopt(plan, {"frame_id": "cell", "stamp": {"sec": 0, "nanosec": 0}})
+    wait_until(lambda: node._execution.cell == cell and states and states[-1]["active"],
+               30.0, "the plan's execution state")
+    at = {b.id: (b.position.tolist(), [0, 0, 0, 1]) for b in design.blocks}
+    off = ((design.block("s2").position + [0.01, 0, 0]).tolist(), [0, 0, 0, 1])
+    node._on_poses(serialize_message(dict_to_message(poses_to_dict(
+        {"s1": at["s1"], "s2": off}, "cell", 10 * 10**9), BlockPoses)))
+    update = wait_until(lambda: next((m for m in states if "repair" in m), None), 60.0,
+                        "the plan update")
+    assert update["repair"] == "hold" and update["timeline"]
+    assert update["holds"][0]["has_grip"]
+    node.destroy_node()
+    settings = [json.loads(m.data["data"]) for m in read_bag(tmp_path / "bag")
+                if m.topic.endswith("/settings")]
+    assert settings_cell(settings[-1]) == cell and settings_cell(settings[0]) is None
+    result = assert_bag_replays(tmp_path / "bag")
+    assert result.executed == len(states)

@@ -33,7 +33,10 @@ Interfaces (relative to the node, e.g. ``/rbe_node/report``):
   a ~/plan result of the design) after each design or poses message checked, the steps
   ahead at the measured poses, and a repaired plan when one of them fails
   (:mod:`rbe_ros.io.execution`, its own thread; parameters ``lookahead_steps``,
-  ``min_margin_g``).
+  ``min_margin_g``). A plan for a robot cell (a ``design_file`` written by ``rbe-ros plan
+  --cell -o``, a ``~/plan`` result for a cell; a design sent on ``~/design`` carries none) is
+  executed as its timeline, the cell recorded with the settings, and its robots drawn on
+  ``~/markers`` after each execution state.
 
 Bad input never stops the node: a state that cannot be checked (outside the limits of
 :class:`rbe_ros.scene.ValidationLimits`, ``max_blocks`` among them) gives a report with status

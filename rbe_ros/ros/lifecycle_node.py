@@ -50,6 +50,7 @@ class RbeLifecycleNode(RbeChecks, LifecycleNode):
                 else None
             self._asbuilt = AsBuilt()
             self._execution = Execution()
+            self._plan_cell = None
         except (ConfigurationError, SceneError, ValueError) as exc:
             self.close_bag()
             self.get_logger().error(f"configure failed: {exc}")

@@ -309,6 +309,11 @@ class RbeChecks:
         self._marker_lock = threading.Lock()
         self._markers_at = -math.inf
         self._markers_waiting: tuple | None = None
+        # a cell plan under execution: the robots (drawn at the last as-built state) go with
+        # every report's markers, and the last report's blocks with the robots' (each array
+        # begins with a DELETEALL: either alone would wipe the other in a viewer)
+        self._report_markers: list[dict] = []
+        self._robot_markers: list[dict] = []
         self._marker_timer = self.create_timer(MARKER_POLL_S, self._markers_due,
                                                callback_group=MutuallyExclusiveCallbackGroup())
         self._marker_timer.cancel()
@@ -624,6 +629,14 @@ class RbeChecks:
         else:
             [markers] = run_markers(self._drawable(state), [report_to_dict(report, header)],
                                     self.check_options())
+        with self._marker_lock:
+            self._report_markers = markers["markers"]
+            if self._robot_markers:
+                markers = {"markers": [*markers["markers"], *self._robot_markers]}
+        self._publish_markers(markers)
+
+    def _publish_markers(self, markers: dict) -> None:
+        """Publish (and record, and send to Foxglove) a MarkerArray dict."""
         if self.foxglove is not None:
             self.foxglove.publish(markers)
         markers = self._encode_markers(markers)
@@ -868,6 +881,9 @@ class RbeChecks:
                 if "design" in slot:
                     self._exec_design, design, cell = slot["design"]
                     self._execution.set_design(design, cell)
+                    if self._execution.cell is None:
+                        with self._marker_lock:
+                            self._robot_markers = []
                     if self._execution.plan is not None:
                         self._pool().warm()     # a repair may come: its process ready
                 header, scene, report, design = slot["state"]
@@ -910,14 +926,11 @@ class RbeChecks:
             return
         centres = np.array([b.position for b in ex.plan.blocks])
         length = 0.3 * max(float(np.linalg.norm(np.ptp(centres, axis=0))), 0.5)
-        markers = {"markers": cell_markers(ex.cell, ex.timeline, ex.timeline_done, header,
-                                           length)}
-        if self.foxglove is not None:
-            self.foxglove.publish(markers)
-        data = self._encode_markers(markers)
-        if self.get_parameter("record_markers").value:
-            self._record(self.marker_topic, data)
-        self._marker_pub.publish(data)
+        robots = cell_markers(ex.cell, ex.timeline, ex.timeline_done, header, length)
+        with self._marker_lock:
+            self._robot_markers = robots
+            markers = {"markers": [*self._report_markers, *robots]}
+        self._publish_markers(markers)
 
     def _repair(self, plan: Scene, built: Scene, options: CheckOptions, settings: Settings,
                 cell):

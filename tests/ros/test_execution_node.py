@@ -571,6 +571,8 @@ def test_a_cell_plan_file_is_executed_its_robots_drawn_bad_poses_refused(make_no
     robots = next(a["markers"] for a in drawn
                   if any(m["ns"] == "grippers" for m in a["markers"]))
     assert sum(m["ns"] == "robots" for m in robots) == 2
+    # with the blocks of the last report, after its DELETEALL: one array draws both
+    assert robots[0]["action"] == 3 and any(m["ns"] == "blocks" for m in robots)
     # s2's holder: its gripper box where the HTML view draws it from the repaired timeline
     holder = next(a for a in update["timeline"] if a["action"] == "hold" and a["block"] == "s2")
     centre, quat = gripper_box(holder, cell_from_dict(TWO_ROBOTS).robot(holder["robot"]))

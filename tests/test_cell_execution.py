@@ -165,3 +165,40 @@ def test_a_cell_repair_holds_at_a_robots_grip_and_its_timeline_stands(tmp_path, 
     states = json.loads(capsys.readouterr().out)["timeline"]
     assert len(states) == len(update["timeline"])
     assert all(s["stable"] for s, a in zip(states, update["timeline"]) if a["step"] >= 2)
+
+
+def test_repair_cli_on_a_cell_plan(tmp_path, capsys):
+    """`rbe-ros repair` of a file `plan --cell -o` wrote repairs within its cell: the
+    repaired file carries the cell and the timeline, and `check --timeline --strict`
+    re-checks every state of it at the measured poses (exit 0). Bad poses (a block out of
+    the plan's order, a block not in the design): one line naming them, exit 2."""
+    from rbe_ros.io.plan_export import plan_export
+
+    design = overhang_stack()
+    plan = plan_sequence(design, 1, CheckOptions(), cell=cell_from_dict(TWO_ROBOTS),
+                         keep_sequence=True)
+    path = tmp_path / "plan.json"
+    path.write_text(json.dumps(plan_export(plan, CheckOptions())))
+
+    def poses(name: str, measured: dict) -> str:
+        file = tmp_path / f"{name}.json"
+        file.write_text(json.dumps({"poses": {b: {"position": p, "orientation": q}
+                                              for b, (p, q) in measured.items()}}))
+        return str(file)
+
+    for name, measured, why in [
+            ("order", at(design, ["s1", "s3"]), "not a prefix of the plan's order: 's3'"),
+            ("ghost", {**at(design, ["s1"]), "ghost": at(design, ["s2"])["s2"]},
+             "not in the design 'stack': 'ghost'")]:
+        capsys.readouterr()
+        assert main(["repair", str(path), "--poses", poses(name, measured)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and why in err
+    out = tmp_path / "repaired.json"
+    capsys.readouterr()
+    assert main(["repair", str(path), "--json", "-o", str(out), "--poses", poses(
+        "off", at(design, ["s1", "s2"], {"s2": ((0.01, 0.0, 0.0), 2.0)}))]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["repair"] == "hold" and len(result["timeline"]) == 10
+    assert [r["name"] for r in result["cell"]["robots"]] == ["r1", "r2"]
+    assert main(["check", str(out), "--timeline", "--strict"]) == 0

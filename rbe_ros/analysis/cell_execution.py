@@ -149,15 +149,20 @@ class CellAhead:
 
 def repair_cell(plan: Scene, built: Scene, options: CheckOptions, cell: CellPlan, *,
                 min_margin_g: float = 0.0, lookahead_steps: int = 0,
+                max_held: int | None = None, replan: bool = True,
                 time_limit: float = REPLAN_TIME_LIMIT) -> tuple[Repair, Timeline | None]:
     """Repair ``plan`` from the as-built scene ``built`` for ``cell`` (see the module
     docstring): the repair, its holds at the robots' grips, and the repaired plan's timeline
     at the measured poses (None when no repair was found). When the hold, swap or re-plan
     of :func:`repair_plan` (blind to the states between actions) leaves a state of the
     timeline falling, the remainder is planned again for the cell (within ``time_limit``
-    s) and checked the same way."""
-    found = repair_plan(plan, built, options, max_held=len(cell.cell.robots) - 1,
-                        min_margin_g=min_margin_g, lookahead_steps=lookahead_steps)
+    s; not with ``replan`` False) and checked the same way. ``max_held``: K, at most the
+    cell's robots less one (None: that)."""
+    robots = len(cell.cell.robots) - 1
+    k_max = robots if max_held is None else min(max_held, robots)
+    start = time.perf_counter()
+    found = repair_plan(plan, built, options, max_held=k_max, min_margin_g=min_margin_g,
+                        lookahead_steps=lookahead_steps, replan=replan, time_limit=time_limit)
     if not found.feasible or found.scene is None:
         return found, None
     runner = StepRunner(found.scene, options, found.placed, min_margin_g)
@@ -171,7 +176,9 @@ def repair_cell(plan: Scene, built: Scene, options: CheckOptions, cell: CellPlan
     what = f"the repaired plan ({found.kind})" if found.changed else "the plan"
     if timeline.message != reason:
         what += f" ({timeline.message})"
-    replanned = _replan(plan, found, options, cell, reason, min_margin_g, time_limit)
+    replanned = "no re-plan asked for" if not replan else \
+        _replan(plan, found, options, cell, reason, k_max, min_margin_g,
+                max(time_limit - (time.perf_counter() - start), 1e-3))
     if isinstance(replanned, tuple):
         return replanned
     return replace(found, feasible=False, changed=False, changed_step=-1, kind="none",
@@ -182,7 +189,8 @@ def repair_cell(plan: Scene, built: Scene, options: CheckOptions, cell: CellPlan
 
 
 def _replan(plan: Scene, found: Repair, options: CheckOptions, cell: CellPlan, reason: str,
-            min_margin_g: float, time_limit: float) -> tuple[Repair, Timeline] | str:
+            k_max: int, min_margin_g: float, time_limit: float
+            ) -> tuple[Repair, Timeline] | str:
     """The remainder of ``plan`` planned again for the cell from the as-built state of
     ``found`` (the placed blocks a fixed prefix, at their measured poses; the holds of the
     steps done kept), every remaining step and state between actions re-checked; or why
@@ -194,7 +202,7 @@ def _replan(plan: Scene, found: Repair, options: CheckOptions, cell: CellPlan, r
     supports = {b.id for b in scene.blocks if b.support}
     fixed = Scene(scene.name, scene.blocks, scene.gravity, tuple(original[0][:placed]),
                   tuple(h for h in scene.holds if h.block in supports), scene.pose_uncertainty)
-    new = plan_sequence(fixed, len(cell.cell.robots) - 1, options, keep_sequence=True,
+    new = plan_sequence(fixed, k_max, options, keep_sequence=True,
                         cell=cell.cell, time_limit=time_limit, min_margin=min_margin_g)
     if not new.feasible:
         return f"re-planning the remaining {len(original[0]) - placed} blocks for the cell " \

@@ -18,6 +18,7 @@ the states between actions) and checked so.
 """
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import replace
 
@@ -25,15 +26,18 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..cell import Cell
+from ..rbe.model import Grip
+from ..rbe.result import Report
 from ..scene import Scene, make_scene
 from .assembly import Assembly
-from .grips import GripFrame
+from .grips import GripFrame, robot_grip
 from .lookahead import StepAhead, StepRunner, held_by_step, plan_order, where, with_plan
 from .options import CheckOptions
 from .planning import plan_sequence
 from .repair import Repair, repair_plan
-from .timeline import (Action, Busy, CellSteps, StateChecks, Timeline, check_action,
-                       plan_actions, scene_with_grips, state_fell)
+from .steps import sequence_step
+from .timeline import (Action, Busy, CellSteps, StateChecks, Timeline, action_present,
+                       check_action, plan_actions, scene_with_grips, state_fell)
 
 
 #: Seconds a re-plan of the remainder for a cell may take.
@@ -79,6 +83,7 @@ class CellAhead:
     def __init__(self, plan: CellPlan, runner: StepRunner):
         self.plan = plan
         self.states = StateChecks(plan.cell, runner.full, plan.base, runner.options)
+        self.memo = runner.memo
         design = {b.id: b for b in plan.base.blocks}
         # block -> (rotation, design position, measured position) of the blocks moved
         self.moves: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
@@ -103,10 +108,31 @@ class CellAhead:
         return replace(a, grip=self.grip(a.grip),
                        busy=tuple((b, Busy(h.robot, self.grip(h.grip))) for b, h in a.busy))
 
+    def known(self, plan: Scene, a: Action) -> tuple[Report | None, bool]:
+        """The check the step runner made of a step state of ``plan`` with the blocks present
+        after ``a`` and a subset of its holds at the same grips (None: none such), and
+        whether it is the same state. A state that stands stands with more held: a hold may
+        apply nothing; so the state after a robot places (before it lets go) and after a
+        robot takes a placed block are known from the step states, a hand-over is not."""
+        k = a.step - 1 if a.before else a.step
+        if k < 0 or k >= len(held_by_step(plan)):
+            return None, False
+        step = sequence_step(plan, k)
+        report = self.memo.get((step.present, step.held))
+        if report is None or set(step.present) != set(
+                action_present(self.plan.base, plan.sequence, a)):
+            return None, False
+        busy = {b: robot_grip(h.grip, self.plan.cell.robot(h.robot)) for b, h in a.busy}
+        given = {g.block: g for g in step.grips}
+        if not all(b in busy and _same_grip(busy[b], given.get(b)) for b in step.held):
+            return None, False
+        return report, set(busy) == set(step.held)
+
     def __call__(self, plan: Scene, step: StepAhead) -> StepAhead:
         """``step`` of ``plan`` with the cell's checks of it: it fails when no free robot can
-        do it or the state after one of its actions falls (the first, named); its largest
-        hold force over those states."""
+        do it or the state after one of its actions falls (the first, named; a state known
+        to stand from the step states is not checked again); its largest hold force over
+        those states."""
         actions, error, failed = self.plan.actions(plan)
         if error and step.step >= failed:
             return step if not step.passes else replace(step, message=error)
@@ -115,7 +141,11 @@ class CellAhead:
         for a in actions:
             if a.step != step.step:
                 continue
-            a = check_action(self.moved(a), order, self.states)
+            a = self.moved(a)
+            known, _ = self.known(plan, a)
+            if known is not None and known.stable:
+                continue
+            a = check_action(a, order, self.states)
             report = a.report
             force = max([force, *(float(np.linalg.norm(w.force))
                                   for w in report.hold_wrenches)])
@@ -125,17 +155,20 @@ class CellAhead:
                                message=state_fell(a, report, step.block))
         return replace(step, max_hold_force=force)
 
-    def timeline(self, plan: Scene, checked: range) -> Timeline:
+    def timeline(self, plan: Scene, checked: range, known_only: bool = False) -> Timeline:
         """The timeline of ``plan`` at the measured poses, the actions of the steps
-        ``checked`` checked (their robots' wrenches with them), infeasible at the first of
-        them that falls or no robot can do."""
+        ``checked`` checked (their robots' wrenches with them; ``known_only``: only those
+        whose state is a step state checked already), infeasible at the first of them that
+        falls or no robot can do."""
         actions, error, failed = self.plan.actions(plan)
         order = plan.sequence
         out = Timeline(self.plan.cell)
         for a in actions:
             a = self.moved(a)
-            if a.step in checked:
-                a = check_action(a, order, self.states, plan.approach)
+            known, same = self.known(plan, a) if a.step in checked else (None, False)
+            if same or (a.step in checked and not known_only):
+                a = check_action(a, order, self.states, plan.approach, known if same else None)
+            if a.report is not None:
                 if not a.report.stable and out.feasible:
                     block = order[a.step] if a.step < len(order) else ""
                     out.feasible = False
@@ -226,6 +259,13 @@ def _replan(plan: Scene, found: Repair, options: CheckOptions, cell: CellPlan, r
                   "step and state between the robots' actions passes at the measured poses",
                   reason, replace(repaired, holds=holds), steps, placed, runner.checks,
                   time.perf_counter() - start), timeline
+
+
+def _same_grip(a: Grip, b: Grip | None) -> bool:
+    """Whether two grips of a block are one: the same point and capacities."""
+    return b is not None and b.point is not None and np.allclose(a.point, b.point, atol=1e-9) \
+        and all(math.isclose(x, y, rel_tol=1e-9) if x is not None and y is not None else x is y
+                for x, y in ((a.max_force, b.max_force), (a.max_torque, b.max_torque)))
 
 
 __all__ = ["CellAhead", "CellPlan", "REPLAN_TIME_LIMIT", "repair_cell"]

@@ -134,7 +134,8 @@ class Lookahead:
     message: str                    # why the plan cannot go on as planned ("" fine)
     time: float = 0.0               # s
     #: a cell's plan: its timeline at the measured poses, the actions of the step done
-    #: last checked (:meth:`rbe_ros.analysis.cell_execution.CellAhead.timeline`)
+    #: last whose state is the as-built one with its check (:meth:`rbe_ros.analysis.
+    #: cell_execution.CellAhead.timeline`)
     timeline: object = None
 
     @property
@@ -271,7 +272,7 @@ def look_ahead(plan: Scene, built: Scene, options: CheckOptions = CheckOptions()
         message = f"{where(failing.step, failing.block)} fails at the measured poses: " \
                   f"{failing.message}"
     timeline = None if cell is None else \
-        runner.extra.timeline(scene, range(placed - 1, placed))
+        runner.extra.timeline(scene, range(placed - 1, placed), known_only=True)
     return Lookahead(placed, total, as_built, steps,
                      -1 if failing is None else failing.step, message,
                      time.perf_counter() - start, timeline)

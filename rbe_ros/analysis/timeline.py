@@ -301,25 +301,35 @@ def action_present(scene: Scene, order, a: Action) -> tuple[str, ...]:
     return supports_present(scene, k) + tuple(placed)
 
 
-def check_action(a: Action, order, states: "StateChecks", approach=()) -> Action:
+def check_action(a: Action, order, states: "StateChecks", approach=(),
+                 report: Report | None = None) -> Action:
     """``a`` with the check of the state after it (``states``: its assembly, the robots'
-    grips and payloads), the acting robot's wrench and, for a place with an insertion
-    direction (``approach``, by step), where the block starts its straight approach."""
-    report = states(action_present(states.scene, order, a), a.busy)
-    wrench = None
-    busy_now = dict(a.busy)
-    if a.block in busy_now and report.hold_wrenches:
-        hw = next((w for w in report.hold_wrenches if w.block == a.block), None)
-        if hw is not None:
-            wrench = robot_wrench(states.cell.robot(a.robot), busy_now[a.block].grip,
-                                  hw.force, hw.torque, states.assembly.gravity)
+    grips and payloads; ``report``: that check made already), the acting robot's wrench
+    and, for a place with an insertion direction (``approach``, by step), where the block
+    starts its straight approach."""
+    if report is None:
+        report = states(action_present(states.scene, order, a), a.busy)
+    a = with_report(a, report, states.cell, states.assembly.gravity)
     direction = None
     k = a.step
     if a.action == PLACE and k < len(approach) and approach[k] is not None:
         unit = np.asarray(approach[k], dtype=float)
         direction = -unit * approach_length(
             states.assembly, states.present(order, k, True), a.block, states.options, unit)
-    return replace(a, report=report, wrench=wrench, approach=direction)
+    return replace(a, approach=direction)
+
+
+def with_report(a: Action, report: Report, cell: Cell, gravity) -> Action:
+    """``a`` with ``report``, the check of the state after it, and the acting robot's
+    wrench from it (for the block it holds then)."""
+    wrench = None
+    busy_now = dict(a.busy)
+    if a.block in busy_now and report.hold_wrenches:
+        hw = next((w for w in report.hold_wrenches if w.block == a.block), None)
+        if hw is not None:
+            wrench = robot_wrench(cell.robot(a.robot), busy_now[a.block].grip, hw.force,
+                                  hw.torque, gravity)
+    return replace(a, report=report, wrench=wrench)
 
 
 def build_timeline(cell: Cell, assembly: Assembly, scene: Scene, order, held,
@@ -401,4 +411,4 @@ def recheck_timeline(cell: Cell, scene: Scene, actions, options: CheckOptions,
 __all__ = ["Action", "Busy", "CellCheck", "CellSteps", "HOLD", "PLACE", "RELEASE",
            "StateChecks", "Timeline", "action_present", "build_timeline", "busy_robots",
            "check_action", "fell", "plan_actions", "recheck_timeline", "scene_with_grips",
-           "state_fell"]
+           "state_fell", "with_report"]

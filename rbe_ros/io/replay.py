@@ -771,13 +771,16 @@ def replay_execution(tracker: Execution, run: Run, reports: list[dict],
 _EXECUTION_EXACT = ("active", "current_step", "total_steps", "first_failing_step")
 _LOOKAHEAD_EXACT = ("step", "block", "stable", "status", "insertable")
 _UPDATE_EXACT = ("changed_step", "feasible", "repair", "order", "holds")
+#: A repaired timeline's actions: who does what, and whether the state after it stands.
+_ACTION_EXACT = ("action", "robot", "block", "step", "stable")
 
 
 def compare_execution(index: int, run: Run, replayed: list[tuple[str, dict]], *,
                       tolerances: Tolerances = Tolerances()) -> list[Difference]:
     """Differences between the ExecutionStates and PlanUpdates recorded for ``run`` and
-    ``replayed``: steps, verdicts, orders and holds exactly, messages as reports' are,
-    margins and hold forces within the tolerances."""
+    ``replayed``: steps, verdicts, orders, holds and a cell's repaired timeline (its
+    actions and their verdicts) exactly, messages as reports' are, margins and hold forces
+    within the tolerances."""
     c = _Comparer(index, -1, "", 1.0, tolerances)
     kinds = [k for k, _ in run.execution], [k for k, _ in replayed]
     if kinds[0] != kinds[1]:
@@ -787,6 +790,9 @@ def compare_execution(index: int, run: Run, replayed: list[tuple[str, dict]], *,
         if kind == PLAN_UPDATE:
             for name in _UPDATE_EXACT:
                 c.exact("plan_update", name, a[name], b[name])
+            c.exact("plan_update", "timeline", *([tuple(x[k] for k in _ACTION_EXACT)
+                                                  for x in u.get("timeline", [])]
+                                                 for u in (a, b)))
             c.message(a["reason"], b["reason"])
             c.message(a["message"], b["message"])
             continue

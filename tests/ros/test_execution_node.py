@@ -636,3 +636,9 @@ def test_a_cell_plan_of_the_node_is_executed_for_its_cell(make_node, tmp_path):
     assert settings_cell(settings[-1]) == cell and settings_cell(settings[0]) is None
     result = assert_bag_replays(tmp_path / "bag")
     assert result.executed == len(states)
+    # a repaired timeline the replay does not make again is a difference
+    run = next(r for r in result.runs if any(k == "plan_update" for k, _ in r.execution))
+    other = [(k, {**m, "timeline": [{**a, "robot": "r9"} for a in m["timeline"]]}
+              if k == "plan_update" else m) for k, m in run.execution]
+    found = compare_execution(0, run, other)
+    assert [(d.where, d.field) for d in found] == [("plan_update", "timeline")]

@@ -21,6 +21,7 @@ from rbe_ros.analysis.timeline import CellCheck
 from rbe_ros.cell import cell_from_dict
 from rbe_ros.cli import main
 from rbe_ros.io.execution import Execution, Settings
+from rbe_ros.io.markers import cell_markers
 from rbe_ros.io.poses import scene_at_poses
 from rbe_ros.io.scene_json import scene_to_dict
 from rbe_ros.scene import make_block
@@ -150,6 +151,9 @@ def test_a_cell_repair_holds_at_a_robots_grip_and_its_timeline_stands(tmp_path, 
     assert hold["max_force"] == pytest.approx(robot.payload_force - robot.tool.mass * 9.81)
     assert execution.timeline_done == max(i for i, a in enumerate(execution.timeline)
                                           if a["step"] < 2)
+    # before the first action: the robots' bases alone
+    assert {m["ns"] for m in cell_markers(cell, execution.timeline, -1, HEADER, 1.0)} == {
+        "robots", "robot_names"}
     # `rbe-ros check --timeline` of the repaired plan at the measured poses
     doc = scene_to_dict(plan.scene.__class__(
         design.name, tuple(make_block(b.id, b.vertices, b.faces,

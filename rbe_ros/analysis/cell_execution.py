@@ -35,7 +35,7 @@ from .lookahead import StepAhead, StepRunner, held_by_step, plan_order, where, w
 from .options import CheckOptions
 from .planning import plan_sequence
 from .repair import Repair, repair_plan
-from .steps import sequence_step
+from .steps import sequence_step, step_count
 from .timeline import (Action, Busy, CellSteps, StateChecks, Timeline, action_present,
                        check_action, plan_actions, scene_with_grips, state_fell)
 
@@ -115,7 +115,7 @@ class CellAhead:
         apply nothing; so the state after a robot places (before it lets go) and after a
         robot takes a placed block are known from the step states, a hand-over is not."""
         k = a.step - 1 if a.before else a.step
-        if k < 0 or k >= len(held_by_step(plan)):
+        if k < 0 or k >= step_count(plan):
             return None, False
         step = sequence_step(plan, k)
         report = self.memo.get((step.present, step.held))

@@ -26,6 +26,7 @@ from .analysis.grips import validate_cell
 from .analysis.option_spec import BY_PATH, OPTIONS, from_outer
 from .analysis.options import CheckOptions
 from .analysis.planning import BACKUP_BLOCK_STATES, MIN_BACKUP, PREFER
+from .analysis.cell_execution import CellPlan, repair_cell
 from .analysis.repair import repair_plan
 from .analysis.pipeline import check_scene, check_sequence, first_failing_step, slim
 from .analysis.executors import CheckPool, ProcessPool, ray_checks, ray_cluster
@@ -47,7 +48,7 @@ from .io.messages import (header_dict, json_safe, report_json, report_to_dict, s
 from .io.replay import (PLAN, REPORT_TOPIC, STATE_TOPIC, Run, RunReader, bag_options,
                         default_output, offline_reports, read_runs, replay_bag, step_stamps,
                         write_runs)
-from .io.plan_export import plan_export, read_timeline
+from .io.plan_export import plan_cell, plan_export, read_timeline
 from .io.plan_output import (ProgressLines, ReportLines, repair_json, repair_text, step_summary,
                               weakest_json, weakest_line)
 from .io.table import format_table
@@ -702,15 +703,27 @@ def _run_repair(args) -> int:
     options = replace(options, solve=replace(options.solve, time_limit=math.inf))
     if args.min_margin < 0:
         raise ValueError(f"--min-margin must be >= 0, not {args.min_margin:g}")
-    result = repair_plan(plan, built, options, max_held=args.max_held,
-                         min_margin_g=args.min_margin, time_limit=limit,
-                         replan=not args.no_replan, lookahead_steps=args.lookahead_steps)
+    cell = plan_cell(args.scene)        # a plan for a cell: repaired within it
+    timeline = None
+    if cell is None:
+        result = repair_plan(plan, built, options, max_held=args.max_held,
+                             min_margin_g=args.min_margin, time_limit=limit,
+                             replan=not args.no_replan, lookahead_steps=args.lookahead_steps)
+    else:
+        result, timeline = repair_cell(plan, built, options, CellPlan(cell, plan, options),
+                                       min_margin_g=args.min_margin,
+                                       lookahead_steps=args.lookahead_steps,
+                                       max_held=args.max_held, replan=not args.no_replan,
+                                       time_limit=limit)
+    extra = {} if timeline is None else {
+        "cell": cell_to_dict(cell),
+        "timeline": json_safe(timeline_to_dicts(timeline, header_dict("world", 0)))}
     if args.output and result.scene is not None:
         out_path = Path(args.output)
         out_path.parent.mkdir(parents=True, exist_ok=True)
-        out_path.write_text(json.dumps(scene_to_dict(result.scene)))
+        out_path.write_text(json.dumps({**scene_to_dict(result.scene), **extra}))
     if args.json:
-        print(json.dumps(repair_json(result), indent=1))
+        print(json.dumps({**repair_json(result), **extra}, indent=1))
     else:
         print(repair_text(result))
         if args.output:

@@ -155,3 +155,58 @@ def sweep_free(assembly, present: list[str], block: str, direction, hulls: bool 
         if manager.in_collision_single(moving, transform=shift):
             return False
     return True
+
+
+#: A cell of one robot: a plan for it holds nothing (K = 0), so only an order repairs it.
+ONE_ROBOT = {"robots": [{"name": "r1", "base": [0.8, -0.8, 0.0], "reach": 2.0,
+                         "payload_force": 300, "payload_torque": 60,
+                         "tool": {"box": [0.08, 0.08, 0.1], "tcp": [0.0, 0.0, 0.1],
+                                  "mass": 1.0}}]}
+#: The stack: which block each rests on.
+RESTS = {"s1": "ground", "s2": "s1", "s3": "s2", "c": "s2"}
+
+
+def overhang_stack():
+    """A stack near its overhang limit: s1 on the ground, s2 on s1 reaching 0.122 m out, s3
+    on s2 0.15 m further out: s2 and s3 together 3 mm inside s1's edge (the common centroid
+    of two equal boxes, 0.122 + 0.15 / 2 = 0.197 of 0.2 m). The counterweight c on s2's left
+    end (half their mass) goes last; placed before s3 it keeps s2 and s3 well inside."""
+    blocks = [box_block("ground", (1.2, 0.6, 0.1), (0, 0, -0.05), support=True,
+                        density=DENSITY),
+              box_block("s1", (0.4, 0.3, 0.1), (0, 0, 0.05), density=DENSITY),
+              box_block("s2", (0.4, 0.3, 0.1), (0.122, 0, 0.15), density=DENSITY),
+              box_block("s3", (0.4, 0.3, 0.1), (0.272, 0, 0.25), density=DENSITY),
+              box_block("c", (0.1, 0.3, 0.2), (-0.028, 0, 0.3), density=DENSITY)]
+    return make_scene("stack", blocks, sequence=["s1", "s2", "s3", "c"])
+
+
+def footprint(design, block: str, poses: dict):
+    """The outline (shapely) of a box seen from above at its measured pose (else design)."""
+    from shapely.geometry import MultiPoint
+
+    b = design.block(block)
+    p, q = poses.get(block, (b.position, b.orientation))
+    return MultiPoint((Rotation.from_quat(q).apply(b.vertices) + p)[:, :2]).convex_hull
+
+
+def stack_stands(design, poses: dict, free: list[str]) -> bool:
+    """Closed form (the oracle): boxes of one density stacked on flat faces stand iff at each
+    interface the common centroid of the block above and of all resting on it lies within
+    the interface (where the two boxes overlap, seen from above)."""
+    from shapely.geometry import Point
+
+    volume = {b.id: float(np.prod(np.ptp(b.vertices, axis=0))) for b in design.blocks}
+    at = {b: np.asarray(poses.get(b, (design.block(b).position,))[0]) for b in free}
+
+    def load(b):
+        on = [b] + [x for y in free if RESTS.get(y) == b for x in load(y)]
+        return on
+
+    for b in free:
+        on = load(b)
+        w = np.array([volume[x] for x in on])
+        centre = (w[:, None] * np.array([at[x] for x in on])).sum(0) / w.sum()
+        contact = footprint(design, b, poses).intersection(footprint(design, RESTS[b], poses))
+        if not contact.contains(Point(centre[:2])):
+            return False
+    return True

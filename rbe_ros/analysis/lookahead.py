@@ -133,6 +133,10 @@ class Lookahead:
     first_failing_step: int         # -1: every step checked passes
     message: str                    # why the plan cannot go on as planned ("" fine)
     time: float = 0.0               # s
+    #: a cell's plan: its timeline at the measured poses, the actions of the step done
+    #: last whose state is the as-built one with its check (:meth:`rbe_ros.analysis.
+    #: cell_execution.CellAhead.timeline`)
+    timeline: object = None
 
     @property
     def failing(self) -> StepAhead | None:
@@ -182,6 +186,9 @@ class StepRunner:
         self.memo: dict[tuple, Report] = {}
         self.checks = 0
         self.checker = StepChecker(options, local=not options.full_solve)
+        #: further checks of each step ahead (a cell's: :mod:`rbe_ros.analysis.
+        #: cell_execution`): ``extra(plan, step)`` -> the step, failing or not
+        self.extra: Callable[[Scene, StepAhead], StepAhead] | None = None
 
     def report(self, plan: Scene, k: int, checker: StepChecker) -> Report:
         """The report of step ``k`` of ``plan`` (a scene over these blocks: sequence and
@@ -209,9 +216,10 @@ class StepRunner:
         report = self.report(plan, k, checker)
         force = max((float(np.linalg.norm(w.force)) for w in report.hold_wrenches),
                     default=0.0)
-        return StepAhead(k, report.block_placed, report.stable, report.status,
+        step = StepAhead(k, report.block_placed, report.stable, report.status,
                          report.insertable, report.margin_g, force, report.held_blocks,
                          failure(report, self.min_margin_g), report)
+        return step if self.extra is None else self.extra(plan, step)
 
     def scan(self, plan: Scene, start: int, stop: int, checker: StepChecker,
              until_failure: bool = True) -> list[StepAhead]:
@@ -232,11 +240,13 @@ class StepRunner:
 
 def look_ahead(plan: Scene, built: Scene, options: CheckOptions = CheckOptions(), *,
                lookahead_steps: int = DEFAULT_LOOKAHEAD, min_margin_g: float = 0.0,
-               until_failure: bool = False) -> Lookahead:
+               until_failure: bool = False, cell=None) -> Lookahead:
     """Check the as-built state of ``plan`` (the free blocks of the as-built scene ``built``
     placed, a prefix of its order, at their measured poses) and its next ``lookahead_steps``
     steps (0: to the end) with the rest at design and the plan's holds, under ``options`` and
     the plan's declared pose uncertainty. ``until_failure``: stop at the first step that fails.
+    ``cell``: the plan's cell (a :class:`rbe_ros.analysis.cell_execution.CellPlan`): each
+    step's states between the robots' actions checked too, and the timeline kept.
 
     Raises SceneError for bad input: measured blocks not in the plan, or not a prefix of its
     order, a plan that is not one (no whole sequence), measured blocks that interpenetrate."""
@@ -246,6 +256,8 @@ def look_ahead(plan: Scene, built: Scene, options: CheckOptions = CheckOptions()
     scene = as_built_plan(plan, built)
     placed = placed_count(plan, built)
     runner = StepRunner(scene, options, placed, min_margin_g)
+    if cell is not None:
+        runner.extra = cell.ahead(runner)
     checker = runner.checker
     total = step_count(scene)
     as_built = runner.report(scene, placed - 1, checker) if placed else None
@@ -259,9 +271,11 @@ def look_ahead(plan: Scene, built: Scene, options: CheckOptions = CheckOptions()
     elif failing is not None:
         message = f"{where(failing.step, failing.block)} fails at the measured poses: " \
                   f"{failing.message}"
+    timeline = None if cell is None else \
+        runner.extra.timeline(scene, range(placed - 1, placed), known_only=True)
     return Lookahead(placed, total, as_built, steps,
                      -1 if failing is None else failing.step, message,
-                     time.perf_counter() - start)
+                     time.perf_counter() - start, timeline)
 
 
 def held_by_step(plan: Scene) -> list[tuple[str, ...]]:

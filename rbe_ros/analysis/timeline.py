@@ -255,8 +255,14 @@ class CellCheck:
 
 
 def fell(a: Action, report: Report, block: str) -> str:
-    """Why the state after action ``a`` of the step placing ``block`` falls: the action, and
-    for a payload exceeded the robots and blocks over it."""
+    """Why the state after action ``a`` of the step placing ``block`` falls: the step, the
+    action, and for a payload exceeded the robots and blocks over it."""
+    return f"step {a.step}: {state_fell(a, report, block)}"
+
+
+def state_fell(a: Action, report: Report, block: str) -> str:
+    """:func:`fell` without the step: the action, and for a payload exceeded the robots and
+    blocks over it."""
     where = (f"the hand-over state after {a.robot} releases {a.block} ({block} not yet "
              f"placed)" if a.before and a.action == RELEASE
              else f"the state after {a.action}({a.robot}, {a.block})")
@@ -264,7 +270,66 @@ def fell(a: Action, report: Report, block: str) -> str:
     over = [f"{holders[w.block].robot} holding {w.block}" for w in report.hold_wrenches
             if w.utilisation > 1.0 and w.block in holders]
     who = f" ({', '.join(over)} beyond its payload)" if over else ""
-    return f"step {a.step}: {where} is {report.status.name}{who}: {report.message}"
+    return f"{where} is {report.status.name}{who}: {report.message}"
+
+
+def plan_actions(steps: CellSteps, scene: Scene, order, held
+                 ) -> tuple[list[Action], str, int]:
+    """The actions of a plan (``order``, ``held`` by step, a release step last when
+    ``held`` is one longer), unchecked, and "" and -1, or why no robot can do step k and k
+    (the actions then end before it). ``scene``: the plan's supports."""
+    order = tuple(order)
+    busy: dict[str, Busy] = {}
+    out: list[Action] = []
+    for k, now in enumerate(held):
+        block = order[k] if k < len(order) else None
+        try:
+            acts, busy = steps.step(k, block, busy, now,
+                                    supports_present(scene, k) + order[:k])
+        except _NoRobot as exc:
+            return out, str(exc), k
+        out += acts
+    return out, "", -1
+
+
+def action_present(scene: Scene, order, a: Action) -> tuple[str, ...]:
+    """The blocks present in the state after action ``a`` of a plan placing ``order``: the
+    supports present at its step and the blocks placed by then (its step's block once it is
+    placed; every block at the release step)."""
+    k = a.step
+    placed = order if k >= len(order) else order[:k] if a.before else order[:k + 1]
+    return supports_present(scene, k) + tuple(placed)
+
+
+def check_action(a: Action, order, states: "StateChecks", approach=(),
+                 report: Report | None = None) -> Action:
+    """``a`` with the check of the state after it (``states``: its assembly, the robots'
+    grips and payloads; ``report``: that check made already), the acting robot's wrench
+    and, for a place with an insertion direction (``approach``, by step), where the block
+    starts its straight approach."""
+    if report is None:
+        report = states(action_present(states.scene, order, a), a.busy)
+    a = with_report(a, report, states.cell, states.assembly.gravity)
+    direction = None
+    k = a.step
+    if a.action == PLACE and k < len(approach) and approach[k] is not None:
+        unit = np.asarray(approach[k], dtype=float)
+        direction = -unit * approach_length(
+            states.assembly, states.present(order, k, True), a.block, states.options, unit)
+    return replace(a, approach=direction)
+
+
+def with_report(a: Action, report: Report, cell: Cell, gravity) -> Action:
+    """``a`` with ``report``, the check of the state after it, and the acting robot's
+    wrench from it (for the block it holds then)."""
+    wrench = None
+    busy_now = dict(a.busy)
+    if a.block in busy_now and report.hold_wrenches:
+        hw = next((w for w in report.hold_wrenches if w.block == a.block), None)
+        if hw is not None:
+            wrench = robot_wrench(cell.robot(a.robot), busy_now[a.block].grip, hw.force,
+                                  hw.torque, gravity)
+    return replace(a, report=report, wrench=wrench)
 
 
 def build_timeline(cell: Cell, assembly: Assembly, scene: Scene, order, held,
@@ -276,40 +341,18 @@ def build_timeline(cell: Cell, assembly: Assembly, scene: Scene, order, held,
     ``scene``: the planned scene's supports; ``approach``: each step's insertion direction;
     ``states``: the checks the planner's :class:`CellCheck` made (reused)."""
     position = {b.id: k for k, b in enumerate(assembly.blocks)}
-    steps = CellSteps(cell, assembly, position)
     states = states or StateChecks(cell, assembly, scene, options)
     order = tuple(order)
+    actions, error, _ = plan_actions(CellSteps(cell, assembly, position), scene, order, held)
     timeline = Timeline(cell)
-    busy: dict[str, Busy] = {}
-    for k, now in enumerate(held):
-        block = order[k] if k < len(order) else None
-        try:
-            acts, busy = steps.step(k, block, busy, now, states.present(order, k, True))
-        except _NoRobot as exc:
-            timeline.feasible, timeline.message = False, str(exc)
-            return timeline
-        for a in acts:
-            if block is None:
-                present = states.present(order, len(order), False)
-            else:
-                present = states.present(order, k, a.before)
-            report = states(present, a.busy)
-            wrench = None
-            busy_now = dict(a.busy)
-            if a.block in busy_now and report.hold_wrenches:
-                hw = next((w for w in report.hold_wrenches if w.block == a.block), None)
-                if hw is not None:
-                    wrench = robot_wrench(cell.robot(a.robot), busy_now[a.block].grip,
-                                          hw.force, hw.torque, assembly.gravity)
-            direction = None
-            if a.action == PLACE and k < len(approach) and approach[k] is not None:
-                unit = np.asarray(approach[k], dtype=float)
-                direction = -unit * approach_length(
-                    assembly, states.present(order, k, True), a.block, options, unit)
-            timeline.actions.append(replace(a, report=report, wrench=wrench,
-                                             approach=direction))
-            if not report.stable and timeline.feasible:
-                timeline.feasible, timeline.message = False, fell(a, report, block or "")
+    for a in actions:
+        a = check_action(a, order, states, approach)
+        timeline.actions.append(a)
+        if not a.report.stable and timeline.feasible:
+            block = order[a.step] if a.step < len(order) else ""
+            timeline.feasible, timeline.message = False, fell(a, a.report, block)
+    if error:
+        timeline.feasible, timeline.message = False, error
     return timeline
 
 
@@ -366,5 +409,6 @@ def recheck_timeline(cell: Cell, scene: Scene, actions, options: CheckOptions,
 
 
 __all__ = ["Action", "Busy", "CellCheck", "CellSteps", "HOLD", "PLACE", "RELEASE",
-           "StateChecks", "Timeline", "build_timeline", "busy_robots",
-           "recheck_timeline", "scene_with_grips"]
+           "StateChecks", "Timeline", "action_present", "build_timeline", "busy_robots",
+           "check_action", "fell", "plan_actions", "recheck_timeline", "scene_with_grips",
+           "state_fell", "with_report"]

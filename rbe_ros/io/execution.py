@@ -10,18 +10,27 @@ rest of the plan (:func:`rbe_ros.analysis.repair.repair_plan`, in the node a pro
 own), sends the repaired plan and looks ahead again on it. Poses that do not fit the plan (a
 block out of the plan's order, a block not in the design, a design that is not the plan's)
 make the state inactive with the reason, the step reached and its look-ahead kept.
+
+A plan for a robot cell (a ``~/plan`` goal with a cell, a planned scene that ``rbe-ros plan
+--cell -o`` wrote) is executed as its timeline: each step ahead also checks the states
+between the robots' actions at the measured poses, a repair keeps within the cell and its
+PlanUpdate carries the repaired timeline (:mod:`rbe_ros.analysis.cell_execution`);
+:attr:`Execution.timeline` is the timeline at the last as-built state, for its markers.
 """
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
+from ..analysis.cell_execution import CellPlan, repair_cell
 from ..analysis.lookahead import DEFAULT_LOOKAHEAD, check_plan_design, look_ahead
 from ..analysis.options import CheckOptions
 from ..analysis.repair import Repair, repair_plan
+from ..analysis.timeline import Timeline
+from ..cell import Cell
 from ..scene import Scene, SceneError
 from .messages import (execution_to_dict, lookahead_step_to_dict, plan_update_to_dict,
-                       report_to_dict)
+                       report_to_dict, timeline_to_dicts)
 
 #: The node's parameter defaults (and a bag's recorded before them).
 LOOKAHEAD_STEPS = DEFAULT_LOOKAHEAD
@@ -44,15 +53,23 @@ class Settings:
                    float(recorded.get("min_margin_g", MIN_MARGIN_G)))
 
 
-#: How a repair is made: ``repair(plan, built, options, settings)``.
-Repairer = Callable[[Scene, Scene, CheckOptions, Settings], Repair]
+#: How a repair is made: ``repair(plan, built, options, settings, cell)`` -> the repair
+#: and, for a cell, the repaired plan's timeline.
+Repairer = Callable[[Scene, Scene, CheckOptions, Settings, Cell | None],
+                    tuple[Repair, Timeline | None]]
 
 
-def repair(plan: Scene, built: Scene, options: CheckOptions, settings: Settings) -> Repair:
+def repair(plan: Scene, built: Scene, options: CheckOptions, settings: Settings,
+           cell: Cell | None = None) -> tuple[Repair, Timeline | None]:
     """The core's repair with the node's settings: within its look-ahead window, its
-    minimum margin (a function of its own: the node runs it in another process)."""
+    minimum margin, the plan's cell (a function of its own: the node runs it in another
+    process)."""
+    if cell is not None:
+        return repair_cell(plan, built, options, CellPlan(cell, plan, options),
+                           min_margin_g=settings.min_margin_g,
+                           lookahead_steps=settings.lookahead_steps)
     return repair_plan(plan, built, options, min_margin_g=settings.min_margin_g,
-                       lookahead_steps=settings.lookahead_steps)
+                       lookahead_steps=settings.lookahead_steps), None
 
 
 NO_PLAN = "no plan: set design_file to a planned scene, or send a design with a sequence"
@@ -63,6 +80,12 @@ class Execution:
 
     def __init__(self) -> None:
         self.plan: Scene | None = None
+        self.cell: Cell | None = None       # the plan's robot cell (None: K holds)
+        self._cell_plan: CellPlan | None = None
+        #: a cell's plan: its timeline at the last as-built state (RobotAction dicts) and
+        #: the index of the last action done (-1: none)
+        self.timeline: list[dict] = []
+        self.timeline_done = -1
         self.error = NO_PLAN
         self.last: dict | None = None       # the last ExecutionState of accepted poses
         # (as-built scene, plan, settings, options) of the last outputs
@@ -70,13 +93,16 @@ class Execution:
         self._outputs: list[tuple[str, dict]] = []
         self._repaired = None               # the as-built scene a repair was last tried at
 
-    def set_design(self, design: Scene | None) -> None:
-        """A new design: its sequence (and holds) is the plan; a design without one keeps
-        the plan held if it is a plan of the design, else says why not."""
+    def set_design(self, design: Scene | None, cell: Cell | None = None) -> None:
+        """A new design: its sequence (and holds) is the plan, for ``cell``'s robots when
+        given; a design without one keeps the plan held (and its cell) if it is a plan of the
+        design, else says why not."""
+        self.timeline, self.timeline_done = [], -1
         if design is None:
             self.plan, self.error = None, "no plan: the design is invalid"
         elif design.sequence:
             self.plan, self.error = design, ""
+            self.cell, self._cell_plan = cell, None
         elif self.plan is not None:
             try:
                 check_plan_design(self.plan, design)
@@ -142,20 +168,33 @@ class Execution:
         if state["first_failing_step"] < 0 or self._repaired is built:
             return None
         self._repaired = built          # tried once per as-built state
-        found = repairer(self.plan, built, options, settings)
+        found, timeline = repairer(self.plan, built, options, settings, self.cell)
         emit(PLAN_UPDATE, plan_update_to_dict(
             header, reason=found.reason or state["message"], changed_step=found.changed_step,
             feasible=found.feasible, repair=found.kind, order=found.order, holds=found.holds,
-            message=found.message))
+            message=found.message, timeline=timeline_to_dicts(timeline, header)))
         if found.feasible and found.changed:
             self.plan = replace(self.plan, sequence=tuple(found.order),
                                 holds=tuple(found.holds))
             emit(EXECUTION, self._state(built, as_built, header, options, settings))
         return None
 
+    def _cell(self, options: CheckOptions) -> CellPlan | None:
+        """The plan's cell with its design's assembly (made again for other contact
+        options)."""
+        if self.cell is None:
+            return None
+        if self._cell_plan is None or self._cell_plan.contact != options.contact:
+            self._cell_plan = CellPlan(self.cell, self.plan, options)
+        return self._cell_plan
+
     def _state(self, built: Scene, as_built, header, options, settings) -> dict:
         ahead = look_ahead(self.plan, built, options, lookahead_steps=settings.lookahead_steps,
-                           min_margin_g=settings.min_margin_g)
+                           min_margin_g=settings.min_margin_g, cell=self._cell(options))
+        if ahead.timeline is not None:
+            self.timeline = timeline_to_dicts(ahead.timeline, header)
+            self.timeline_done = max((i for i, a in enumerate(ahead.timeline.actions)
+                                      if a.step < ahead.current_step), default=-1)
         self.last = execution_to_dict(
             header, active=True, current_step=ahead.current_step,
             total_steps=ahead.total_steps,

@@ -401,9 +401,10 @@ def gripper_box(action: Mapping, robot: Robot) -> tuple[np.ndarray, np.ndarray]:
 
 def cell_markers(cell: Cell, timeline: Sequence[Mapping], index: int, header: Mapping,
                  length: float) -> list[dict]:
-    """The markers of the state after action ``index`` of ``timeline`` (RobotAction dicts):
-    robot bases, the busy robots' gripper boxes, the acting robot's force (the largest of
-    the timeline ``length`` m long) and its hover text (see the module docstring)."""
+    """The markers of the state after action ``index`` of ``timeline`` (RobotAction dicts;
+    -1: before the first, the robot bases alone): robot bases, the busy robots' gripper
+    boxes, the acting robot's force (the largest of the timeline ``length`` m long) and its
+    hover text (see the module docstring)."""
     out = []
     for k, r in enumerate(cell.robots):
         base = np.asarray(r.base, dtype=float)
@@ -422,6 +423,8 @@ def cell_markers(cell: Cell, timeline: Sequence[Mapping], index: int, header: Ma
         centre, quat = gripper_box(a, robot)
         out.append(_marker(header, "grippers", k, CUBE, GRIPPER, position=centre,
                            orientation=quat, scale=robot.tool.box))
+    if index < 0:
+        return out
     act = timeline[index]
     largest = max((np.linalg.norm([a["wrench_world"]["force"][c] for c in "xyz"])
                    for a in timeline), default=0.0)

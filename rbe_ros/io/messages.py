@@ -539,12 +539,14 @@ def execution_to_dict(header: dict, *, active: bool, current_step: int, total_st
 
 
 def plan_update_to_dict(header: dict, *, reason: str, changed_step: int, feasible: bool,
-                        repair: str, order, holds, message: str) -> dict:
-    """An rbe_msgs/PlanUpdate dict: the repaired plan (whole order, holds by step)."""
+                        repair: str, order, holds, message: str,
+                        timeline: list[dict] | None = None) -> dict:
+    """An rbe_msgs/PlanUpdate dict: the repaired plan (whole order, holds by step; a cell's
+    timeline, RobotAction dicts)."""
     return {"header": header, "reason": str(reason), "changed_step": int(changed_step),
             "feasible": bool(feasible), "repair": str(repair),
             "order": [str(b) for b in order], "holds": [_hold_to_dict(h) for h in holds],
-            "timeline": [], "message": str(message)}
+            "timeline": list(timeline or []), "message": str(message)}
 
 
 __all__ = ["SOLID_PRIMITIVE_BOX", "execution_to_dict", "header_dict", "header_stamp_ns",

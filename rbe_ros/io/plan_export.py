@@ -23,7 +23,7 @@ from ..analysis.planning import Plan
 from ..cell import Cell, CellError, cell_from_dict, cell_to_dict
 from ..scene import Scene
 from .messages import header_dict, timeline_to_dicts
-from .scene_json import scene_to_dict
+from .scene_json import read_json, scene_to_dict
 
 
 def planned_scene(plan: Plan, options: CheckOptions) -> Scene | None:
@@ -105,4 +105,14 @@ def read_timeline(data: Mapping) -> tuple[Cell, list[ExportedAction]]:
     return cell, out
 
 
-__all__ = ["ExportedAction", "plan_export", "planned_scene", "read_timeline"]
+def plan_cell(path) -> Cell | None:
+    """The cell the planned scene file at ``path`` was planned for (``rbe-ros plan --cell
+    -o`` writes it beside its timeline), None for a file without one (CellError naming the
+    field when it is malformed)."""
+    doc, _ = read_json(path)
+    if not isinstance(doc, Mapping) or "cell" not in doc or "timeline" not in doc:
+        return None
+    return read_timeline(doc)[0]
+
+
+__all__ = ["ExportedAction", "plan_cell", "plan_export", "planned_scene", "read_timeline"]

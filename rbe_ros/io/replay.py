@@ -57,6 +57,7 @@ from ..analysis.planning import STOPPED
 from ..analysis.steps import final_state, sequence_steps
 from ..geometry.block import pose_block
 from ..rbe.result import NOT_COMPUTED, Report
+from ..cell import Cell, cell_from_dict, cell_to_dict
 from ..scene import Scene, SceneError
 from .bag import BagWriter, read_custom_data, read_raw, typestore
 from .cdr import Repeats
@@ -107,12 +108,21 @@ IGNORED = frozenset({"solve_time", "dropped_states"})
 
 # --- check options <-> JSON ------------------------------------------------------------------
 
-def settings_dict(options: CheckOptions, frame_id: str, execution: Settings) -> dict:
+def settings_dict(options: CheckOptions, frame_id: str, execution: Settings,
+                  cell: Cell | None = None) -> dict:
     """What the node records on ~/settings: its check options, frame_id and execution
-    parameters."""
+    parameters, and the robot cell of the plan it executes (recorded before the design that
+    brings the plan: its replay executes it for that cell)."""
     return {"options": json.loads(options_to_json(options)), "frame_id": frame_id,
             "execution": {"lookahead_steps": execution.lookahead_steps,
-                          "min_margin_g": execution.min_margin_g}}
+                          "min_margin_g": execution.min_margin_g,
+                          **({"cell": cell_to_dict(cell)} if cell is not None else {})}}
+
+
+def settings_cell(settings: dict | None) -> Cell | None:
+    """The cell of the plan executed in recorded ``settings`` (None: none)."""
+    cell = ((settings or {}).get("execution") or {}).get("cell")
+    return None if cell is None else cell_from_dict(cell)
 
 
 def bag_options(path) -> CheckOptions:
@@ -745,7 +755,7 @@ def replay_execution(tracker: Execution, run: Run, reports: list[dict],
             design = scene_from_state_dict(run.state)
         except SceneError:
             design = None
-        tracker.set_design(design)
+        tracker.set_design(design, settings_cell(run.settings))
     if run.kind not in (DESIGN, POSES) or not run.execution:
         return []
     run_options, frame_id = run_settings(run, options)
@@ -761,13 +771,16 @@ def replay_execution(tracker: Execution, run: Run, reports: list[dict],
 _EXECUTION_EXACT = ("active", "current_step", "total_steps", "first_failing_step")
 _LOOKAHEAD_EXACT = ("step", "block", "stable", "status", "insertable")
 _UPDATE_EXACT = ("changed_step", "feasible", "repair", "order", "holds")
+#: A repaired timeline's actions: who does what, and whether the state after it stands.
+_ACTION_EXACT = ("action", "robot", "block", "step", "stable")
 
 
 def compare_execution(index: int, run: Run, replayed: list[tuple[str, dict]], *,
                       tolerances: Tolerances = Tolerances()) -> list[Difference]:
     """Differences between the ExecutionStates and PlanUpdates recorded for ``run`` and
-    ``replayed``: steps, verdicts, orders and holds exactly, messages as reports' are,
-    margins and hold forces within the tolerances."""
+    ``replayed``: steps, verdicts, orders, holds and a cell's repaired timeline (its
+    actions and their verdicts) exactly, messages as reports' are, margins and hold forces
+    within the tolerances."""
     c = _Comparer(index, -1, "", 1.0, tolerances)
     kinds = [k for k, _ in run.execution], [k for k, _ in replayed]
     if kinds[0] != kinds[1]:
@@ -777,6 +790,9 @@ def compare_execution(index: int, run: Run, replayed: list[tuple[str, dict]], *,
         if kind == PLAN_UPDATE:
             for name in _UPDATE_EXACT:
                 c.exact("plan_update", name, a[name], b[name])
+            c.exact("plan_update", "timeline", *([tuple(x[k] for k in _ACTION_EXACT)
+                                                  for x in u.get("timeline", [])]
+                                                 for u in (a, b)))
             c.message(a["reason"], b["reason"])
             c.message(a["message"], b["message"])
             continue
@@ -1090,5 +1106,6 @@ __all__ = ["DESIGN", "Difference", "KEPT_DIFFERENCES", "OPTIONS_KEY", "PLAN", "P
            "merge_message",
            "offline_reports", "options_from_json", "options_to_json", "read_runs", "record_bag",
            "replay_bag", "replay_execution", "replay_plan", "replay_run", "report_repeats",
-           "run_settings", "SETTINGS_TYPE", "settings_dict", "state_reports", "step_stamps",
+           "run_settings", "SETTINGS_TYPE", "settings_cell", "settings_dict", "state_reports",
+           "step_stamps",
            "stopped_at", "write_runs"]

@@ -46,9 +46,11 @@ class RbeLifecycleNode(RbeChecks, LifecycleNode):
         try:
             self.check_options()
             self._open_bag()
-            self._design = self.design_message(path) if path else None
+            self._design = (self.design_message(path), self.design_cell(path)) if path \
+                else None
             self._asbuilt = AsBuilt()
             self._execution = Execution()
+            self._plan_cell = None
         except (ConfigurationError, SceneError, ValueError) as exc:
             self.close_bag()
             self.get_logger().error(f"configure failed: {exc}")
@@ -62,7 +64,7 @@ class RbeLifecycleNode(RbeChecks, LifecycleNode):
         self._start_interfaces()
         if self._design is not None:    # once: a second activate keeps the measured poses
             design, self._design = self._design, None
-            self._send_design(design)
+            self._send_design(*design)
         self.get_logger().info("activated")
         return super().on_activate(state)
 

@@ -33,7 +33,10 @@ Interfaces (relative to the node, e.g. ``/rbe_node/report``):
   a ~/plan result of the design) after each design or poses message checked, the steps
   ahead at the measured poses, and a repaired plan when one of them fails
   (:mod:`rbe_ros.io.execution`, its own thread; parameters ``lookahead_steps``,
-  ``min_margin_g``).
+  ``min_margin_g``). A plan for a robot cell (a ``design_file`` written by ``rbe-ros plan
+  --cell -o``, a ``~/plan`` result for a cell; a design sent on ``~/design`` carries none) is
+  executed as its timeline, the cell recorded with the settings, and its robots drawn on
+  ``~/markers`` after each execution state.
 
 Bad input never stops the node: a state that cannot be checked (outside the limits of
 :class:`rbe_ros.scene.ValidationLimits`, ``max_blocks`` among them) gives a report with status
@@ -61,6 +64,7 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
@@ -90,10 +94,11 @@ from ..io import cdr, lmgc90
 from ..io.bag import BagWriter, typestore
 from ..io.inputs import load_design
 from ..io.foxglove_scene import SceneServer
-from ..io.markers import MARKER_TYPE, run_markers, step_markers
+from ..io.markers import MARKER_TYPE, cell_markers, run_markers, step_markers
 from ..io.messages import (plan_feedback_to_dict, plan_goal_from_dict, plan_result_to_dict,
                            poses_to_dict, report_header, report_to_dict, state_to_dict)
 from ..io.cell_file import read_cell
+from ..io.plan_export import plan_cell
 from ..io.plans import INVALID_CELL
 from ..io.execution import EXECUTION, LOOKAHEAD_STEPS, MIN_MARGIN_G, Execution, Settings
 from ..io.poses import AsBuilt
@@ -253,6 +258,7 @@ class RbeChecks:
         # ahead and repairing never hold up the as-built checks; repairs run in a process
         self._execution = Execution()
         self._designs = 0               # designs merged; the one the execution follows
+        self._plan_cell = None          # the robot cell of the plan sent last with a design
         self._exec_design = 0
         self._exec_slot: dict = {}
         self._exec_cond = threading.Condition()
@@ -303,6 +309,11 @@ class RbeChecks:
         self._marker_lock = threading.Lock()
         self._markers_at = -math.inf
         self._markers_waiting: tuple | None = None
+        # a cell plan under execution: the robots (drawn at the last as-built state) go with
+        # every report's markers, and the last report's blocks with the robots' (each array
+        # begins with a DELETEALL: either alone would wipe the other in a viewer)
+        self._report_markers: list[dict] = []
+        self._robot_markers: list[dict] = []
         self._marker_timer = self.create_timer(MARKER_POLL_S, self._markers_due,
                                                callback_group=MutuallyExclusiveCallbackGroup())
         self._marker_timer.cancel()
@@ -498,7 +509,7 @@ class RbeChecks:
         if self._bag is None:
             return
         settings = settings_dict(self.check_options(), self.get_parameter("frame_id").value,
-                                 self._execution_settings())
+                                 self._execution_settings(), self._plan_cell)
         data = serialize_message(String(data=json.dumps(settings, sort_keys=True)))
         self._record(self.settings_topic, data)
         self._carry(self.settings_topic, data)
@@ -618,6 +629,14 @@ class RbeChecks:
         else:
             [markers] = run_markers(self._drawable(state), [report_to_dict(report, header)],
                                     self.check_options())
+        with self._marker_lock:
+            self._report_markers = markers["markers"]
+            if self._robot_markers:
+                markers = {"markers": [*markers["markers"], *self._robot_markers]}
+        self._publish_markers(markers)
+
+    def _publish_markers(self, markers: dict) -> None:
+        """Publish (and record, and send to Foxglove) a MarkerArray dict."""
         if self.foxglove is not None:
             self.foxglove.publish(markers)
         markers = self._encode_markers(markers)
@@ -777,20 +796,30 @@ class RbeChecks:
         alone are checked (nothing measured yet)."""
         self._on_asbuilt(data, AssemblyState, self.design_topic, DESIGN)
 
+    def _on_plan_design(self, data: bytes, cell) -> None:
+        """A design with a sequence that is a plan for the robot cell ``cell`` (None: K
+        holds), as :meth:`_on_design`."""
+        self._on_asbuilt(data, AssemblyState, self.design_topic, DESIGN, cell)
+
     def _on_poses(self, data: bytes) -> None:
         """Measured poses (raw CDR): recorded, merged into the as-built state (an update
         that cannot be merged changes nothing and is answered INVALID_INPUT)."""
         self._on_asbuilt(data, BlockPoses, self.poses_topic, POSES)
 
-    def _on_asbuilt(self, data: bytes, msg_type, topic: str, kind: str) -> None:
+    def _on_asbuilt(self, data: bytes, msg_type, topic: str, kind: str, cell=None) -> None:
         """Record a design or poses message, merge it into the as-built state
         (:func:`rbe_ros.replay.merge_message`) and put the result in the slot, inactive too
-        (merged as an overload's dropped updates are); never raises."""
+        (merged as an overload's dropped updates are); never raises. A design with a
+        sequence is a plan for ``cell`` (recorded first with the settings, for its replay);
+        one without keeps the plan's."""
         try:
             msg = deserialize_message(data, msg_type)
             # recorded in the order merged (a replay merges them so): the topic callbacks
             # run one at a time, and a plan's design (_adopt) comes from another thread
             with self._asbuilt_lock:
+                if kind == DESIGN and msg.sequence and cell != self._plan_cell:
+                    self._plan_cell = cell
+                    self._record_settings()
                 header = self._received(msg, data, topic)
                 try:
                     scene = merge_message(self._asbuilt, kind, message_to_dict(msg))
@@ -802,7 +831,8 @@ class RbeChecks:
                     self._carry(topic, data)
                     self._designs += 1
                     with self._exec_cond:
-                        self._exec_slot["design"] = (self._designs, self._asbuilt.design)
+                        self._exec_slot["design"] = (self._designs, self._asbuilt.design,
+                                                     self._plan_cell)
                 else:
                     self._carry(topic, self._measured_poses)
                 self._put((header, scene, self._designs))
@@ -849,8 +879,11 @@ class RbeChecks:
                 slot, self._exec_slot = self._exec_slot, {}
             try:
                 if "design" in slot:
-                    self._exec_design, design = slot["design"]
-                    self._execution.set_design(design)
+                    self._exec_design, design, cell = slot["design"]
+                    self._execution.set_design(design, cell)
+                    if self._execution.cell is None:
+                        with self._marker_lock:
+                            self._robot_markers = []
                     if self._execution.plan is not None:
                         self._pool().warm()     # a repair may come: its process ready
                 header, scene, report, design = slot["state"]
@@ -872,6 +905,8 @@ class RbeChecks:
             data = self._encode_execution(message)
             self._record(self.execution_topic, data)
             self._execution_pub.publish(data)
+            if self._execution.cell is not None and message["active"]:
+                self._send_cell_markers(message["header"])
         else:
             data = self._encode_update(message)
             self._record(self.plan_update_topic, data)
@@ -882,9 +917,25 @@ class RbeChecks:
                 if message["feasible"] else
                 f"no repair found: {message['reason']}; {message['message']}")
 
-    def _repair(self, plan: Scene, built: Scene, options: CheckOptions, settings: Settings):
+    def _send_cell_markers(self, header: dict) -> None:
+        """The robots of the cell plan under execution at the as-built state (bases, the
+        busy robots' gripper boxes, the last action's force; :func:`rbe_ros.io.markers.
+        cell_markers`, as the HTML view draws them) on ~/markers."""
+        ex = self._execution
+        if not ex.timeline:
+            return
+        centres = np.array([b.position for b in ex.plan.blocks])
+        length = 0.3 * max(float(np.linalg.norm(np.ptp(centres, axis=0))), 0.5)
+        robots = cell_markers(ex.cell, ex.timeline, ex.timeline_done, header, length)
+        with self._marker_lock:
+            self._robot_markers = robots
+            markers = {"markers": [*self._report_markers, *robots]}
+        self._publish_markers(markers)
+
+    def _repair(self, plan: Scene, built: Scene, options: CheckOptions, settings: Settings,
+                cell):
         """The repair in a worker process (:mod:`rbe_ros.ros.workers`)."""
-        return self._pool().repair(plan, built, options, settings)
+        return self._pool().repair(plan, built, options, settings, cell)
 
     def _pool(self) -> Workers:
         """The worker processes (each spawned at its first use)."""
@@ -913,9 +964,21 @@ class RbeChecks:
                                              self.get_clock().now().nanoseconds),
                                AssemblyState)
 
-    def _send_design(self, state: AssemblyState) -> None:
-        """Through :meth:`_on_design`, so that it is recorded, and replayed, like one sent."""
-        self._on_design(serialize_message(state))
+    def design_cell(self, path: str):
+        """The robot cell a planned scene at ``path`` was planned for (``rbe-ros plan --cell
+        -o``), None without one or when it cannot be read (logged: the plan is then executed
+        with K holds)."""
+        try:
+            return plan_cell(path)
+        except (SceneError, OSError, ValueError) as exc:
+            self.get_logger().error(f"design_file {path!r}: its cell: {exc}; executed "
+                                    "without a cell")
+            return None
+
+    def _send_design(self, state: AssemblyState, cell=None) -> None:
+        """Through :meth:`_on_design`, so that it is recorded, and replayed, like one sent
+        (``cell``: the robot cell a plan with a sequence is for)."""
+        self._on_plan_design(serialize_message(state), cell)
 
     def _on_check(self, request: CheckAssembly.Request, response: CheckAssembly.Response):
         try:
@@ -1043,7 +1106,7 @@ class RbeChecks:
             if not why:
                 self._send_design(dict_to_message(state_to_dict(
                     plan.scene, header["frame_id"], self.get_clock().now().nanoseconds),
-                    AssemblyState))
+                    AssemblyState), plan.timeline.cell if plan.timeline is not None else None)
         self.get_logger().info(f"the plan is not executed: {why}" if why else
                                f"executing the plan: {' '.join(plan.order)}")
 
@@ -1060,14 +1123,16 @@ class RbeNode(RbeChecks, Node):
         self._start_interfaces()
         path = self.get_parameter("design_file").value
         if path:
+            cell = None
             try:
                 state = self.design_message(path)
+                cell = self.design_cell(path)
             except SceneError as exc:   # answered as an empty design: INVALID_INPUT
                 self.get_logger().error(f"design_file {path!r}: {exc}")
                 state = AssemblyState()
                 state.header.frame_id = self.get_parameter("frame_id").value
                 state.header.stamp = self.get_clock().now().to_msg()
-            self._send_design(state)
+            self._send_design(state, cell)
 
 
 def _stamp(header: dict) -> str:

@@ -27,6 +27,8 @@ from rclpy.serialization import deserialize_message
 from ..analysis.options import CheckOptions
 from ..analysis.planning import Plan, PlanProgress
 from ..analysis.repair import Repair
+from ..analysis.timeline import Timeline
+from ..cell import Cell
 from ..io.execution import Settings, repair
 from ..io.plans import PlanLimits, plan_state
 from ..scene import Scene
@@ -112,10 +114,10 @@ class Workers:
         the imports)."""
         self._submit(time.sleep, 0.0)
 
-    def repair(self, plan: Scene, built: Scene, options: CheckOptions,
-               settings: Settings) -> Repair:
+    def repair(self, plan: Scene, built: Scene, options: CheckOptions, settings: Settings,
+               cell: Cell | None = None) -> tuple[Repair, Timeline | None]:
         """:func:`rbe_ros.io.execution.repair` in a worker."""
-        return self._submit(repair, plan, built, options, settings).result()
+        return self._submit(repair, plan, built, options, settings, cell).result()
 
     def close(self) -> None:
         """Stop the processes now (a plan or repair running is not waited for) and the

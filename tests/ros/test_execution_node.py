@@ -18,6 +18,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from scipy.spatial.transform import Rotation
 
+from helpers import ONE_ROBOT, overhang_stack, stack_stands
 from rbe_client import NodeProcess, wait_until
 from rbe_ros import cli
 from rbe_ros.io.bag import read_bag
@@ -146,34 +147,76 @@ def rbe_check(capsys, path, poses: dict, tmp_path, name: str, sequence: bool = F
     return json.loads(capsys.readouterr().out)
 
 
+def cell_plan_file(design, cell: dict, path) -> dict:
+    """The plan of ``design`` in its order for ``cell``, written as ``rbe-ros plan --cell -o``
+    writes it (the planned scene, the cell, the timeline); the file's JSON."""
+    from rbe_ros.analysis.options import CheckOptions
+    from rbe_ros.analysis.planning import plan_sequence
+    from rbe_ros.cell import cell_from_dict
+    from rbe_ros.io.plan_export import plan_export
+
+    plan = plan_sequence(design, 0, CheckOptions(), cell=cell_from_dict(cell),
+                         keep_sequence=True)
+    assert plan.feasible and plan.order == list(design.sequence), plan.message
+    doc = plan_export(plan, CheckOptions())
+    path.write_text(json.dumps(doc))
+    return doc
+
+
+#: The two structures executed: the block that lands off (after the blocks before it, at
+#: design), how, and the look-ahead's (current step, first failing step) then.
+CASES = {
+    # a stack near its overhang limit, planned for one robot: s2 lands 10 mm out and turned
+    # 2 deg; s3 next would tip s2 and s3 over s1's edge; no robot is free to hold: only the
+    # order (the counterweight first) saves it
+    "stack": dict(design=overhang_stack, cell=ONE_ROBOT, stands=stack_stands, before=["s1"],
+                  block="s2", offset=[0.01, 0.0, 0.0], failing=(2, 2), next_block="s3",
+                  repair="swap"),
+    # a plank on a pier with a robot to hold (K = 1): the plank lands 10 mm left and turned
+    # 2 deg; the middle block next stands, the left one after it would tip the plank; no
+    # order does: only a hold
+    "plank": dict(design=lambda: plank(0.2, 1, mid=True), cell=None, stands=stands,
+                  before=[], block="plank", offset=[-0.01, 0.0, 0.0], failing=(1, 2),
+                  next_block="left", repair="hold"),
+}
+
+
 @pytest.mark.long       # 10-15 s each: a node, its repair process, a replay
-@pytest.mark.parametrize("counterweight, robots, orders", [
-    (0.1, 0, {("right", "left")}),              # a swap saves it, no robot free
-    (0.2, 1, set()),                            # no order does: only a hold
-], ids=["swap", "hold"])
+@pytest.mark.parametrize("case", list(CASES))
 def test_block_lands_off_a_later_step_fails_and_the_plan_is_repaired(
-        rclpy_context, tmp_path, capsys, counterweight, robots, orders):
-    design = plank(counterweight, robots, mid=True)
+        rclpy_context, tmp_path, capsys, case):
+    c = CASES[case]
+    design = c["design"]()
     path = tmp_path / "planned.json"
-    path.write_text(json.dumps(scene_to_dict(design)))
-    # the plank lands 10 mm left and turned 2 deg: the middle block next stands, the left
-    # block after it would tip the plank (the oracle, and `rbe-ros check` on the measured
-    # plank with the others at design)
-    off = {"plank": ([-0.01, 0.0, 0.55],
-                     Rotation.from_euler("z", 2, degrees=True).as_quat().tolist())}
-    at_design = {b: (design.block(b).position.tolist(), [0, 0, 0, 1])
-                 for b in ("mid", "left", "right")}
-    assert stands(design, {**off, **at_design}, ["plank", "mid"])
-    assert not stands(design, {**off, **at_design}, ["plank", "mid", "left"])
-    assert stands(design, {**off, **at_design}, ["plank", "mid", "left", "right"])
-    assert stands(design, at_design | {"plank": ([0, 0, 0.55], [0, 0, 0, 1])},
-                  ["plank", "mid", "left"])                      # as designed it stands
-    check = rbe_check(capsys, path, {**off, "mid": at_design["mid"], "left": at_design["left"]},
-                      tmp_path, "left_next")
+    if c["cell"] is not None:
+        planned = cell_plan_file(design, c["cell"], path)
+    else:
+        path.write_text(json.dumps(scene_to_dict(design)))
+    at_design = {b.id: (b.position.tolist(), list(b.orientation)) for b in design.blocks
+                 if not b.support}
+    off = {c["block"]: ((design.block(c["block"]).position + c["offset"]).tolist(),
+                        Rotation.from_euler("z", 2, degrees=True).as_quat().tolist())}
+    order = list(design.sequence)
+    k_off = order.index(c["block"])
+    failing_step = c["failing"][1]
+    # the oracle: as designed every step stands; with the block off the failing step
+    # falls, the steps before it and the whole stand
+    for k in range(len(order)):
+        assert c["stands"](design, at_design, order[:k + 1])
+    measured = {**at_design, **off}
+    assert c["stands"](design, measured, order[:failing_step])
+    assert not c["stands"](design, measured, order[:failing_step + 1])
+    assert c["stands"](design, measured, order)
+    # and `rbe-ros check` of the failing step's state (the block off, the others at design)
+    check = rbe_check(capsys, path, {b: measured[b] for b in order[:failing_step + 1]},
+                      tmp_path, "failing_next")
     assert check["stable"] is False and check["status"] == 1      # TENSION_REQUIRED
-    # which orders of the two blocks left stand without a hold (the oracle)
-    assert {o for o in [("left", "right"), ("right", "left")]
-            if stands(design, {**off, **at_design}, ["plank", "mid", o[0]])} == orders
+    # which orders of the blocks left stand without a hold (the oracle)
+    rest = order[failing_step:]
+    saving = [o for o in ([rest[1], rest[0], *rest[2:]],)
+              if all(c["stands"](design, measured, order[:failing_step] + o[:j + 1])
+                     for j in range(len(o)))]
+    assert bool(saving) == (c["repair"] == "swap")
 
     bag = tmp_path / "bag"
     proc = NodeProcess(["-p", f"design_file:={path}", "-p", f"mcap_path:={bag}"],
@@ -183,32 +226,47 @@ def test_block_lands_off_a_later_step_fails_and_the_plan_is_repaired(
         wait_until(lambda: proc.proc.poll() is None and camera.ready(), 60.0, "the node")
         wait_until(lambda: camera.states, 30.0, "the design's execution state")
         start = camera.states[-1][1]
-        assert (start.active, start.current_step, start.total_steps) == (True, 0, 4)
-        assert start.first_failing_step == -1 and [s.block for s in start.lookahead] == \
-            ["plank", "mid", "left", "right"]
-        camera.place(design, "plank", STAMP0, offset=[-0.01, 0.0, 0.0], yaw_deg=2.0)
-        received, failing = wait_until(lambda: camera.state(STAMP0), 30.0, "execution")
-        assert received - camera.sent[STAMP0] < 2.0
-        # the step after next fails: the look-ahead says so now
-        assert (failing.current_step, failing.first_failing_step) == (1, 2)
-        assert [(s.block, s.stable) for s in failing.lookahead[:2]] == \
-            [("mid", True), ("left", False)]
-        assert "step 2 (left)" in failing.message
+        assert (start.active, start.current_step, start.total_steps) == (True, 0, len(order))
+        assert start.first_failing_step == -1 and [s.block for s in start.lookahead] == order
+        sec = STAMP0
+        for block in c["before"]:
+            camera.place(design, block, sec)
+            wait_until(lambda: camera.state(sec), 30.0, f"{block}")
+            sec += 1
+        camera.place(design, c["block"], sec, offset=c["offset"], yaw_deg=2.0)
+        received, failing = wait_until(lambda: camera.state(sec), 30.0, "execution")
+        assert received - camera.sent[sec] < 2.0
+        # a later step fails: the look-ahead says so now
+        assert (failing.current_step, failing.first_failing_step) == c["failing"]
+        assert [(s.block, s.stable) for s in failing.lookahead][
+            failing_step - failing.current_step] == (c["next_block"], False)
+        assert f"step {failing_step} ({c['next_block']})" in failing.message
         update = wait_until(lambda: camera.updates, 60.0, "the plan update")[0]
-        assert update.feasible and update.changed_step == 2
-        assert list(update.order[:2]) == ["plank", "mid"]
-        assert update.reason.startswith("step 2 (left) fails at the measured poses")
-        assert update.repair == ("swap" if orders else "hold")
+        assert update.feasible and update.changed_step == failing_step
+        assert list(update.order[:failing_step]) == order[:failing_step]
+        assert update.reason.startswith(f"step {failing_step} ({c['next_block']}) fails at "
+                                        "the measured poses")
+        assert update.repair == c["repair"]
         # the repaired plan's execution state: nothing fails ahead any more
-        repaired = wait_until(lambda: len(camera.states) >= 3 and camera.state(STAMP0, True),
-                              30.0, "the repaired plan's state")[1]
+        repaired = wait_until(lambda: len([m for _, m in camera.states
+                                           if m.header.stamp.sec == sec]) >= 2
+                              and camera.state(sec, True), 30.0, "the repaired plan's state")[1]
         assert repaired.first_failing_step == -1 and repaired.active
-        order = list(update.order)
+        new_order = list(update.order)
         holds = [message_to_dict(h) for h in update.holds]
+        if c["cell"] is not None:
+            # the cell's plan: the repaired timeline (the robot places each block in the new
+            # order), beside the timeline of the file it started from
+            assert [a.block for a in update.timeline if a.action == "place"] == new_order
+            assert {a.robot for a in update.timeline} == {"r1"}
+            assert all(a.stable for a in update.timeline if a.step >= failing_step)
+            assert [a["block"] for a in planned["timeline"] if a["action"] == "place"] == order
+        else:
+            assert not update.timeline
         # the camera follows the repaired plan
-        for k, block in enumerate(order[1:], start=1):
-            camera.place(design, block, STAMP0 + k)
-            got = wait_until(lambda: camera.state(STAMP0 + k, True), 30.0, f"step {k}")[1]
+        for k, block in enumerate(new_order[k_off + 1:], start=k_off + 1):
+            camera.place(design, block, sec + k)
+            got = wait_until(lambda: camera.state(sec + k, True), 30.0, f"step {k}")[1]
             assert got.current_step == k + 1 and got.first_failing_step == -1
     finally:
         camera.close()
@@ -219,32 +277,32 @@ def test_block_lands_off_a_later_step_fails_and_the_plan_is_repaired(
     # every remaining step of the repaired plan stands at the measured poses: a held block
     # is a support (the plank then rests on the pier and it); the oracle on the free ones
     measured = camera.measured
-    for k in range(1, len(order)):
+    for k in range(k_off, len(new_order)):
         held = {h["block"] for h in holds if h["from_step"] <= k and
                 (h["until_step"] < 0 or k < h["until_step"])}
-        assert held or stands(design, measured, order[:k + 1]), f"step {k}"
-    if not orders:
+        assert held or c["stands"](design, measured, new_order[:k + 1]), f"step {k}"
+    if c["repair"] == "hold":
         assert holds, "no order stands: the repair must hold a block"
     else:
-        assert tuple(order[2:]) in orders or holds
+        assert new_order[failing_step:] in saving and not holds
     # and by `rbe-ros check --sequence` on the repaired plan, its blocks at the measured poses
     # (--poses would drop the holds: they count the design's steps)
     repaired_path = tmp_path / "repaired.json"
     doc = scene_to_dict(replace(design, blocks=tuple(
         make_block(b.id, b.vertices, b.faces, *measured.get(b.id, (b.position, b.orientation)),
                    density=DENSITY, support=b.support) for b in design.blocks)))
-    doc["sequence"] = order
+    doc["sequence"] = new_order
     doc["holds"] = [{"block": h["block"], "from_step": h["from_step"],
                      **({"until_step": h["until_step"]} if h["until_step"] >= 0 else {})}
                     for h in holds]
     repaired_path.write_text(json.dumps(doc))
     steps = rbe_check(capsys, repaired_path, {}, tmp_path, "all", sequence=True)
     assert [r["stable"] for r in steps["reports"]] == [True] * len(steps["reports"]), steps
-    assert len(steps["reports"]) >= len(order)
+    assert len(steps["reports"]) >= len(new_order)
     # the bag: every execution state and the update recorded, and `replay --compare`
     topics = [m.topic for m in read_bag(bag)]
     assert topics.count("/rbe_node/plan_update") == 1
-    assert topics.count("/rbe_node/execution") >= len(order) + 2
+    assert topics.count("/rbe_node/execution") >= len(new_order) + 2
     result = assert_bag_replays(bag)
     assert sum(len(r.execution) for r in result.runs) == topics.count("/rbe_node/execution") + 1
 
@@ -446,3 +504,141 @@ def test_a_step_ahead_below_min_margin_g_is_repaired(make_node, tmp_path):
     assert repaired["first_failing_step"] == -1
     assert all(s["margin_g"] >= 0.1 for s in repaired["lookahead"])
     assert_bag_replays(tmp_path / "bag")
+
+
+def test_a_cell_plan_file_is_executed_its_robots_drawn_bad_poses_refused(make_node, tmp_path):
+    """A design_file planned for a cell (the overhang stack, two robots) is executed as its
+    timeline: s2 lands 10 mm out and turned 2 deg, the repair holds s2 while s3 is placed
+    (its timeline on ~/plan_update), and with s3 measured ~/markers draws the robots as the
+    HTML view does (the same gripper box at the holder's moved grip). Poses out of the
+    plan's order, of a block not in the design, and a design that is not the plan's: a
+    reason on ~/execution, the step reached kept, everything in the bag, which replays."""
+    from rclpy.serialization import serialize_message
+
+    from rbe_msgs.msg import AssemblyState
+    from rbe_ros.cell import cell_from_dict
+    from rbe_ros.io.execution import repair
+    from rbe_ros.io.markers import gripper_box
+    from rbe_ros.io.messages import state_to_dict
+
+    from test_cell_execution import TWO_ROBOTS
+
+    design = overhang_stack()
+    path = tmp_path / "planned.json"
+    cell_plan_file(design, TWO_ROBOTS, path)
+    node = make_node(design_file=str(path), mcap_path=str(tmp_path / "bag"))
+    states: list[tuple[str, dict]] = []
+    drawn: list[dict] = []
+    node._send_execution = (lambda send: lambda kind, m: (states.append((kind, m)),
+                                                          send(kind, m)))(node._send_execution)
+    node._encode_markers = (lambda encode: lambda m: (drawn.append(m), encode(m))[1])(
+        node._encode_markers)
+    node._repair = repair       # here, not in a worker process (spawning one takes seconds)
+
+    def poses(sec: int, measured: dict, answers: int = 1) -> list[dict]:
+        node._on_poses(serialize_message(dict_to_message(
+            poses_to_dict(measured, "cell", sec * 1_000_000_000), BlockPoses)))
+        return wait_until(lambda: [m for _, m in states if m["header"]["stamp"]["sec"] == sec]
+                          if len([m for _, m in states if m["header"]["stamp"]["sec"] == sec])
+                          >= answers else None, 60.0, f"the execution state of {sec}")
+
+    at = {b.id: (b.position.tolist(), [0, 0, 0, 1]) for b in design.blocks}
+    off = ((design.block("s2").position + [0.01, 0, 0]).tolist(),
+           Rotation.from_euler("z", 2, degrees=True).as_quat().tolist())
+    [first] = poses(1, {"s1": at["s1"]})
+    assert first["active"] and first["current_step"] == 1 and first["first_failing_step"] == -1
+    [wrong] = poses(2, {"s3": at["s3"]})                  # s2 comes first
+    assert not wrong["active"] and wrong["current_step"] == 1 and wrong["message"] == (
+        "measured blocks are not a prefix of the plan's order: 's3' (step 2) is measured but "
+        "'s2' (step 1) is not")
+    [ghost] = poses(3, {"ghost": at["s2"]})
+    assert not ghost["active"] and ghost["current_step"] == 1 and "'ghost'" in ghost["message"]
+    # the as-built state kept s3 as measured: the design again forgets the poses
+    sent = len(states)
+    node._send_design(node.design_message(str(path)), node.design_cell(str(path)))
+    wait_until(lambda: len(states) > sent, 30.0, "the design's state")
+    assert states[-1][1]["active"] and states[-1][1]["current_step"] == 0, states[-1][1]["message"]
+    poses(31, {"s1": at["s1"]})
+    failing, update, repaired = poses(4, {"s2": off}, answers=3)
+    assert failing["current_step"] == 2 and failing["first_failing_step"] == 2
+    assert update["repair"] == "hold" and update["feasible"] and update["timeline"]
+    assert repaired["first_failing_step"] == -1
+    drawn.clear()
+    [built] = poses(5, {"s3": at["s3"]})
+    assert built["active"] and built["current_step"] == 3
+    wait_until(lambda: any(m["ns"] == "grippers" for a in drawn for m in a["markers"]), 30.0,
+               "the robots' markers")
+    robots = next(a["markers"] for a in drawn
+                  if any(m["ns"] == "grippers" for m in a["markers"]))
+    assert sum(m["ns"] == "robots" for m in robots) == 2
+    # with the blocks of the last report, after its DELETEALL: one array draws both
+    assert robots[0]["action"] == 3 and any(m["ns"] == "blocks" for m in robots)
+    # s2's holder: its gripper box where the HTML view draws it from the repaired timeline
+    holder = next(a for a in update["timeline"] if a["action"] == "hold" and a["block"] == "s2")
+    centre, quat = gripper_box(holder, cell_from_dict(TWO_ROBOTS).robot(holder["robot"]))
+    [box] = [m for m in robots if m["ns"] == "grippers"]
+    assert [box["pose"]["position"][k] for k in "xyz"] == pytest.approx(centre)
+    assert [box["pose"]["orientation"][k] for k in "xyzw"] == pytest.approx(quat)
+    other = make_scene("other", [design.block("ground"), design.block("s1")])
+    node._on_design(serialize_message(dict_to_message(state_to_dict(other, "cell", 6 * 10**9),
+                                                      AssemblyState)))
+    [mismatch] = wait_until(lambda: [m for _, m in states if m["header"]["stamp"]["sec"] == 6],
+                            30.0, "6")
+    assert not mismatch["active"] and "does not match the design" in mismatch["message"]
+    node.destroy_node()
+    topics = [m.topic.rsplit("/", 1)[1] for m in read_bag(tmp_path / "bag")]
+    assert topics.count("poses") == 6 and topics.count("design") == 3
+    assert topics.count("execution") + topics.count("plan_update") >= len(states)
+    result = assert_bag_replays(tmp_path / "bag")
+    assert result.executed == topics.count("execution") + topics.count("plan_update")
+
+
+def test_a_cell_plan_of_the_node_is_executed_for_its_cell(make_node, tmp_path):
+    """A ~/plan result for a cell is executed for that cell: the cell recorded with the
+    settings before the plan's design, so that the replay repairs as the node did (a hold
+    at the robot's grip, the repaired timeline)."""
+    from rclpy.serialization import serialize_message
+
+    from rbe_msgs.msg import AssemblyState
+    from rbe_ros.analysis.planning import plan_sequence
+    from rbe_ros.cell import cell_from_dict
+    from rbe_ros.io.execution import repair
+    from rbe_ros.io.messages import scene_from_state_dict, state_to_dict
+    from rbe_ros.io.replay import settings_cell
+
+    from test_cell_execution import TWO_ROBOTS
+
+    cell = cell_from_dict(TWO_ROBOTS)
+    design = scene_from_state_dict(state_to_dict(replace(overhang_stack(), sequence=())))
+    plan = plan_sequence(design, 1, cell=cell)
+    assert plan.feasible and plan.order == ["s1", "s2", "s3", "c"]
+    node = make_node(mcap_path=str(tmp_path / "bag"))
+    node._repair = repair       # here, not in a worker process (spawning one takes seconds)
+    states: list[dict] = []
+    node._send_execution = (lambda send: lambda kind, m: (states.append(m), send(kind, m)))(
+        node._send_execution)
+    node._on_design(serialize_message(dict_to_message(state_to_dict(design, "cell", 10**9),
+                                                      AssemblyState)))
+    node._adopt(plan, {"frame_id": "cell", "stamp": {"sec": 0, "nanosec": 0}})
+    wait_until(lambda: node._execution.cell == cell and states and states[-1]["active"],
+               30.0, "the plan's execution state")
+    at = {b.id: (b.position.tolist(), [0, 0, 0, 1]) for b in design.blocks}
+    off = ((design.block("s2").position + [0.01, 0, 0]).tolist(), [0, 0, 0, 1])
+    node._on_poses(serialize_message(dict_to_message(poses_to_dict(
+        {"s1": at["s1"], "s2": off}, "cell", 10 * 10**9), BlockPoses)))
+    update = wait_until(lambda: next((m for m in states if "repair" in m), None), 60.0,
+                        "the plan update")
+    assert update["repair"] == "hold" and update["timeline"]
+    assert update["holds"][0]["has_grip"]
+    node.destroy_node()
+    settings = [json.loads(m.data["data"]) for m in read_bag(tmp_path / "bag")
+                if m.topic.endswith("/settings")]
+    assert settings_cell(settings[-1]) == cell and settings_cell(settings[0]) is None
+    result = assert_bag_replays(tmp_path / "bag")
+    assert result.executed == len(states)
+    # a repaired timeline the replay does not make again is a difference
+    run = next(r for r in result.runs if any(k == "plan_update" for k, _ in r.execution))
+    other = [(k, {**m, "timeline": [{**a, "robot": "r9"} for a in m["timeline"]]}
+              if k == "plan_update" else m) for k, m in run.execution]
+    found = compare_execution(0, run, other)
+    assert [(d.where, d.field) for d in found] == [("plan_update", "timeline")]

@@ -7,11 +7,14 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 
 import pytest
 
 from rbe_ros import generators
-from rbe_ros.analysis.planning import PlanOptions, plan_sequence
+from rbe_ros.analysis import planning
+from rbe_ros.analysis.margin import report_margin
+from rbe_ros.analysis.planning import PlanOptions, _Planner, plan_sequence
 from rbe_ros.cli import main
 from rbe_ros.io.scene_json import scene_to_dict
 from rbe_ros.scene import SceneError
@@ -75,11 +78,49 @@ def test_robust_needs_prefer_margin_and_a_declared_uncertainty(tmp_path, capsys)
         plan_sequence(ledge(None), 0, prefer="margin", robust=4)
 
 
-def test_lazy_margin_ranking_returns_the_plan_of_scoring_every_child():
-    """The plan --prefer margin made before the lazy ranking (every feasible child scored,
-    then sorted) on the 7-voussoir arch, with fewer candidate trials."""
+def eager(self, partial, failure):
+    """The ranking before the lazy one: every feasible child tried and scored, then sorted
+    (its weakest p_stable so far, its weakest margin so far, then the default's score)."""
+    children = []
+    for child, found in self.feasible(partial, failure):
+        found = self.with_margin(found)
+        child.reports = (*partial.reports, replace(
+            child.reports[-1], margin_g=found.report.margin_g,
+            margin_direction=found.report.margin_direction))
+        parts = []
+        if self.samples is not None:
+            child.p_stable = (*partial.p_stable, self.samples.p_stable(
+                self.present(child.order, len(child.order) - 1), found.held))
+            parts.append(-min(child.p_stable))
+        parts.append(-min(r.margin_g for r in child.reports))
+        child.score = (*parts, *child.score[-3:])
+        children.append(child)
+    return iter(sorted(children, key=lambda c: (c.score, c.order)))
+
+
+@pytest.mark.parametrize("robust", [0, pytest.param(8, marks=pytest.mark.long)])
+def test_lazy_ranking_returns_the_plan_of_scoring_every_child(monkeypatch, robust):
+    """The 7-voussoir arch with a declared uncertainty: the lazy ranking's plan is that of
+    trying and scoring every child (by margin, and by p_stable then margin), with fewer
+    margins made."""
+    arch = replace(generators.semicircular_arch(n=7), pose_uncertainty=(0.006, 1.5))
+    margins = []
+    monkeypatch.setattr(planning, "report_margin",
+                        lambda *a: margins.append(1) or report_margin(*a))
+    lazy = plan_sequence(arch, 2, prefer="margin", robust=robust)
+    made, margins[:] = len(margins), []
+    monkeypatch.setattr(_Planner, "_best_first", eager)
+    full = plan_sequence(arch, 2, prefer="margin", robust=robust)
+    assert lazy.feasible and full.feasible
+    assert (lazy.order, lazy.held, lazy.p_stable) == (full.order, full.held, full.p_stable)
+    assert [r.margin_g for r in lazy.reports] == [r.margin_g for r in full.reports]
+    assert lazy.checks <= full.checks and lazy.states <= full.states
+    assert made < len(margins)
+
+
+def test_lazy_margin_ranking_keeps_the_plan_of_before():
+    """The 7-voussoir arch's plan --prefer margin as it was before the lazy ranking."""
     plan = plan_sequence(generators.semicircular_arch(n=7), 2, prefer="margin", candidates=8)
     assert plan.order == ["v00", "v01", "v02", "v03", "v04", "v06", "v05"]
     assert plan.held == [(), ("v01",), ("v02",), ("v03",), ("v04",), ("v04",), ()]
     assert plan.weakest.margin_g == pytest.approx(0.125451, abs=1e-5)
-    assert plan.states <= 13

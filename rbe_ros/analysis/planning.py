@@ -531,10 +531,10 @@ class _Planner:
         found = self.insertion(order)
         return "" if found is None or found.insertable else found.reason
 
-    def trial(self, partial: _Partial, block: str) -> TrialResult:
-        """Whether ``block`` can be placed after ``partial`` with at most K held, and how
-        (:class:`TrialResult`): the one feasibility test of a candidate step."""
-        trial = _Trial(self, partial, block)
+    def trial(self, partial: _Partial, trial: _Trial) -> TrialResult:
+        """Whether ``trial``'s block can be placed after ``partial`` with at most K held, and
+        how (:class:`TrialResult`): the one feasibility test of a candidate step."""
+        block = trial.order[-1]
         held, proven = self._holds(trial, partial.held[-1] if partial.held else ())
         if len(held) > self.plan.max_held or not trial.stands(held):
             return TrialResult(held, False, proven=proven)
@@ -645,43 +645,64 @@ class _Planner:
 
     def _best_first(self, partial: _Partial, failure: _Failure) -> Iterator[_Partial]:
         """The feasible children of ``partial`` in the order of their key (score, order), as
-        sorting them all would give, each trial, p_stable and margin made when asked for.
+        trying and scoring them all, then sorting, would give; each trial, p_stable and
+        margin made only when a child could still come before those known.
 
-        The scored parts of a child's score (-p_stable, -margin: the weakest of its plan so
-        far) are never below the partial plan's (its weakest), and an untried candidate's
-        rest is never below (hold-steps so far, 0 held, the next rank): a key with each
-        unknown part at that bound is a lower bound. Of a heap of children, keyed so, and
-        the next untried candidate's bound, the least is taken: a child with every part
-        known comes next (nothing left can come before it), else its next part is made and
-        it goes back; the bound: the next candidate is tried."""
+        A key with each unknown part at a bound below it is a lower bound: the scored parts
+        (-p_stable, -margin: the weakest of the plan so far) are never below the partial
+        plan's (its weakest); the held blocks of a candidate not yet tried are never fewer
+        than 0, of one that does not stand with none held than 1; its rank is never below
+        the next untried rank. Of a heap of candidates and children, keyed so, and the next
+        untried candidate's bound, the least is taken: a child with every part known comes
+        next (nothing left can come before it); else its next part is made (for an untried
+        candidate: whether it stands with none held; then its trial; then p_stable; then
+        margin) and it goes back."""
         lows = []                       # the best each scored part can be: the weakest so far
         if self.samples is not None:
             lows.append(-min(partial.p_stable, default=math.inf))
         lows.append(-min((r.margin_g for r in partial.reports), default=math.inf))
         total, _, ranks = partial.score[-3:]
-        children = self.feasible(partial, failure)
-        heap: list = []     # (key, tie, child, its trial, its scored parts so far)
+        untried = self._states(partial, failure)
+        heap: list = []     # (key, tie, trial or child, its rank or trial, its parts so far)
         seq = itertools.count()
-        untried = 0                     # no rank below this is left untried
+        after = 0                       # no untried candidate has a rank below this
 
-        def key(child: _Partial, parts: list) -> tuple:
-            known = [max(low, part) for low, part in zip(lows, parts)]
-            return (*known, *lows[len(known):], *child.score[-3:]), child.order
+        def push(entry, payload, parts: list | None, held: int = 0, rank: int = 0) -> None:
+            if parts is None:           # a candidate: (_Trial, s spent on it so far)
+                key = (*lows, total + held, held, ranks + rank), entry.order
+            else:
+                known = [max(low, part) for low, part in zip(lows, parts)]
+                key = (*known, *lows[len(known):], *entry.score[-3:]), entry.order
+            heapq.heappush(heap, (key, next(seq), entry, payload, parts, rank))
+
+        def tried(trial: _Trial, start: float, rank: int) -> None:
+            made = self._tried(partial, trial, rank, start, failure)
+            if made is not None:
+                push(made[0], made[1], [])
 
         while True:
-            bound = ((*lows, total, 0, ranks + untried), ()) if children is not None else None
+            bound = ((*lows, total, 0, ranks + after), ()) if untried is not None else None
             if bound is not None and (not heap or bound <= heap[0][0]):
-                made = next(children, None)
-                if made is None:
-                    children = None
+                taken = next(untried, None)
+                if taken is None:
+                    untried = None
                     continue
-                child, found = made
-                untried = child.score[-1] - ranks + 1
-                heapq.heappush(heap, (key(child, []), next(seq), child, found, []))
+                rank, block = taken
+                after = rank + 1
+                start = time.perf_counter()
+                trial = _Trial(self, partial, block)
+                if trial.stands(()):
+                    tried(trial, start, rank)       # nothing held: its trial is made
+                else:
+                    push(trial, time.perf_counter() - start, None, 1, rank)
                 continue
             if not heap:
                 return
-            _, _, child, found, parts = heapq.heappop(heap)
+            _, _, entry, payload, parts, rank = heapq.heappop(heap)
+            if parts is None:
+                tried(entry, time.perf_counter() - payload, rank)
+                continue
+            child, found = entry, payload
             if len(parts) == len(lows):
                 child.score = (*(max(low, p) for low, p in zip(lows, parts)),
                                *child.score[-3:])
@@ -699,34 +720,46 @@ class _Planner:
                     margin_direction=found.report.margin_direction))
                 parts.append(-found.report.margin_g)
                 found = None    # a suspended search keeps no full report or assembly
-            heapq.heappush(heap, (key(child, parts), next(seq), child, found, parts))
+            push(child, found, parts)
 
-    def feasible(self, partial: _Partial, failure: _Failure
-                 ) -> Iterator[tuple[_Partial, TrialResult]]:
-        """The feasible children of ``partial`` in rank order, with their trials: its
-        candidates (:meth:`candidates`) each tried (:meth:`trial`), lazily, as the search asks
-        for the next. A candidate whose state is known dead (the memo) is skipped unchecked;
-        each other is a state of the budget. ``failure`` collects why candidates were
-        refused."""
+    def _states(self, partial: _Partial, failure: _Failure) -> Iterator[tuple[int, str]]:
+        """The candidates (:meth:`candidates`) of ``partial`` in rank order, (rank, block),
+        lazily, as the search asks for the next: one whose state is known dead (the memo) is
+        skipped unchecked; each other is a state of the budget."""
         tried = 0
         for rank, b in enumerate(self.candidates(partial.order, failure.blocked)):
             tried += 1
-            order = (*partial.order, b)
-            if frozenset(order) in self.dead:
+            if frozenset((*partial.order, b)) in self.dead:
                 failure.dead += 1
                 continue
             if self.states >= self.budget:
                 raise _Budget
             self.states += 1
-            start = time.perf_counter()
-            found = self.trial(partial, b)
-            if not found.ok:
-                failure.refused(b, found)
-                continue
-            yield self._child(partial, order, found, rank, start), found
-            found = None        # a suspended search keeps no full report or assembly
+            yield rank, b
         if tried and tried == self.plan.candidates:
             failure.proven = False              # candidates beyond the limit not tried
+
+    def feasible(self, partial: _Partial, failure: _Failure
+                 ) -> Iterator[tuple[_Partial, TrialResult]]:
+        """The feasible children of ``partial`` in rank order, with their trials: its
+        candidates (:meth:`_states`) each tried (:meth:`trial`), lazily, as the search asks
+        for the next. ``failure`` collects why candidates were refused."""
+        for rank, b in self._states(partial, failure):
+            start = time.perf_counter()
+            made = self._tried(partial, _Trial(self, partial, b), rank, start, failure)
+            if made is not None:
+                yield made
+                made = None     # a suspended search keeps no full report or assembly
+
+    def _tried(self, partial: _Partial, trial: _Trial, rank: int, start: float,
+               failure: _Failure) -> tuple[_Partial, TrialResult] | None:
+        """The child that ``trial`` (:meth:`trial`) makes of ``partial``, with the trial's
+        result; None when it is refused (into ``failure``)."""
+        found = self.trial(partial, trial)
+        if not found.ok:
+            failure.refused(trial.order[-1], found)
+            return None
+        return self._child(partial, trial.order, found, rank, start), found
 
     def _child(self, partial: _Partial, order, found: TrialResult, rank: int,
                start: float) -> _Partial:

@@ -14,6 +14,7 @@ Usage: .venv/bin/python benchmarks/prefer_margin.py [margin] [robust] [lazy]
 from __future__ import annotations
 
 import json
+import os
 import re
 import subprocess
 import sys
@@ -116,8 +117,8 @@ def robust_section() -> str:
     return "\n".join([*lines, ""])
 
 
-LAZY_SCENES = {"arch": (lambda: generators.semicircular_arch(n=7), 8),
-               "dome85": (lambda: generators.dome(slices=8, courses=5), 8)}
+LAZY_SCENES = {"7-voussoir arch": (lambda: generators.semicircular_arch(n=7), 8),
+               "8 x 5 dome": (lambda: generators.dome(slices=8, courses=5), 8)}
 
 
 def lazy_one(tree: str, scene: str) -> None:
@@ -144,7 +145,10 @@ def lazy_section() -> str:
                  "`--prefer margin --candidates 8` ranked lazily (after: a child's trial, "
                  "margin and p_stable made only when it could still come first, "
                  "planning.py's _best_first) against scoring every feasible child, then "
-                 f"sorting (before: commit {BEFORE}); each in its own process, in one run.", "",
+                 f"sorting (before: commit {BEFORE}); each in its own process, in one run "
+                 f"(load average at its start {os.getloadavg()[0]:.1f}). The table above was "
+                 "made before the lazy ranking: its --prefer margin times are the before "
+                 "ones.", "",
                  "| scene | before s | after s | after / before | same plan | states before "
                  "/ after | checks before / after |", "|---|---|---|---|---|---|---|"]
         for scene in LAZY_SCENES:
@@ -172,9 +176,8 @@ def write(name: str, text: str) -> None:
     head, rest = (parts[0], parts[1:]) if parts and not parts[0].startswith("## ") \
         else ("", parts)
     titles = {"robust": "## --robust N", "lazy": "## Ranking lazily"}
-    if name == "margin":
-        head = text.rstrip() + "\n\n"
-    else:
+    head = (text if name == "margin" else head).rstrip() + "\n\n"
+    if name != "margin":
         kept = [p for p in rest if not p.startswith(titles[name])]
         rest = [*kept, text.rstrip() + "\n\n"]
         rest.sort(key=lambda p: list(titles.values()).index(p.split("\n")[0])

@@ -76,7 +76,8 @@ margin. They come in exactly the order of scoring every feasible child and sorti
 lazily (:meth:`_Planner._best_first`): a score part never exceeds the partial plan's weakest,
 so a child whose parts are known and whose key no unscored or untried child can beat comes
 first, and the trials, margins and p_stable of the rest are made only if the search backs up
-to them.
+to them (the budget counts the candidates tried: a search that found its plan within the
+budget finds the same one).
 ``min_margin`` > 0: a step stands only with a margin of at least that (the hold search
 holds more until it does). With either, or when the options ask for margins, every step's
 margin is computed (about one whole solve per direction) and the plan names its weakest step.

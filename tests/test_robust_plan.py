@@ -21,7 +21,7 @@ from rbe_ros.scene import SceneError
 
 from helpers import LEDGE_INSIDE as INSIDE, LEDGE_SIGMA as SIGMA, ledge
 
-SAMPLES = 32
+SAMPLES = 16
 
 
 def run(capsys, *argv) -> tuple[int, str, str]:

@@ -211,12 +211,12 @@ def test_robust_samples_in_the_goal(rbe):
     planned by p_stable (the column first, where margin puts the plate first) as ``plan
     --robust`` plans it; each recorded goal re-plans to its recorded result."""
     scene = ledge(None)             # the node's parameters declare the uncertainty
-    handle = rbe.client.send_plan(goal_of(scene, 0, robust_samples=32), [])
+    handle = rbe.client.send_plan(goal_of(scene, 0, robust_samples=16), [])
     _, result = rbe.client.result(handle, timeout=60.0)
-    assert result.message.startswith("invalid input: robust 32 ranks candidates by p_stable")
-    goal = goal_of(scene, 0, prefer="margin", robust_samples=32)
+    assert result.message.startswith("invalid input: robust 16 ranks candidates by p_stable")
+    goal = goal_of(scene, 0, prefer="margin", robust_samples=16)
     _, result = rbe.client.result(rbe.client.send_plan(goal, []), timeout=60.0)
-    assert result.message.startswith("invalid input: robust 32: p_stable samples the declared")
+    assert result.message.startswith("invalid input: robust 16: p_stable samples the declared")
     client = _Client(rbe.context, "rbe_node")      # replay's client sets node parameters
     try:
         client.set_parameters({"pose_uncertainty_m": 3 * LEDGE_SIGMA}, 30.0)
@@ -224,11 +224,11 @@ def test_robust_samples_in_the_goal(rbe):
         client.set_parameters({"pose_uncertainty_m": 0.0}, 30.0)
     finally:
         client.close()
-    # as tests/test_robust_plan.py plans it with plan --robust 32
+    # as tests/test_robust_plan.py plans it with plan --robust 16
     assert result.feasible and list(result.order) == ["column", "plate"]
     assert result.weakest_margin_g == pytest.approx(0.125, abs=1e-6)      # the column's
     runs = [r for r in read_runs(rbe.bag) if r.kind == PLAN][-3:]
-    assert [r.state["robust_samples"] for r in runs] == [32, 32, 32]
+    assert [r.state["robust_samples"] for r in runs] == [16, 16, 16]
     for run in runs:
         replayed = replay_plan(run)[0]
         assert (replayed["message"], replayed["order"]) == (run.reports[0]["message"],

@@ -664,12 +664,15 @@ class _Planner:
         lows.append(-min((r.margin_g for r in partial.reports), default=math.inf))
         total, _, ranks = partial.score[-3:]
         untried = self._states(partial, failure)
-        heap: list = []     # (key, tie, trial or child, its rank or trial, its parts so far)
+        # (key, tie, entry, payload, parts, rank): a candidate that does not stand unheld
+        # (its _Trial, s spent on it, None), or a child (its TrialResult until its margin is
+        # made, its scored parts so far)
+        heap: list = []
         seq = itertools.count()
         after = 0                       # no untried candidate has a rank below this
 
         def push(entry, payload, parts: list | None, held: int = 0, rank: int = 0) -> None:
-            if parts is None:           # a candidate: (_Trial, s spent on it so far)
+            if parts is None:           # a candidate
                 key = (*lows, total + held, held, ranks + rank), entry.order
             else:
                 known = [max(low, part) for low, part in zip(lows, parts)]

@@ -49,8 +49,9 @@ from .io.replay import (PLAN, REPORT_TOPIC, STATE_TOPIC, Run, RunReader, bag_opt
                         default_output, offline_reports, read_runs, replay_bag, step_stamps,
                         write_runs)
 from .io.plan_export import plan_cell, plan_export, read_timeline
-from .io.plan_output import (ProgressLines, ReportLines, repair_json, repair_text, step_summary,
-                              weakest_json, weakest_line)
+from .io.plan_output import (ProgressLines, ReportLines, repair_json, repair_text, step_summaries,
+                              weakest_json, weakest_line, weakest_p_json,
+                              weakest_p_line)
 from .io.table import format_table
 from .io.view import ViewRun, checked_runs, write_html
 from .io.scene_json import load_scene, read_json, scene_to_dict
@@ -280,6 +281,12 @@ def build_parser() -> argparse.ArgumentParser:
                       help="which feasible candidate a step keeps: holds (default: fewest "
                       "hold-steps, the first that fits) or margin (of the first --candidates, "
                       "the largest weakest margin so far, then fewest hold-steps)")
+    plan.add_argument("--robust", type=int, default=0, metavar="N",
+                      help="with --prefer margin: rank candidates by p_stable, the share of N "
+                      "samples of the declared pose uncertainty (about 3 sigma, as robust "
+                      "--pose-sigma a third of it, seed 0) in which the step stands, then by "
+                      "margin; needs --prefer margin and a declared uncertainty (default 0: "
+                      "by margin)")
     _min_margin_argument(plan)
     plan.add_argument("-o", "--output", metavar="SCENE",
                       help="write the planned scene (sequence and holds) as JSON")
@@ -630,8 +637,14 @@ def _run_plan(args) -> int:
     limits = PlanLimits(args.max_held, args.beam, args.candidates, args.keep_sequence,
                         time_limit=limit if math.isfinite(limit) else 0.0,
                         search_budget=args.search_budget, cell=cell, prefer=args.prefer,
-                        min_margin=args.min_margin)
+                        min_margin=args.min_margin, robust_samples=args.robust)
     limits.search()                 # a limit out of range: an error of the command line
+    if args.robust < 0:
+        raise ValueError(f"--robust must be >= 0 (0: off), not {args.robust}")
+    if args.robust and not declared(options, scene).contact.uncertain:
+        raise ValueError("--robust N samples the declared pose uncertainty: declare one "
+                         "(--pose-uncertainty-m / --pose-uncertainty-deg, or the scene's "
+                         "pose_uncertainty)")
     options = replace(options, solve=replace(options.solve, time_limit=math.inf))
     reports = ReportLines(args.reports) if args.reports else None
     interrupted = []
@@ -656,9 +669,10 @@ def _run_plan(args) -> int:
                "search_backups": plan.backups,
                "holds": scene_to_dict(plan.scene).get("holds", []) if plan.scene else [],
                "search_checks": plan.checks, "models": plan.models, "time": plan.time,
-               "prefer": args.prefer, "min_margin": args.min_margin,
+               "prefer": args.prefer, "min_margin": args.min_margin, "robust": args.robust,
                "weakest_step": weakest_json(plan.weakest),
-               "steps": [step_summary(r) for r in plan.reports], "warnings": args.warnings}
+               "weakest_p_stable": weakest_p_json(plan),
+               "steps": step_summaries(plan), "warnings": args.warnings}
         if plan.timeline is not None:
             out["robots"] = list(plan.timeline.robots)
             out["timeline"] = json_safe(timeline_to_dicts(plan.timeline, header_dict("world", 0)))
@@ -668,6 +682,8 @@ def _run_plan(args) -> int:
         print(f"plan: {verdict}: {plan.message}")
         print(f"order: {', '.join(plan.order)}")
         print(weakest_line(plan.weakest))
+        if plan.p_stable:
+            print(weakest_p_line(plan, args.robust))
         if plan.reports:
             print(format_table(plan.reports))
         if plan.timeline is not None:

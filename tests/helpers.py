@@ -210,3 +210,23 @@ def stack_stands(design, poses: dict, free: list[str]) -> bool:
         if not contact.contains(Point(centre[:2])):
             return False
     return True
+
+
+#: The ledge scene's plate centroid is LEDGE_INSIDE m inside the ledge's edge; its declared
+#: pose uncertainty is 3 LEDGE_SIGMA in position, none in angle.
+LEDGE_INSIDE, LEDGE_SIGMA, LEDGE_EDGE = 0.001, 0.002, 1.15
+
+
+def ledge(pose_uncertainty=(3 * LEDGE_SIGMA, 0.0)):
+    """Where ranking by margin and by p_stable disagree: a ground slab, a ledge (a support)
+    and two free blocks that stand alone, a slender column on the ground (margin 0.05 / 0.4 =
+    0.125 g) and a thin plate whose centroid is LEDGE_INSIDE from the ledge's edge (margin
+    LEDGE_INSIDE / 0.005 = 0.2 g towards the edge; it falls when noise moves it over)."""
+    return make_scene("ledge", [
+        box_block("ground", (3, 3, 0.2), (0, 0, -0.1), support=True, density=DENSITY),
+        box_block("ledge", (0.3, 0.3, 0.1), (LEDGE_EDGE - 0.15, 0, 0.05), support=True,
+                  density=DENSITY),
+        box_block("column", (0.1, 0.1, 0.8), (-0.8, 0, 0.4), density=DENSITY),
+        box_block("plate", (0.2, 0.2, 0.01), (LEDGE_EDGE - LEDGE_INSIDE, 0, 0.105),
+                  density=DENSITY),
+    ], pose_uncertainty=pose_uncertainty)

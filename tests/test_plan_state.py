@@ -79,7 +79,8 @@ def through_cdr(msgtype: str, message: dict) -> dict:
 
 
 def test_goal_and_result_dicts_through_cdr():
-    limits = PlanLimits(2, 3, hold_force_max=50.0, time_limit=2.5, search_budget=7)
+    limits = PlanLimits(2, 3, hold_force_max=50.0, time_limit=2.5, search_budget=7,
+                        prefer="margin", min_margin=0.05, robust_samples=16)
     goal = through_cdr(PLAN_GOAL_TYPE, plan_goal_to_dict(state_to_dict(ARCH, "cell", 7),
                                                          limits))
     state, back = plan_goal_from_dict(goal)

@@ -68,9 +68,16 @@ For a robot cell (``cell``), a candidate that stands must also be one its robots
 (:class:`rbe_ros.analysis.timeline.CellCheck`: a free robot that can grip each block the step
 takes, every state between its actions standing with the robots' grips and payloads), and
 the plan carries the timeline of their actions.
-``prefer`` "margin": every feasible candidate (of the first ``candidates``) of a partial plan is
-made before the search goes on, and they are tried by the weakest margin of their plan so far
-(largest first), then as above.
+``prefer`` "margin": the children of a partial plan are tried by the weakest margin of their
+plan so far (largest first), then as above (fewest hold-steps, fewest held now, candidate
+rank); with ``robust`` N samples first by the weakest p_stable so far (the share of N samples
+of the declared pose uncertainty in which the step stands, :class:`StepSamples`), then by
+margin. They come in exactly the order of scoring every feasible child and sorting, but made
+lazily (:meth:`_Planner._best_first`): a score part never exceeds the partial plan's weakest,
+so a child whose parts are known and whose key no unscored or untried child can beat comes
+first, and the trials, margins and p_stable of the rest are made only if the search backs up
+to them (the budget counts the candidates tried: a search that found its plan within the
+budget finds the same one).
 ``min_margin`` > 0: a step stands only with a margin of at least that (the hold search
 holds more until it does). With either, or when the options ask for margins, every step's
 margin is computed (about one whole solve per direction) and the plan names its weakest step.
@@ -79,6 +86,7 @@ from __future__ import annotations
 
 import collections
 import copy
+import heapq
 import itertools
 import math
 import time
@@ -99,6 +107,7 @@ from .insertion import block_insertion
 from .margin import DEFAULT_DIRECTIONS, Margin, report_margin
 from .options import CheckOptions
 from .pipeline import check_sequence, slim
+from .robust import StepSamples
 from .steps import gripped, supports_present
 from .timeline import CellCheck, Timeline, build_timeline, scene_with_grips
 from .verdict import UNEXPLAINED, check
@@ -145,10 +154,13 @@ class PlanOptions:
     #: "margin" (the largest weakest margin so far, then fewest hold-steps)
     prefer: str = "holds"
     min_margin: float = 0.0      # g: a step with a smaller margin does not stand (0: off)
+    #: with prefer "margin": rank by p_stable over this many samples of the declared pose
+    #: uncertainty first, then by margin (0: by margin only)
+    robust: int = 0
 
     def __post_init__(self):
         for name, low in (("max_held", 0), ("beam", 1), ("candidates", 0),
-                          ("search_budget", 0)):
+                          ("search_budget", 0), ("robust", 0)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
                 raise ValueError(f"{name} must be an integer >= {low}, not {value!r}")
@@ -158,6 +170,9 @@ class PlanOptions:
             raise ValueError(f"prefer must be one of {', '.join(PREFER)}, not {self.prefer!r}")
         if not 0 <= self.min_margin < math.inf:
             raise ValueError(f"min_margin must be a number >= 0 (g), not {self.min_margin!r}")
+        if self.robust and self.prefer != "margin":
+            raise ValueError(f"robust {self.robust} ranks candidates by p_stable, which only "
+                             "prefer margin does (prefer holds takes the first that fits)")
 
     @property
     def greedy(self) -> bool:
@@ -237,6 +252,8 @@ class Plan:
     timeline: Timeline | None = None       # planned for a cell: the robots' actions
     #: the (slim) report of the step with the smallest margin (the first of equals)
     weakest: Report | None = None
+    #: with ``robust``: each report's p_stable (the release step's included)
+    p_stable: list[float] = field(default_factory=list)
 
     @property
     def max_held(self) -> int:
@@ -276,6 +293,7 @@ class TrialResult:
     assembly: Assembly | None = None
     proven: bool = True
     refusal: str = ""       # why the cell's robots cannot do a step that stands
+    margin: Margin | None = None    # when the trial made it (min_margin, --margin)
 
 
 @dataclass
@@ -305,6 +323,7 @@ class _Partial:
     score: tuple
     reports: tuple[Report, ...] = ()           # slim step reports
     checker: StepChecker | None = None         # the kept forces of its last step
+    p_stable: tuple[float, ...] = ()           # with robust: per step
 
 
 class _Trial:
@@ -414,6 +433,12 @@ class _Planner:
         # each step's margin (its weakest reported): asked for, or needed by the plan's choice
         self.margins = bool(options.margin_directions or plan.prefer == "margin"
                             or plan.min_margin)
+        self.lazy = plan.prefer == "margin"     # children scored by _best_first
+        if plan.robust and not options.contact.uncertain:
+            raise SceneError(f"robust {plan.robust}: p_stable samples the declared pose "
+                             "uncertainty, and none is declared (--pose-uncertainty-m / -deg, "
+                             "or the scene's pose_uncertainty)")
+        self.samples = StepSamples(scene, options, plan.robust) if plan.robust else None
         self.insertions: dict = {}              # order -> insertion of its last block
         # a cell's robots: who grips what, and the hand-over states (analysis/timeline.py)
         self.cell_check = (CellCheck(cell, self.full, self.base, options, self.position)
@@ -508,10 +533,10 @@ class _Planner:
         found = self.insertion(order)
         return "" if found is None or found.insertable else found.reason
 
-    def trial(self, partial: _Partial, block: str) -> TrialResult:
-        """Whether ``block`` can be placed after ``partial`` with at most K held, and how
-        (:class:`TrialResult`): the one feasibility test of a candidate step."""
-        trial = _Trial(self, partial, block)
+    def trial(self, partial: _Partial, trial: _Trial) -> TrialResult:
+        """Whether ``trial``'s block can be placed after ``partial`` with at most K held, and
+        how (:class:`TrialResult`): the one feasibility test of a candidate step."""
+        block = trial.order[-1]
         held, proven = self._holds(trial, partial.held[-1] if partial.held else ())
         if len(held) > self.plan.max_held or not trial.stands(held):
             return TrialResult(held, False, proven=proven)
@@ -522,10 +547,20 @@ class _Planner:
             # order, not only on the set placed: no proof
             return TrialResult(held, False, proven=False, refusal=why)
         assembly, report = trial.result(held)
-        if self.margins:
-            margin = trial.margin(held)
-            report = replace(report, margin_g=margin.margin_g, margin_direction=margin.direction)
-        return TrialResult(held, True, report, assembly)
+        found = TrialResult(held, True, report, assembly,
+                            margin=trial.margins.get(frozenset(held)))
+        # prefer margin makes a child's margin only when its rank needs it (_best_first)
+        return self.with_margin(found) if self.margins and not self.lazy else found
+
+    def with_margin(self, found: TrialResult) -> TrialResult:
+        """``found`` with its step's margin in its report (made now unless the trial made
+        it)."""
+        margin = found.margin or report_margin(found.report, found.assembly,
+                                               self.options.deciding,
+                                               self.options.margin_directions
+                                               or DEFAULT_DIRECTIONS)
+        return replace(found, margin=margin, report=replace(
+            found.report, margin_g=margin.margin_g, margin_direction=margin.direction))
 
     def _holds(self, trial: _Trial, previous) -> tuple[tuple[str, ...], bool]:
         """The holds of ``trial``'s step as a robot would keep them (the module docstring):
@@ -604,38 +639,132 @@ class _Planner:
 
     def expand(self, partial: _Partial, failure: _Failure) -> Iterator[_Partial]:
         """The feasible children of ``partial`` in the order the search tries them: rank order,
-        lazily (:meth:`feasible`); with ``prefer`` "margin" all of them first, then by their
-        score (the weakest margin so far, largest first)."""
-        children = self.feasible(partial, failure)
-        if self.plan.prefer == "margin":
-            return iter(sorted(children, key=lambda p: (p.score, p.order)))
-        return children
+        lazily (:meth:`feasible`); with ``prefer`` "margin" by their score
+        (:meth:`_best_first`)."""
+        if self.lazy:
+            return self._best_first(partial, failure)
+        return (child for child, _ in self.feasible(partial, failure))
 
-    def feasible(self, partial: _Partial, failure: _Failure) -> Iterator[_Partial]:
-        """The feasible children of ``partial`` in rank order: its candidates
-        (:meth:`candidates`) each tried (:meth:`trial`), lazily, as the search asks for the
-        next. A candidate whose state is known dead (the memo) is skipped unchecked; each
-        other is a state of the budget. ``failure`` collects why candidates were refused."""
+    def _best_first(self, partial: _Partial, failure: _Failure) -> Iterator[_Partial]:
+        """The feasible children of ``partial`` in the order of their key (score, order), as
+        trying and scoring them all, then sorting, would give; each trial, p_stable and
+        margin made only when a child could still come before those known.
+
+        A key with each unknown part at a bound below it is a lower bound: the scored parts
+        (-p_stable, -margin: the weakest of the plan so far) are never below the partial
+        plan's (its weakest); the held blocks of a candidate not yet tried are never fewer
+        than 0, of one that does not stand with none held than 1; its rank is never below
+        the next untried rank. Of a heap of candidates and children, keyed so, and the next
+        untried candidate's bound, the least is taken: a child with every part known comes
+        next (nothing left can come before it); else its next part is made (for an untried
+        candidate: whether it stands with none held; then its trial; then p_stable; then
+        margin) and it goes back."""
+        lows = []                       # the best each scored part can be: the weakest so far
+        if self.samples is not None:
+            lows.append(-min(partial.p_stable, default=math.inf))
+        lows.append(-min((r.margin_g for r in partial.reports), default=math.inf))
+        total, _, ranks = partial.score[-3:]
+        untried = self._states(partial, failure)
+        # (key, tie, entry, payload, parts, rank): a candidate that does not stand unheld
+        # (its _Trial, s spent on it, None), or a child (its TrialResult until its margin is
+        # made, its scored parts so far)
+        heap: list = []
+        seq = itertools.count()
+        after = 0                       # no untried candidate has a rank below this
+
+        def push(entry, payload, parts: list | None, held: int = 0, rank: int = 0) -> None:
+            if parts is None:           # a candidate
+                key = (*lows, total + held, held, ranks + rank), entry.order
+            else:
+                known = [max(low, part) for low, part in zip(lows, parts)]
+                key = (*known, *lows[len(known):], *entry.score[-3:]), entry.order
+            heapq.heappush(heap, (key, next(seq), entry, payload, parts, rank))
+
+        def tried(trial: _Trial, start: float, rank: int) -> None:
+            made = self._tried(partial, trial, rank, start, failure)
+            if made is not None:
+                push(made[0], made[1], [])
+
+        while True:
+            bound = ((*lows, total, 0, ranks + after), ()) if untried is not None else None
+            if bound is not None and (not heap or bound <= heap[0][0]):
+                taken = next(untried, None)
+                if taken is None:
+                    untried = None
+                    continue
+                rank, block = taken
+                after = rank + 1
+                start = time.perf_counter()
+                trial = _Trial(self, partial, block)
+                if trial.stands(()):
+                    tried(trial, start, rank)       # nothing held: its trial is made
+                else:
+                    push(trial, time.perf_counter() - start, None, 1, rank)
+                continue
+            if not heap:
+                return
+            _, _, entry, payload, parts, rank = heapq.heappop(heap)
+            if parts is None:
+                tried(entry, time.perf_counter() - payload, rank)
+                continue
+            child, found = entry, payload
+            if len(parts) == len(lows):
+                child.score = (*(max(low, p) for low, p in zip(lows, parts)),
+                               *child.score[-3:])
+                yield child
+                continue
+            if self.samples is not None and not parts:
+                p = self.samples.p_stable(self.present(child.order, len(child.order) - 1),
+                                          found.held)
+                child.p_stable = (*partial.p_stable, p)
+                parts.append(-p)
+            else:
+                found = self.with_margin(found)
+                child.reports = (*partial.reports, replace(
+                    child.reports[-1], margin_g=found.report.margin_g,
+                    margin_direction=found.report.margin_direction))
+                parts.append(-found.report.margin_g)
+                found = None    # a suspended search keeps no full report or assembly
+            push(child, found, parts)
+
+    def _states(self, partial: _Partial, failure: _Failure) -> Iterator[tuple[int, str]]:
+        """The candidates (:meth:`candidates`) of ``partial`` in rank order, (rank, block),
+        lazily, as the search asks for the next: one whose state is known dead (the memo) is
+        skipped unchecked; each other is a state of the budget."""
         tried = 0
         for rank, b in enumerate(self.candidates(partial.order, failure.blocked)):
             tried += 1
-            order = (*partial.order, b)
-            if frozenset(order) in self.dead:
+            if frozenset((*partial.order, b)) in self.dead:
                 failure.dead += 1
                 continue
             if self.states >= self.budget:
                 raise _Budget
             self.states += 1
-            start = time.perf_counter()
-            found = self.trial(partial, b)
-            if not found.ok:
-                failure.refused(b, found)
-                continue
-            child = self._child(partial, order, found, rank, start)
-            found = None        # a suspended search keeps no full report or assembly
-            yield child
+            yield rank, b
         if tried and tried == self.plan.candidates:
             failure.proven = False              # candidates beyond the limit not tried
+
+    def feasible(self, partial: _Partial, failure: _Failure
+                 ) -> Iterator[tuple[_Partial, TrialResult]]:
+        """The feasible children of ``partial`` in rank order, with their trials: its
+        candidates (:meth:`_states`) each tried (:meth:`trial`), lazily, as the search asks
+        for the next. ``failure`` collects why candidates were refused."""
+        for rank, b in self._states(partial, failure):
+            start = time.perf_counter()
+            made = self._tried(partial, _Trial(self, partial, b), rank, start, failure)
+            if made is not None:
+                yield made
+                made = None     # a suspended search keeps no full report or assembly
+
+    def _tried(self, partial: _Partial, trial: _Trial, rank: int, start: float,
+               failure: _Failure) -> tuple[_Partial, TrialResult] | None:
+        """The child that ``trial`` (:meth:`trial`) makes of ``partial``, with the trial's
+        result; None when it is refused (into ``failure``)."""
+        found = self.trial(partial, trial)
+        if not found.ok:
+            failure.refused(trial.order[-1], found)
+            return None
+        return self._child(partial, trial.order, found, rank, start), found
 
     def _child(self, partial: _Partial, order, found: TrialResult, rank: int,
                start: float) -> _Partial:
@@ -649,10 +778,8 @@ class _Planner:
         if self.streaming and len(partial.order) == self.streamed:
             self.on_report(report)          # the next step of the path: streamed
             self.streamed += 1
+        # prefer margin: the scored parts go before it (_best_first)
         score = (total + len(found.held), len(found.held), ranks + rank)
-        if self.plan.prefer == "margin":        # the weakest step so far first
-            score = (-min((r.margin_g for r in (*partial.reports, report)), default=0.0),
-                     *score)
         return _Partial(order, (*partial.held, found.held), score,
                         (*partial.reports, slim(report)), checker)
 
@@ -906,11 +1033,13 @@ class _Planner:
     def _finish(self, partial: _Partial, feasible: bool, failed: int, message: str,
                 outcome: str, failure: dict | None = None) -> Plan:
         order, held = list(partial.order), list(partial.held)
-        reports = list(partial.reports)
+        reports, p_stable = list(partial.reports), list(partial.p_stable)
         n = len(order)
         release = feasible and held and held[-1]
         if release:
             held.append(())                          # release step
+            if self.samples is not None:        # the finished assembly's
+                p_stable.append(self.samples.p_stable(self.present(self.free, n + 1)))
             report = replace(self.final, step_index=n, block_placed="")
             reports.append(slim(report))
             if self.streaming:
@@ -947,7 +1076,7 @@ class _Planner:
                       key=lambda r: r.margin_g, default=None)
         return Plan(feasible, order, held, message, failed, scene, reports, self.checks,
                     models=dict(self.models), weakest=weakest, outcome=outcome, states=self.states,
-                    backups=self.backups, failure=failure or {})
+                    backups=self.backups, failure=failure or {}, p_stable=p_stable)
 
 
 def _with_timeline(plan: Plan, planner: _Planner, cell: Cell) -> Plan:
@@ -984,7 +1113,7 @@ def plan_sequence(scene: Scene, max_held: int = 2, options: CheckOptions = Check
                   on_report: Callable[[Report], None] | None = None,
                   look_ahead: Callable[[Assembly, CheckOptions], LookAhead] | None = None,
                   cell: Cell | None = None, prefer: str = "holds",
-                  min_margin: float = 0.0) -> Plan:
+                  min_margin: float = 0.0, robust: int = 0) -> Plan:
     """An insertion order of every free block of ``scene`` in which each step stands with at
     most ``max_held`` blocks held (see the module docstring), or where none was found.
 
@@ -1000,12 +1129,12 @@ def plan_sequence(scene: Scene, max_held: int = 2, options: CheckOptions = Check
     (:mod:`rbe_ros.analysis.executors`), closed when the plan is made; the plan is the same
     with and without. ``cell``: plan for its robots (at most as many busy as it has, each grip
     within reach, the hand-over states standing) and make the timeline of their actions,
-    every state checked (:mod:`rbe_ros.analysis.timeline`). ``prefer`` and ``min_margin``:
-    :class:`PlanOptions`."""
+    every state checked (:mod:`rbe_ros.analysis.timeline`). ``prefer``, ``min_margin`` and
+    ``robust``: :class:`PlanOptions`."""
     start = time.perf_counter()
     planner = _Planner(scene, declared(options, scene),
                        PlanOptions(max_held, beam, candidates, keep_sequence, full_candidates,
-                                   time_limit, search_budget, prefer, min_margin),
+                                   time_limit, search_budget, prefer, min_margin, robust),
                        progress, should_stop, on_report, cell)
     if look_ahead is not None and not full_candidates:
         planner.pool = look_ahead(planner.full, planner.options)

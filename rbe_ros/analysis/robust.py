@@ -19,7 +19,9 @@ from ..scene import Scene, SceneError
 from .options import CheckOptions, HoldSearch
 from .perturb import PoseNoise, perturb_scene
 from .pipeline import check_scene, check_sequence, slim
-from .steps import sequence_steps
+from .steps import gripped, sequence_steps
+from .validate import validated_assembly
+from .verdict import check
 
 #: Declared pose uncertainty of a sample, in standard deviations of the noise.
 DECLARED_SIGMAS = 3.0
@@ -118,6 +120,42 @@ def run_batch(job: RobustJob, indices: Iterable[int]) -> list[SampleResult]:
             steps, stands = (False,) * count, False
         out.append(SampleResult(k, stands, steps, _distance(job.scene, scene, job.noise)))
     return out
+
+
+def declared_noise(options: CheckOptions) -> PoseNoise:
+    """The pose noise whose DECLARED_SIGMAS sigma is ``options``' declared uncertainty."""
+    contact = options.contact
+    return PoseNoise(contact.pose_uncertainty_m / DECLARED_SIGMAS,
+                     contact.pose_uncertainty_deg / DECLARED_SIGMAS)
+
+
+class StepSamples:
+    """p_stable of the steps of a plan being made (``plan --robust N``): sample k of
+    ``scene`` as :func:`sample_scene` draws it under ``options``' declared uncertainty, its
+    contacts detected once, and a step (blocks present, held ones gripped at their
+    centroids) checked in each sample. A planned scene places every block of ``scene`` in
+    scene order, so its samples are these: ``robust --sequence`` on it gives each step the
+    same p_stable. Every candidate meets the same samples (common random numbers: a ranking
+    by p_stable is not one of sampling luck)."""
+
+    def __init__(self, scene: Scene, options: CheckOptions, samples: int, seed: int = 0):
+        if samples < 1:
+            raise ValueError(f"samples must be at least 1, not {samples}")
+        job = RobustJob(scene, declared_noise(options), seed, options, sequence=True)
+        self.samples, self.options = samples, sample_options(job)
+        self.assemblies: list = []
+        for k in range(samples):
+            try:
+                self.assemblies.append(validated_assembly(
+                    sample_scene(job, k), self.options.limits, self.options.contact))
+            except SceneError:      # as run_batch: a placement no robot could make, failing
+                self.assemblies.append(None)
+
+    def p_stable(self, present, held=()) -> float:
+        """The share of samples in which the step with ``present`` and ``held`` stands."""
+        stood = sum(check(gripped(a, present, held), self.options).stable
+                    for a in self.assemblies if a is not None)
+        return stood / self.samples
 
 
 def batches(samples: int, size: int) -> list[range]:

@@ -431,7 +431,8 @@ def plan_goal_to_dict(state: dict, limits: PlanLimits) -> dict:
             "hold_torque_max": float(limits.hold_torque_max),
             "time_limit": float(limits.time_limit),
             "search_budget": int(limits.search_budget), "cell": str(limits.cell),
-            "prefer": str(limits.prefer), "min_margin": float(limits.min_margin)}
+            "prefer": str(limits.prefer), "min_margin": float(limits.min_margin),
+            "robust_samples": int(limits.robust_samples)}
 
 
 def plan_goal_from_dict(d: Mapping) -> tuple[dict, PlanLimits]:
@@ -444,7 +445,8 @@ def plan_goal_from_dict(d: Mapping) -> tuple[dict, PlanLimits]:
         hold_torque_max=float(d.get("hold_torque_max", 0.0)),
         time_limit=float(d.get("time_limit", 0.0)),
         search_budget=int(d.get("search_budget", 0)), cell=str(d.get("cell", "") or ""),
-        prefer=str(d.get("prefer", "")) or "holds", min_margin=float(d.get("min_margin", 0.0)))
+        prefer=str(d.get("prefer", "")) or "holds", min_margin=float(d.get("min_margin", 0.0)),
+        robust_samples=int(d.get("robust_samples", 0)))
 
 
 def plan_result_to_dict(plan: Plan, header: dict) -> dict:

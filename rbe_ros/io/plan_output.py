@@ -8,7 +8,7 @@ import json
 import time
 from typing import IO
 
-from ..analysis.planning import PlanProgress
+from ..analysis.planning import Plan, PlanProgress
 from ..analysis.repair import Repair
 from ..rbe.result import Report
 from .messages import json_safe, report_json
@@ -32,6 +32,41 @@ def step_summary(report: Report) -> dict:
                                          "grip_point": w.grip_point.tolist(),
                                          "utilisation": w.utilisation}
                                         for w in report.hold_wrenches]})
+
+
+def step_summaries(plan: Plan) -> list[dict]:
+    """A plan's :func:`step_summary` rows, each with its p_stable when planned with
+    ``--robust``."""
+    rows = [step_summary(r) for r in plan.reports]
+    for row, p in zip(rows, plan.p_stable):
+        row["p_stable"] = p
+    return rows
+
+
+def weakest_p(plan: Plan) -> int:
+    """The index of the plan's step with the smallest p_stable (the first of equals; -1:
+    not planned with ``--robust``)."""
+    return min(range(len(plan.p_stable)), key=plan.p_stable.__getitem__, default=-1)
+
+
+def weakest_p_json(plan: Plan) -> dict:
+    """A plan's weakest step by p_stable for ``--json``: step, block, p_stable, margin_g
+    (step -1, p_stable -1 without ``--robust``)."""
+    k = weakest_p(plan)
+    if k < 0:
+        return {"step": -1, "block": "", "p_stable": -1.0, "margin_g": -1.0}
+    r = plan.reports[k]
+    return json_safe({"step": r.step_index, "block": r.block_placed,
+                      "p_stable": plan.p_stable[k], "margin_g": r.margin_g})
+
+
+def weakest_p_line(plan: Plan, samples: int) -> str:
+    """A plan's weakest step by p_stable as a line of text."""
+    k = weakest_p(plan)
+    r = plan.reports[k]
+    return (f"weakest step by p_stable: {r.step_index} ({r.block_placed or 'release'}), "
+            f"p_stable {plan.p_stable[k]:.3f} over {samples} samples, margin "
+            f"{r.margin_g:.4f} g")
 
 
 def weakest_json(report: Report | None) -> dict:

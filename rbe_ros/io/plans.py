@@ -40,12 +40,14 @@ class PlanLimits:
     cell: str = ""                  # the robot cell, JSON or YAML text; "": none
     prefer: str = "holds"           # "holds" or "margin" (PlanOptions.prefer; "": holds)
     min_margin: float = 0.0         # g; <= 0: off
+    robust_samples: int = 0         # with prefer margin: p_stable over N samples; <= 0: off
 
     def search(self) -> PlanOptions:
         """The planner's search (ValueError naming a limit out of its range)."""
         return PlanOptions(self.max_held, self.beam, self.candidates, self.keep_sequence,
                            search_budget=max(self.search_budget, 0),
-                           prefer=self.prefer or "holds", min_margin=max(self.min_margin, 0.0))
+                           prefer=self.prefer or "holds", min_margin=max(self.min_margin, 0.0),
+                           robust=max(self.robust_samples, 0))
 
 
 def plan_options(options: CheckOptions, limits: PlanLimits) -> CheckOptions:
@@ -124,7 +126,8 @@ def plan_state(read_scene: Callable[[], Scene], limits: PlanLimits,
                              # also the planner's own, for its progress to show what is left
                              time_limit=limits.time_limit if limits.time_limit > 0
                              else math.inf, prefer=search.prefer,
-                             min_margin=search.min_margin, progress=progress,
+                             min_margin=search.min_margin, robust=search.robust,
+                             progress=progress,
                              should_stop=stop, **extra)
     except SceneError as exc:
         return _failed(f"invalid input: {exc}")

@@ -18,11 +18,12 @@ from rbe_ros.analysis.planning import STOPPED, plan_sequence
 from rbe_ros.cli import main
 from rbe_ros.io.messages import report_to_dict
 from rbe_ros.io.replay import (PLAN, bag_options, compare_plan, compare_report, read_runs,
-                               replay_bag, write_runs)
+                               replay_bag, replay_plan, write_runs)
 from rbe_ros.io.scene_json import scene_to_dict
 from rbe_ros.ros.convert import message_to_dict
-from rbe_ros.ros.live import live_goal, live_recheck
+from rbe_ros.ros.live import _Client, live_goal, live_recheck
 
+from helpers import LEDGE_SIGMA, ledge
 from rbe_client import node_and_client, stamp_of, state_msg, wait_until
 
 MAX_HELD = 2
@@ -201,3 +202,34 @@ def test_a_search_budget_in_the_goal(rbe):
     unbounded = rbe.client.send_plan(goal_of(arch, 0), [])
     status, result = rbe.client.result(unbounded, timeout=60.0)
     assert result.message.startswith("no plan with at most 0 held exists")
+
+
+@pytest.mark.long           # seconds: three goals, a parameter set, three re-plans
+def test_robust_samples_in_the_goal(rbe):
+    """The goal's robust_samples is the plan's --robust N: refused with prefer holds, and
+    without the node's declared pose uncertainty; with pose_uncertainty_m set, the ledge is
+    planned by p_stable (the column first, where margin puts the plate first) as ``plan
+    --robust`` plans it; each recorded goal re-plans to its recorded result."""
+    scene = ledge(None)             # the node's parameters declare the uncertainty
+    handle = rbe.client.send_plan(goal_of(scene, 0, robust_samples=16), [])
+    _, result = rbe.client.result(handle, timeout=60.0)
+    assert result.message.startswith("invalid input: robust 16 ranks candidates by p_stable")
+    goal = goal_of(scene, 0, prefer="margin", robust_samples=16)
+    _, result = rbe.client.result(rbe.client.send_plan(goal, []), timeout=60.0)
+    assert result.message.startswith("invalid input: robust 16: p_stable samples the declared")
+    client = _Client(rbe.context, "rbe_node")      # replay's client sets node parameters
+    try:
+        client.set_parameters({"pose_uncertainty_m": 3 * LEDGE_SIGMA}, 30.0)
+        _, result = rbe.client.result(rbe.client.send_plan(goal, []), timeout=60.0)
+        client.set_parameters({"pose_uncertainty_m": 0.0}, 30.0)
+    finally:
+        client.close()
+    # as tests/test_robust_plan.py plans it with plan --robust 16
+    assert result.feasible and list(result.order) == ["column", "plate"]
+    assert result.weakest_margin_g == pytest.approx(0.125, abs=1e-6)      # the column's
+    runs = [r for r in read_runs(rbe.bag) if r.kind == PLAN][-3:]
+    assert [r.state["robust_samples"] for r in runs] == [16, 16, 16]
+    for run in runs:
+        replayed = replay_plan(run)[0]
+        assert (replayed["message"], replayed["order"]) == (run.reports[0]["message"],
+                                                           run.reports[0]["order"])

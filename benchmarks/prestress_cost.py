@@ -20,6 +20,7 @@ from pathlib import Path
 from machine import machine_summary
 
 from rbe_ros import generators as gen
+from rbe_ros.interlock import keyed_vault
 from rbe_ros.io.scene_json import scene_to_dict
 
 HERE = Path(__file__).resolve().parent
@@ -53,15 +54,16 @@ print(json.dumps({"time": best, "status": report.status.name, "blocks": len(asse
 
 
 def cases(folder: Path):
-    """(name, scene file, mu, modelling accuracy in m): the generators' wall, arches and
-    dome, the compas cross vault with its modelling accuracy declared (1 mm: every one of
+    """(name, scene file, mu, modelling accuracy in m): the generators' wall, arches, dome
+    and barrel vault (keyed-vault -p rings=2: two rings in bond), the compas cross vault with its modelling accuracy declared (1 mm: every one of
     its stored interfaces found; the design tolerance misses the crown joint 11|12,
     tests/test_compas_files.py, and its two crown blocks then hang by friction alone)."""
     for name, scene in (("running-bond wall 20 x 14", gen.running_bond_wall(20, 14)),
                         ("semicircular arch", gen.semicircular_arch()),
                         ("buttressed arch", gen.buttressed_arch()),
-                        ("dome 14 x 10", gen.dome())):
-        path = folder / f"{name.split()[0]}.json"
+                        ("dome 14 x 10", gen.dome()),
+                        ("keyed barrel vault 2 rings", keyed_vault(rings=2))):
+        path = folder / f"{name.split()[0]}-{name.split()[1]}.json"
         path.write_text(json.dumps(scene_to_dict(scene)))
         yield name, path, 0.6, 0.0
     yield "compas cross vault", VAULT, 0.84, 0.001

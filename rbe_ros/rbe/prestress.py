@@ -44,7 +44,7 @@ import scipy.sparse as sp
 
 from .cones import pyramid_facets
 from .model import EquilibriumModel
-from .solver import Solution, SolveOptions, solve
+from .solver import Kept, Solution, SolveOptions, solve
 
 #: Weight of the kinetic energy of the motion against the check's objective 1/2 |f|^2 (both
 #: in units of the free weight W): the step's forces are those of the motion to about
@@ -73,6 +73,8 @@ FEEDS_FROM = 3
 #: tangential acceleration at its centre exceeds the same share and the normal one.
 MOVING_SHARE = 1e-2
 MOVING_G = 1e-4
+#: Digits (of the largest) to which the moving blocks and sliding interfaces are ranked.
+RANK_DIGITS = 6
 #: The caps hold the test's field within mu N (1 + CONE_TOL) + SHARE_TOL W (the accuracy
 #: of the solver's normal forces).
 CONE_TOL = 1e-6
@@ -131,8 +133,9 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
             return (Placement(solution, steps=count - 1) if _held(model, solution)
                     else Placement(None, steps=count - 1, beyond=solution))
         frictionless = not caps.any()       # the first step: no variables of friction
+        kept = Kept()                       # the motion's solver, for its least forces
         motion = solve(rigid, options, load=load, friction_cap=bound, inertia=metric,
-                       frictionless=frictionless)
+                       frictionless=frictionless, keep=kept)
         if not motion.solved:
             break
         if _still(model, motion):
@@ -141,7 +144,7 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
                 return replace(settled, steps=count)
         # the least forces that leave the motion found: its normal forces, none by squeeze
         forces = solve(rigid, options, load=load - _scaled(model, motion.unbalanced),
-                       friction_cap=bound, inertia=metric, frictionless=frictionless)
+                       friction_cap=bound, inertia=metric, frictionless=frictionless, keep=kept)
         if not forces.solved:
             break
         normal = options.mu * _above_noise(_sums(model, forces.forces[0]), floor)
@@ -297,10 +300,10 @@ def _motion_of(model: EquilibriumModel, step: Solution):
     g = model.force_scale / sum(model.blocks[j].mass for j in model.free)
     moving = np.flatnonzero((rate > MOVING_SHARE * rate.max(initial=0.0))
                             & (rate > MOVING_G * g))
-    order = moving[np.argsort(-rate[moving], kind="stable")]
+    order = moving[np.argsort(-_tied(rate[moving]), kind="stable")]
     row = np.full(len(model.blocks), -1)
     row[model.free] = np.arange(len(model.free))
-    normal = _sums(model, step.forces[0])
+    normal = _tied(_sums(model, step.forces[0]))
     slide = []
     for k, it in enumerate(model.interfaces):
         ra, rb = row[it.a], row[it.b]
@@ -314,8 +317,16 @@ def _motion_of(model: EquilibriumModel, step: Solution):
         dn = float(d @ n)
         dt = float(np.linalg.norm(d - dn * n))
         if dt > MOVING_SHARE * rate.max() and dn <= dt:     # sliding, not lifting off
-            slide.append((-normal[k], -dt, k))
+            slide.append((-normal[k], -_tied(dt, rate.max()), k))
     return (tuple(int(model.free[r]) for r in order), tuple(k for _, _, k in sorted(slide)))
+
+
+def _tied(values, largest=None):
+    """``values`` rounded to RANK_DIGITS of the largest: equal in a symmetric scene to
+    the solver's rounding, they rank in scene order, whatever solver made them."""
+    values = np.asarray(values, dtype=float)
+    unit = float(np.abs(values).max(initial=0.0)) if largest is None else float(largest)
+    return np.round(values / unit, RANK_DIGITS) * unit if unit > 0 else values
 
 
 def _velocity(linear, angular, r: int, x, centre) -> np.ndarray:

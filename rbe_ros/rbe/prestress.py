@@ -181,12 +181,7 @@ def _settled(model: EquilibriumModel, rigid: EquilibriumModel, options: SolveOpt
     field = None
     for _ in range(MAX_STEPS):
         bound = caps * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
-        # caps of none: a field without friction variables keeps them (a third of the
-        # variables, no cones); only if there is none, the rounding the caps allow
-        found = solve(rigid, options, load=load, frictionless=True) if not caps.any() \
-            else None
-        if found is None or not found.solved:
-            found = solve(rigid, options, load=load, friction_cap=bound)
+        found = solve(rigid, options, load=load, friction_cap=bound)
         if not found.solved:
             break
         field = found

@@ -50,7 +50,7 @@ import scipy.sparse as sp
 
 from .cones import pyramid_facets
 from .model import EquilibriumModel
-from .solver import Solution, SolveOptions, Weights, solve
+from .solver import Kept, Solution, SolveOptions, Weights, solve
 
 #: Weight of the kinetic energy of the motion against the check's objective 1/2 |f|^2 (both
 #: in units of the free weight W): the step's forces are those of the motion to about
@@ -61,6 +61,11 @@ INERTIA_WEIGHT = 1e6
 #: step's caps decides (the kinetic term's weight against the check's objective and the
 #: robots' wrenches leaves about 1e-3 of a held block's weight unbalanced).
 STILL = 1e-2
+#: A step whose motion leaves no free block more than this share of its weight (as STILL)
+#: makes the next step try the RBE problem with its caps before its motion: the cross
+#: vault's second step leaves 0.13, its third none (its first 2.0; a block that falls
+#: freely: 1).
+NEAR_STILL = 0.25
 #: The caps no longer change when none moves by more than this share of W.
 CONVERGED = 1e-4
 #: Normal resultants below this share of the lighter free block's weight at an interface
@@ -79,6 +84,8 @@ FEEDS_FROM = 3
 #: tangential acceleration at its centre exceeds the same share and the normal one.
 MOVING_SHARE = 1e-2
 MOVING_G = 1e-4
+#: Digits (of the largest) to which the moving blocks and sliding interfaces are ranked.
+RANK_DIGITS = 6
 #: The caps hold the test's field within mu N (1 + CONE_TOL) + SHARE_TOL W (the accuracy
 #: of the solver's normal forces).
 CONE_TOL = 1e-6
@@ -138,7 +145,7 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
     load = model.dead_load if load is None else np.asarray(load, dtype=float)
     caps = np.zeros(len(model.interfaces))
     floor = _noise_floor(model)
-    motion, change_before = None, math.inf
+    motion, change_before, tried = None, math.inf, 2 * NEAR_STILL
     for count in range(1, MAX_STEPS + 1):
         bound = caps * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
         if solution is not None and solution.solved and _within(
@@ -150,12 +157,28 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
                         else Placement(None, steps=count - 1, beyond=solution))
             caps, motion = own
             bound = caps * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
+        # the last step's motion near rest: this one likely leaves none, which the RBE
+        # problem with the caps decides alone (it has a field exactly when no motion is
+        # left), without the motion's solve; tried first (again only once the motion has
+        # halved since: caps that creep leave a motion near rest step after step)
+        early = motion is not None and _unbalance(model, motion) <= tried / 2
+        if early:
+            settled = _settled(model, rigid, options, load, caps, floor)
+            if settled is not None:
+                own = _own_caps(model, rigid, options, load, caps, floor, metric,
+                                None if model.grips else settled.field)
+                if own is None:
+                    return replace(settled, steps=count)
+                caps, motion = own
+                continue
+            tried = _unbalance(model, motion)
         frictionless = not caps.any()       # the first step: no variables of friction
+        kept = Kept()                       # the motion's solver, for its least forces
         motion = solve(rigid, options, load=load, friction_cap=bound, inertia=metric,
-                       frictionless=frictionless)
+                       frictionless=frictionless, keep=kept)
         if not motion.solved:
             break
-        if _still(model, motion):
+        if not early and _still(model, motion):
             settled = _settled(model, rigid, options, load, caps, floor)
             if settled is not None:
                 own = _own_caps(model, rigid, options, load, caps, floor, metric,
@@ -166,7 +189,7 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
                 continue
         # the least forces that leave the motion found: its normal forces, none by squeeze
         forces = solve(rigid, options, load=load - _scaled(model, motion.unbalanced),
-                       friction_cap=bound, inertia=metric, frictionless=frictionless)
+                       friction_cap=bound, inertia=metric, frictionless=frictionless, keep=kept)
         if not forces.solved:
             break
         normal = options.mu * _above_noise(_sums(model, forces.forces[0]), floor)
@@ -396,12 +419,18 @@ def inertia_metric(model: EquilibriumModel) -> sp.csc_matrix:
 def _still(model: EquilibriumModel, step: Solution) -> bool:
     """Whether no free block is left with a net force above STILL of its weight (or a net
     moment above STILL of its weight times its size)."""
+    return _unbalance(model, step) <= STILL
+
+
+def _unbalance(model: EquilibriumModel, step: Solution) -> float:
+    """The largest net force a step leaves a free block, as a share of its weight (or net
+    moment, of its weight times its size)."""
     e = step.unbalanced.reshape(-1, 6)
     weight = np.array([model.blocks[j].mass for j in model.free]) * (
         model.force_scale / sum(model.blocks[j].mass for j in model.free))
     size = np.array([model.blocks[j].size for j in model.free])
-    return bool(np.all(np.linalg.norm(e[:, :3], axis=1) <= STILL * weight) and
-                np.all(np.linalg.norm(e[:, 3:], axis=1) <= STILL * weight * size))
+    return float(max(np.max(np.linalg.norm(e[:, :3], axis=1) / weight, initial=0.0),
+                     np.max(np.linalg.norm(e[:, 3:], axis=1) / (weight * size), initial=0.0)))
 
 
 def accelerations(model: EquilibriumModel, step: Solution) -> tuple[np.ndarray, np.ndarray]:
@@ -434,10 +463,10 @@ def _motion_of(model: EquilibriumModel, step: Solution):
     g = model.force_scale / sum(model.blocks[j].mass for j in model.free)
     moving = np.flatnonzero((rate > MOVING_SHARE * rate.max(initial=0.0))
                             & (rate > MOVING_G * g))
-    order = moving[np.argsort(-rate[moving], kind="stable")]
+    order = moving[np.argsort(-_tied(rate[moving]), kind="stable")]
     row = np.full(len(model.blocks), -1)
     row[model.free] = np.arange(len(model.free))
-    normal = _sums(model, step.forces[0])
+    normal = _tied(_sums(model, step.forces[0]))
     slide = []
     for k, it in enumerate(model.interfaces):
         ra, rb = row[it.a], row[it.b]
@@ -451,8 +480,16 @@ def _motion_of(model: EquilibriumModel, step: Solution):
         dn = float(d @ n)
         dt = float(np.linalg.norm(d - dn * n))
         if dt > MOVING_SHARE * rate.max() and dn <= dt:     # sliding, not lifting off
-            slide.append((-normal[k], -dt, k))
+            slide.append((-normal[k], -_tied(dt, rate.max()), k))
     return (tuple(int(model.free[r]) for r in order), tuple(k for _, _, k in sorted(slide)))
+
+
+def _tied(values, largest=None):
+    """``values`` rounded to RANK_DIGITS of the largest: equal in a symmetric scene to
+    the solver's rounding, they rank in scene order, whatever solver made them."""
+    values = np.asarray(values, dtype=float)
+    unit = float(np.abs(values).max(initial=0.0)) if largest is None else float(largest)
+    return np.round(values / unit, RANK_DIGITS) * unit if unit > 0 else values
 
 
 def _velocity(linear, angular, r: int, x, centre) -> np.ndarray:

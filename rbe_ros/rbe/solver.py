@@ -187,10 +187,41 @@ def _spent_since(start: float) -> float:
     return elapsed
 
 
+class Kept:
+    """The Clarabel solver of a solve() (``keep``), for the same problem under another load:
+    only the equilibrium rows' right-hand side -p differs, so Clarabel's data update keeps
+    its equilibration, KKT ordering and symbolic factorisation, and none of the problem's
+    arrays is built again (the placement test's least forces of a motion, whose problem is
+    the motion's with p - e)."""
+
+    def __init__(self):
+        self.solver = self.v = None
+        self.size = 0               # of the KKT system
+
+    def solve(self, model: EquilibriumModel, options: SolveOptions, p: np.ndarray
+              ) -> Solution | None:
+        """The solution under ``p`` (scaled), or None if there is no solver kept or its
+        first attempt is not accepted (solve() then makes the problem anew)."""
+        if self.solver is None:
+            return None
+        start = time.perf_counter()
+        b = np.asarray(p, dtype=float)
+        rows = np.arange(len(b))
+        settings = _settings(options, _attempts(False)[0], 0.0, self.size)
+        self.solver.update(b=(rows, -b), settings=settings)
+        result = self.solver.solve()
+        status = str(result.status)
+        accepted = _accept(model, self.v, np.array(result.x), b, None, status) \
+            if status in _SOLVED else None
+        elapsed = _spent_since(start)
+        return None if accepted is None else replace(accepted, time=elapsed)
+
+
 def solve(model: EquilibriumModel, options: SolveOptions = SolveOptions(), *,
           load: np.ndarray | None = None, live_load: np.ndarray | None = None,
           friction_cap: np.ndarray | None = None,
-          inertia: sp.spmatrix | None = None, frictionless: bool = False) -> Solution:
+          inertia: sp.spmatrix | None = None, frictionless: bool = False,
+          keep: Kept | None = None) -> Solution:
     """Solve the RBE problem of ``model`` under ``load`` (scaled p; default: dead load).
     ``friction_cap`` (N per interface, inf: none) bounds the resultant of each interface's
     friction forces in the cone's norm, as well as the vertex cones (Tresca bounds of the
@@ -200,10 +231,16 @@ def solve(model: EquilibriumModel, options: SolveOptions = SolveOptions(), *,
     (the kinetic energy of the motion it starts, rbe/prestress.py). ``frictionless``: no
     friction variables at all (fn >= 0 only; a third of the variables and no cones).
     Within a check's time budget (:mod:`rbe_ros.deadline`) the solver gets what is left of it,
-    and a solve that runs out of it raises CheckTimeout."""
+    and a solve that runs out of it raises CheckTimeout. ``keep``: a solve of the same
+    problem under another load kept its solver there (solved with it, unless its first
+    attempt fails), else this one keeps its solver there (no live load, no tension)."""
     checkpoint()
     nv = model.num_vertices
     p = model.dead_load if load is None else load
+    if keep is not None and live_load is None:
+        again = keep.solve(model, options, p)
+        if again is not None:
+            return again
     multiplier = live_load is not None
     lp = options.objective == "lp" and not multiplier
     # Under friction-net fn- is redundant: any fn- > 0 can be cancelled against fn+ at lower
@@ -236,11 +273,15 @@ def solve(model: EquilibriumModel, options: SolveOptions = SolveOptions(), *,
             data[:2] = [_Csc.diagonal(p_retry) if inertia is None else
                         _with_inertia(p_retry, v, inertia), _floats(q_retry)]
         settings = _settings(options, attempt, time.perf_counter() - start, a.shape[0] + v.count)
-        result = clarabel.DefaultSolver(*data, settings).solve()
+        solver = clarabel.DefaultSolver(*data, settings)
+        result = solver.solve()
         status = str(result.status)
         if status in _SOLVED:
             accepted = _accept(model, v, np.array(result.x), p, live_load, status)
             if accepted is not None:
+                if keep is not None and not k and not multiplier and not tension and \
+                        keep.solver is None and solver.is_data_update_allowed():
+                    keep.solver, keep.v, keep.size = solver, v, a.shape[0] + v.count
                 break
     elapsed = _spent_since(start)
     if accepted is not None:

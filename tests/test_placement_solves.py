@@ -1,0 +1,102 @@
+"""How the placement test makes its solves (rbe/prestress.py) changes no answer: each saving
+is checked against the test made the plain way, every solve built anew, on the squeeze
+suite and the generators.
+
+The savings: the least forces of a step's motion re-solved by the motion's own Clarabel
+solver (only the load differs: solver.Kept); after a step whose motion was near rest, the
+RBE problem with the caps tried before the motion (it has a field exactly when the step
+leaves no motion). The oracle undoes both through the module's own names: no solver kept,
+the motion always first.
+"""
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rbe_ros import generators
+from rbe_ros.analysis.assembly import Assembly
+from rbe_ros.analysis.options import CheckOptions
+from rbe_ros.analysis.pipeline import check_scene
+from rbe_ros.analysis.verdict import model_of
+from rbe_ros.interlock import keyed_vault
+from rbe_ros.io.scene_json import load_scene
+from rbe_ros.rbe import prestress
+from rbe_ros.rbe.solver import Kept, SolveOptions, solve
+
+SUITE = Path(__file__).resolve().parent / "data" / "squeeze"
+MANIFEST = json.loads((SUITE / "manifest.json").read_text())["scenes"]
+
+
+class _NoneKept(Kept):
+    """A Kept that never keeps: every solve built anew."""
+
+    def solve(self, model, options, p):
+        return None
+
+
+def _plain(monkeypatch):
+    """The placement test with every solve made the plain way."""
+    monkeypatch.setattr(prestress, "Kept", _NoneKept)
+    monkeypatch.setattr(prestress, "NEAR_STILL", -1.0)
+
+
+def _same(ours, theirs, where: str):
+    """Status, message, blocks named; normal forces to 1e-5 of the largest."""
+    assert (ours.status, ours.message, ours.unstable_blocks) == \
+        (theirs.status, theirs.message, theirs.unstable_blocks), where
+    scale = max((abs(i.normal_resultant) for i in theirs.interfaces), default=1.0)
+    for a, b in zip(ours.interfaces, theirs.interfaces):
+        assert a.normal_resultant == pytest.approx(b.normal_resultant, abs=1e-5 * scale), where
+
+
+def _scenes():
+    for entry in MANIFEST:
+        yield entry["name"], load_scene(SUITE / entry["file"]), entry["mu"]
+    yield "semicircular arch", generators.semicircular_arch(), 0.6
+    yield "keyed vault", keyed_vault(), 0.6
+
+
+@pytest.mark.long
+def test_the_savings_change_no_report_on_the_squeeze_suite_and_generators(monkeypatch):
+    """Status, message and the blocks named equal, normal forces to 1e-5 of the largest."""
+    cases = list(_scenes())
+    ours = {name: check_scene(scene, replace(CheckOptions(), solve=SolveOptions(mu=mu)))
+            for name, scene, mu in cases}
+    _plain(monkeypatch)
+    for name, scene, mu in cases:
+        _same(ours[name], check_scene(scene, replace(CheckOptions(),
+                                                     solve=SolveOptions(mu=mu))), name)
+
+
+@pytest.mark.parametrize("name", ["leaning_posts15_mu1.20", "incline_pressed30_mu0.50",
+                                  "incline_pressed30_mu0.70", "shelf60_mu1.20"])
+def test_the_savings_change_no_report_on_squeeze_scenes(monkeypatch, name):
+    """Symmetric posts that fall (their message names post_l first, as scene order ranks
+    ties), a block that slides after friction closes a contact, one that then stands, a
+    shelf whose caps creep near rest (the RBE problem tried early, and failing): as the
+    plain test (the whole suite: the long test above)."""
+    entry = next(e for e in MANIFEST if e["name"] == name)
+    scene, options = load_scene(SUITE / entry["file"]), \
+        replace(CheckOptions(), solve=SolveOptions(mu=entry["mu"]))
+    ours = check_scene(scene, options)
+    _plain(monkeypatch)
+    _same(ours, check_scene(scene, options), name)
+
+
+def test_a_kept_solver_solves_the_least_forces_as_a_fresh_one():
+    """The arch's first step: the least forces of its motion by the motion's solver equal
+    those of a solver made anew, to the solver's accuracy."""
+    model = model_of(Assembly.from_scene(generators.semicircular_arch()), CheckOptions())
+    options = SolveOptions(mu=0.6)
+    metric = prestress.inertia_metric(model)
+    kept = Kept()
+    motion = solve(model, options, inertia=metric, frictionless=True, keep=kept)
+    assert kept.solver is not None
+    load = model.dead_load - prestress._scaled(model, motion.unbalanced)
+    again = solve(model, options, load=load, inertia=metric, frictionless=True, keep=kept)
+    fresh = solve(model, options, load=load, inertia=metric, frictionless=True)
+    assert again.solved and fresh.solved
+    assert np.abs(again.forces - fresh.forces).max() <= 1e-9 * model.force_scale
+    assert np.abs(again.unbalanced - fresh.unbalanced).max() <= 1e-9 * model.force_scale

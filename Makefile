@@ -18,14 +18,16 @@ demo: setup
 	$(VENV)/bin/rbe-ros view out/demo -o out/demo/report.html
 	@echo "[demo] open out/demo/report.html in a browser (3D view, step slider, table of steps)"
 
-# The core tests on both cores (pytest-xdist), then the ROS tests (tests/ros) one at a time:
-# they start nodes and time their answers, so they run with no other test beside them.
+# The core tests on both cores (pytest-xdist), then the ROS tests (tests/ros): they start
+# nodes and time their answers, so they do not run beside the core tests; on two workers,
+# each in a DDS domain of its own (tests/ros/conftest.py), a test file on one worker (its
+# module-scoped node started once).
 test: setup browser ray
 	@echo "[test] ROS_DOMAIN_ID=$(ROS_DOMAIN_ID) ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST"
 	ROS_DOMAIN_ID=$(ROS_DOMAIN_ID) ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST \
 		$(PY) -m pytest tests -q -m "not long" --ignore=tests/ros -n 2
 	ROS_DOMAIN_ID=$(ROS_DOMAIN_ID) ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST \
-		$(PY) -m pytest tests/ros -q -m "not long"
+		$(PY) -m pytest tests/ros -q -m "not long" -n 2 --dist loadfile
 
 # The whole suite 5 times in a row with 2 busy processes beside it (one per core here):
 # no timing assert may fail under load (scripts/suite_under_load.sh; 30-50 minutes).

@@ -12,8 +12,8 @@ $RBE_COMPAS_SAMPLES name others; those tests fail, never skip, when it is missin
 
 Tests marked ``long`` (minutes each: whole suites planned or checked against references) are
 left out of ``make test`` (``-m "not long"``) and run by ``make test-long``. ``make test`` runs
-the core tests on both cores (pytest-xdist), then the ROS tests (tests/ros) one at a time:
-they start nodes and time their answers.
+the core tests on both cores (pytest-xdist), then the ROS tests (tests/ros), which start
+nodes and time their answers, on both cores by test file (``--dist loadfile``).
 """
 import os
 from pathlib import Path

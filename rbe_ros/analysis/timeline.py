@@ -10,12 +10,12 @@ places while busy.
 Between the planner's steps k-1 and k (held blocks H[k-1], then H[k] with block b placed):
 the robots first take the placed blocks H[k] holds anew; b's placing robot is a free robot
 that can grip it and carry it to its pose within its payload (:mod:`rbe_ros.analysis.grips`:
-the nearest first); when none is free,
-holds of H[k-1] that H[k] drops are released first (oldest first) - the hand-over state,
-b still absent, which must stand; then b is placed, kept or released, and the other
-dropped holds released. Each state after an action is checked with the robots' grips and
-payloads (:func:`rbe_ros.analysis.verdict.check`), so no state between actions goes
-unchecked, and no state has more robots busy than the cell has.
+the nearest first); when none is free, holds of H[k-1] that H[k] drops are released first
+(oldest first) - the hand-over state, b still absent, which must stand; then b is placed,
+kept or released, and the other dropped holds released. Each state after an action is
+checked with the robots' grips and payloads (:func:`rbe_ros.analysis.verdict.check`), so
+no state between actions goes unchecked, and no state has more robots busy than the cell
+has.
 
 During the search (:class:`CellCheck`, a hook of the planner) a trial step is refused when
 no free robot can grip a block it needs or the state after one of its actions falls (a

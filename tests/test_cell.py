@@ -359,12 +359,14 @@ def test_cell_fields_and_robot_count():
     with pytest.raises(CellError, match="appears twice"):
         cell_from_dict({"robots": [ARCH_CELL["robots"][0]] * 2})
     # two robots: one holds while one places; at step 4 the crown v03 held alone needs
-    # 1601 N, beyond r1's 1500 N payload less its tool's 19.6 N: the plan names both
+    # 1582 N, beyond r1's 1500 N payload less its tool's 19.6 N: the plan names both (its
+    # grip is the top face: carried by its front face, 0.5 m off its centre of mass, the
+    # crown's 1277 N would need 637 N m of r1's 400 N m)
     plan = plan_sequence(generators.semicircular_arch(7), 1,
                          cell=cell_from_dict({"robots": ARCH_CELL["robots"][:2]}))
     assert not plan.feasible and plan.failed_step == 4
     assert "(r1 holding v03 beyond its payload): hold exceeded" in plan.message
-    assert "needs |F| 1601 N (capacity 1480 N)" in plan.message
+    assert "needs |F| 1582 N (capacity 1480 N)" in plan.message
     assert max(busy_per_state([{"action": a.action, "robot": a.robot, "block": a.block}
                                for a in plan.timeline.actions])) <= 2
 
@@ -505,3 +507,57 @@ def test_a_top_grip_is_free_while_held_and_blocks_the_course_above(tmp_path, cap
     acts, _ = steps.step(5, "course01_brick01", busy, (), present)
     assert [(a.action, a.block, a.before) for a in acts][:2] == [
         ("release", "course00_brick01", True), ("place", "course01_brick01", False)]
+
+
+def test_a_carried_block_closed_form_and_a_robot_too_weak_to_carry_it(tmp_path, capsys):
+    """A block resting on the ground once placed, carried there by its +x face (no hold:
+    the ground bears it after): the place action's wrench is its whole weight m g up at the
+    TCP, about which it hangs a / 2 off (its centre of mass), M = (b - p) x (-W) = (0,
+    m g a / 2, 0); with the tool's weight m_t g up at its box centre d = sz / 2 + 1 mm
+    behind the face, in tool axes (x up, y = y, z = -x) F = ((m + m_t) g, 0, 0), M = (0,
+    m g a / 2 - m_t g d, 0). A robot of 50 N m carries it by its top face (tool axis along
+    gravity: no torque); one of 500 N carries it by none, and the plan names robot, block,
+    need and payload."""
+    a, m, tool_mass, depth = 0.4, 50.0, 3.0, 0.2
+    ground = box_block("ground", (1, 1, 0.1), (0, 0, -0.05), density=2000, support=True)
+    block = box_block("b", (a, 0.3, 0.2), (0, 0, 0.1), mass=m)
+    scene_path = write(tmp_path, "one.json", scene_to_dict(make_scene("one", [ground, block])))
+
+    def plan(force, torque):
+        cell = {"robots": [{"name": "r", "base": [3.0, 0.0, 0.1], "reach": 4.0,
+                            "payload_force": force, "payload_torque": torque,
+                            "tool": {"box": [0.1, 0.1, depth], "tcp": [0, 0, depth],
+                                     "mass": tool_mass}}]}
+        capsys.readouterr()
+        code = main(["plan", scene_path, "--cell", write(tmp_path, "c.json", cell), "--json"])
+        return code, json.loads(capsys.readouterr().out)
+
+    def xyz(v):
+        return [v["x"], v["y"], v["z"]]
+
+    code, result = plan(1000.0, 200.0)
+    assert code == 0 and [(t["action"], t["block"]) for t in result["timeline"]] == [
+        ("place", "b"), ("release", "b")]
+    place = result["timeline"][0]
+    assert xyz(place["grip"]["pose"]["position"]) == pytest.approx([a / 2, 0, 0.1])
+    assert xyz(place["wrench_world"]["force"]) == pytest.approx([0, 0, m * G], abs=1e-9)
+    assert xyz(place["wrench_world"]["torque"]) == pytest.approx([0, m * G * a / 2, 0],
+                                                                 abs=1e-9)
+    d = depth / 2 + 1e-3
+    assert xyz(place["wrench_tool"]["force"]) == pytest.approx([(m + tool_mass) * G, 0, 0],
+                                                               abs=1e-9)
+    assert xyz(place["wrench_tool"]["torque"]) == pytest.approx(
+        [0, m * G * a / 2 - tool_mass * G * d, 0], abs=1e-9)
+    # 95.1 N m is beyond 50 N m: the top face, its torque nil
+    code, result = plan(1000.0, 50.0)
+    place = result["timeline"][0]
+    assert code == 0 and xyz(place["grip"]["pose"]["position"]) == pytest.approx([0, 0, 0.2])
+    assert xyz(place["wrench_tool"]["force"]) == pytest.approx([0, 0, -(m + tool_mass) * G],
+                                                               abs=1e-9)
+    assert xyz(place["wrench_tool"]["torque"]) == pytest.approx([0, 0, 0], abs=1e-9)
+    # 520 N is beyond 500 N whatever the face
+    code, result = plan(500.0, 200.0)
+    assert code == 1 and not result["feasible"] and result["order"] == []
+    need = f"carrying it needs |F| {(m + tool_mass) * G:.0f} N"
+    assert "r cannot grip block b" in result["message"]
+    assert f"{need}, |M| 0 N m with its gripper (payload 500 N, 200 N m)" in result["message"]

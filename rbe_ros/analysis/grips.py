@@ -16,6 +16,13 @@ check) and its tool's weight, m_t g at the box centre c: F_r = F - m_t g, M_r = 
 (c - p) x (-m_t g), within the robot's payload. The check bounds the block's need by the
 payload less what the tool takes in the worst case (|F| <= payload - m_t |g|, |M| <=
 payload torque - m_t |g| |c - p|), so a wrench it accepts is within the payload.
+
+What the placing robot carries to the block's pose (:func:`carry_wrench`, the place action):
+the block's whole weight m g at its centre of mass b, nothing else bearing it, and the tool's:
+F_r = -(m + m_t) g, M_r = (b - p) x (-m g) + (c - p) x (-m_t g). A robot grips a block to
+place it only on a face where that is within its payload (:meth:`GripChooser.choose`
+``carry``): faces where the block hangs less off the TCP (a top face, the tool axis along
+gravity) pass where a side face's torque does not.
 """
 from __future__ import annotations
 
@@ -28,7 +35,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..cell import Cell, CellError, Robot
-from ..geometry.block import pose_blocks
+from ..geometry.block import PosedBlock, pose_blocks
 from ..geometry.insertion import present_pieces
 from ..rbe.model import Grip
 from ..scene import Scene
@@ -112,6 +119,21 @@ def robot_wrench(robot: Robot, grip: GripFrame, force, torque, gravity) -> Robot
     use = max(_ratio(np.linalg.norm(f_r), robot.payload_force),
               _ratio(np.linalg.norm(m_r), robot.payload_torque))
     return RobotWrench(force, torque, f_r, m_r, rt @ f_r, rt @ m_r, use)
+
+
+def carry_wrench(robot: Robot, grip: GripFrame, block: PosedBlock, gravity) -> RobotWrench:
+    """``robot``'s wrench carrying ``block`` by ``grip`` (at the block's placed pose, which
+    the carry only translates): its whole weight at its centre of mass, the tool's included."""
+    weight = block.mass * np.asarray(gravity, dtype=float)
+    return robot_wrench(robot, grip, -weight, np.cross(block.centroid - grip.point, -weight),
+                        gravity)
+
+
+def wrench_need(w: RobotWrench, robot: Robot) -> str:
+    """A robot's wrench with the tool's weight against its payload, in words."""
+    return (f"|F| {np.linalg.norm(w.force_robot):.0f} N, |M| {np.linalg.norm(w.torque_robot):.0f}"
+            f" N m with its gripper (payload {robot.payload_force:g} N, "
+            f"{robot.payload_torque:g} N m)")
 
 
 def _ratio(value: float, cap: float) -> float:
@@ -202,20 +224,22 @@ class GripChooser:
             if grip.face >= 0 else frozenset()
         return block in on or bool(self.collides(robot, grip, frozenset((block,))))
 
-    def choose(self, block: str, robot: Robot, present=None) -> tuple[GripFrame | None, str]:
+    def choose(self, block: str, robot: Robot, present=None, carry: bool = False
+               ) -> tuple[GripFrame | None, str]:
         """``robot``'s grip of ``block`` with the blocks ``present`` (None: the finished
         assembly): on a face none of them touches, faces free in the finished assembly first
         (no later block lands on them), then the one facing the robot's base most; its
-        gripper clear of them, within reach, with a URDF an inverse kinematics solution. None
-        and why not when there is none."""
+        gripper clear of them, within reach, ``carry`` (to place it) its carry wrench within
+        the payload, with a URDF an inverse kinematics solution. None and why not when there
+        is none."""
         near = self.near(block)
         here = near if present is None else near & frozenset(present)
-        key = (block, robot.name, here)
+        key = (block, robot.name, here, carry)
         if key not in self._chosen:
-            self._chosen[key] = self._choose(block, robot, here)
+            self._chosen[key] = self._choose(block, robot, here, carry)
         return self._chosen[key]
 
-    def _choose(self, block: str, robot: Robot, here: frozenset[str]
+    def _choose(self, block: str, robot: Robot, here: frozenset[str], carry: bool
                 ) -> tuple[GripFrame | None, str]:
         base = np.asarray(robot.base, dtype=float)
         faces = [(g, on) for g, on in self.faces(block) if not on & here]
@@ -234,6 +258,12 @@ class GripChooser:
             if hit:
                 why.append(f"face {g.face}: {robot.name}'s gripper hits {', '.join(hit[:3])}")
                 continue
+            if carry:
+                w = carry_wrench(robot, g, self.assembly.blocks[self.index[block]],
+                                 self.assembly.gravity)
+                if w.utilisation > 1.0:
+                    why.append(f"face {g.face}: carrying it needs {wrench_need(w, robot)}")
+                    continue
             if robot.urdf and solve_ik(robot, g.point, g.rotation) is None:
                 why.append(f"face {g.face}: no inverse kinematics solution")
                 continue
@@ -264,5 +294,5 @@ def validate_cell(cell: Cell, scene: Scene) -> None:
             load_arm(r)
 
 
-__all__ = ["GripChooser", "GripFrame", "PRE_GRIP", "RobotWrench",
-           "robot_grip", "robot_wrench", "tool_box_pose", "validate_cell"]
+__all__ = ["GripChooser", "GripFrame", "PRE_GRIP", "RobotWrench", "carry_wrench",
+           "robot_grip", "robot_wrench", "tool_box_pose", "validate_cell", "wrench_need"]

@@ -9,12 +9,13 @@ places while busy.
 
 Between the planner's steps k-1 and k (held blocks H[k-1], then H[k] with block b placed):
 the robots first take the placed blocks H[k] holds anew; b's placing robot is a free robot
-that can grip it (:mod:`rbe_ros.analysis.grips`: the nearest first); when none is free,
-holds of H[k-1] that H[k] drops are released first (oldest first) - the hand-over state,
-b still absent, which must stand; then b is placed, kept or released, and the other
-dropped holds released. Each state after an action is checked with the robots' grips and
-payloads (:func:`rbe_ros.analysis.verdict.check`), so no state between actions goes
-unchecked, and no state has more robots busy than the cell has.
+that can grip it and carry it to its pose within its payload (:mod:`rbe_ros.analysis.grips`:
+the nearest first); when none is free, holds of H[k-1] that H[k] drops are released first
+(oldest first) - the hand-over state, b still absent, which must stand; then b is placed,
+kept or released, and the other dropped holds released. Each state after an action is
+checked with the robots' grips and payloads (:func:`rbe_ros.analysis.verdict.check`), so
+no state between actions goes unchecked, and no state has more robots busy than the cell
+has.
 
 During the search (:class:`CellCheck`, a hook of the planner) a trial step is refused when
 no free robot can grip a block it needs or the state after one of its actions falls (a
@@ -33,7 +34,8 @@ from ..rbe.result import Report
 from ..scene import Scene
 from .assembly import Assembly
 from .insertion import approach_length
-from .grips import PRE_GRIP, GripChooser, GripFrame, RobotWrench, robot_grip, robot_wrench
+from .grips import (PRE_GRIP, GripChooser, GripFrame, RobotWrench, carry_wrench, robot_grip,
+                    robot_wrench)
 from .options import CheckOptions
 from .steps import supports_present
 from .verdict import check
@@ -53,7 +55,7 @@ class Busy:
 class Action:
     """One action of the timeline, the state after it (``before``: the step's block not
     yet placed; ``busy``: the blocks held then, with their robots' grips) and, once built,
-    its check and the acting robot's wrench."""
+    its check and the acting robot's wrench (a place: what it carries to the pose)."""
 
     action: str
     robot: str
@@ -118,10 +120,10 @@ class CellSteps:
         self.position = position
         self.centroid = {b.id: b.centroid for b in assembly.blocks}
 
-    def _take(self, block: str, busy: dict[str, Busy], present
+    def _take(self, block: str, busy: dict[str, Busy], present, carry: bool = False
               ) -> tuple[Robot, GripFrame] | str:
-        """The nearest free robot that can grip ``block`` among the blocks ``present``, or
-        why none can."""
+        """The nearest free robot that can grip ``block`` among the blocks ``present``
+        (``carry``: and carry it to its pose within its payload), or why none can."""
         taken = {h.robot for h in busy.values()}
         why = []
         robots = sorted(self.cell.robots, key=lambda r: float(np.linalg.norm(
@@ -131,7 +133,7 @@ class CellSteps:
                 held = next(b for b, h in busy.items() if h.robot == r.name)
                 why.append(f"{r.name} is busy holding {held}")
                 continue
-            grip, reason = self.chooser.choose(block, r, present)
+            grip, reason = self.chooser.choose(block, r, present, carry)
             if grip is not None:
                 return r, grip
             why.append(reason)
@@ -151,9 +153,9 @@ class CellSteps:
         def act(kind, robot, b, before, grip):
             acts.append(Action(kind, robot, b, k, before, tuple(busy.items()), grip))
 
-        def taken(b):
+        def taken(b, carry=False):
             while True:
-                found = self._take(b, busy, present)
+                found = self._take(b, busy, present, carry)
                 if not isinstance(found, str):
                     return found
                 if not drop:
@@ -167,7 +169,7 @@ class CellSteps:
                 robot, grip = taken(c)
                 busy[c] = Busy(robot.name, grip)
                 act(HOLD, robot.name, c, True, grip)
-            robot, grip = taken(block)
+            robot, grip = taken(block, carry=True)
             for c, h in list(busy.items()):
                 if self.chooser.in_the_way(block, self.cell.robot(h.robot), h.grip):
                     if c not in drop:
@@ -309,7 +311,7 @@ def check_action(a: Action, order, states: "StateChecks", approach=(),
     starts its straight approach."""
     if report is None:
         report = states(action_present(states.scene, order, a), a.busy)
-    a = with_report(a, report, states.cell, states.assembly.gravity)
+    a = with_report(a, report, states.cell, states.assembly)
     direction = None
     k = a.step
     if a.action == PLACE and k < len(approach) and approach[k] is not None:
@@ -319,12 +321,17 @@ def check_action(a: Action, order, states: "StateChecks", approach=(),
     return replace(a, approach=direction)
 
 
-def with_report(a: Action, report: Report, cell: Cell, gravity) -> Action:
+def with_report(a: Action, report: Report, cell: Cell, assembly: Assembly) -> Action:
     """``a`` with ``report``, the check of the state after it, and the acting robot's
-    wrench from it (for the block it holds then)."""
+    wrench: a place's what it carries to the pose (not the settled hold), else from the
+    report (for the block it holds then)."""
     wrench = None
     busy_now = dict(a.busy)
-    if a.block in busy_now and report.hold_wrenches:
+    gravity = assembly.gravity
+    if a.action == PLACE:
+        block = next(b for b in assembly.blocks if b.id == a.block)
+        wrench = carry_wrench(cell.robot(a.robot), a.grip, block, gravity)
+    elif a.block in busy_now and report.hold_wrenches:
         hw = next((w for w in report.hold_wrenches if w.block == a.block), None)
         if hw is not None:
             wrench = robot_wrench(cell.robot(a.robot), busy_now[a.block].grip, hw.force,

@@ -37,9 +37,9 @@ DECIDED = sorted(n for n, r in VERDICTS.items() if r["lmgc90"] in ("stands", "fa
 SAFE_SIDE = {"leaning_posts15_mu5.00": "FRICTION_EXCEEDED"}
 
 
-def _script():
-    spec = importlib.util.spec_from_file_location("squeeze_suite",
-                                                  ROOT / "scripts" / "squeeze_suite.py")
+def _script(name: str = "squeeze_suite"):
+    """scripts/NAME.py as a module (the scripts that write the suite's scenes)."""
+    spec = importlib.util.spec_from_file_location(name, ROOT / "scripts" / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
@@ -139,16 +139,8 @@ V_LONG = {"v_flat_arch4_mu1.20", "v_shelf75_mu0.60", "v_shelf75_mu4.50", "v_shel
           "v_leaning20_mu1.60", "v_leaning20_mu1.30", "v_leaning_posts15_mu3.00"}
 
 
-def _variants_script():
-    spec = importlib.util.spec_from_file_location("squeeze_variants",
-                                                  ROOT / "scripts" / "squeeze_variants.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 def test_the_variants_are_what_their_script_writes(tmp_path, samples):
-    _variants_script().write(tmp_path, samples)
+    _script("squeeze_variants").write(tmp_path, samples)
     written = sorted(p.name for p in tmp_path.iterdir())
     assert written == sorted(p.name for p in VARIANTS.glob("*.json")
                              if p.name != "lmgc90_verdicts.json")

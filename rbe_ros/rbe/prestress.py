@@ -162,31 +162,25 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
         # left), without the motion's solve; tried first (again only once the motion has
         # halved since: caps that creep leave a motion near rest step after step)
         early = motion is not None and _unbalance(model, motion) <= tried / 2
-        if early:
-            settled = _settled(model, rigid, options, load, caps, floor)
-            if settled is not None:
-                own = _own_caps(model, rigid, options, load, caps, floor, metric,
-                                None if model.grips else settled.field)
-                if own is None:
-                    return replace(settled, steps=count)
-                caps, motion = own
-                continue
+        settled = _settled(model, rigid, options, load, caps, floor) if early else None
+        if early and settled is None:
             tried = _unbalance(model, motion)
-        frictionless = not caps.any()       # the first step: no variables of friction
-        kept = Kept()                       # the motion's solver, for its least forces
-        motion = solve(rigid, options, load=load, friction_cap=bound, inertia=metric,
-                       frictionless=frictionless, keep=kept)
-        if not motion.solved:
-            break
-        if not early and _still(model, motion):
-            settled = _settled(model, rigid, options, load, caps, floor)
-            if settled is not None:
-                own = _own_caps(model, rigid, options, load, caps, floor, metric,
-                                None if model.grips else settled.field)
-                if own is None:
-                    return replace(settled, steps=count)
-                caps, motion = own
-                continue
+        if settled is None:
+            frictionless = not caps.any()       # the first step: no variables of friction
+            kept = Kept()                       # the motion's solver, for its least forces
+            motion = solve(rigid, options, load=load, friction_cap=bound, inertia=metric,
+                           frictionless=frictionless, keep=kept)
+            if not motion.solved:
+                break
+            if not early and _still(model, motion):
+                settled = _settled(model, rigid, options, load, caps, floor)
+        if settled is not None:     # no motion left: stands, unless it rubs on caps it lacks
+            own = _own_caps(model, rigid, options, load, caps, floor, metric,
+                            None if model.grips else settled.field)
+            if own is None:
+                return replace(settled, steps=count)
+            caps, motion = own
+            continue
         # the least forces that leave the motion found: its normal forces, none by squeeze
         forces = solve(rigid, options, load=load - _scaled(model, motion.unbalanced),
                        friction_cap=bound, inertia=metric, frictionless=frictionless, keep=kept)

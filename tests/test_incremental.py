@@ -14,6 +14,7 @@ from rbe_ros.analysis.incremental import StepChecker
 from rbe_ros.analysis.options import CheckOptions, HoldSearch
 from rbe_ros.analysis.pipeline import check_sequence, slim
 from rbe_ros.analysis.steps import sequence_step, sequence_steps
+from rbe_ros.rbe.result import Status
 from rbe_ros.analysis.validate import validated_assembly
 from rbe_ros.analysis.verdict import check
 from rbe_ros.scene import make_scene
@@ -41,8 +42,26 @@ def test_local_models_give_the_full_verdict_at_every_step(runs):
     assert [r.stable for r in local] == [r.stable for r in full]
     assert {r.model for r in full} == {"full"}
     used = collections.Counter(r.model.split()[0] for r in local)
-    assert used["local"] >= 5 and used["relaxed"] >= 5, used     # both shortcuts are exercised
+    # a region's field on a dome needs friction: no proof (see the thin dome below)
+    assert used["relaxed"] >= 5 and used["local"] == 0, used
     assert 0 < sum(not r.stable for r in full) < len(full)
+
+
+#: A running-bond wall of 80 bricks: its fields need no friction, so regions answer.
+WALL = gen.running_bond_wall(courses=10, bricks_per_course=8)
+
+
+@pytest.fixture(scope="module")
+def wall_runs():
+    return (check_sequence(WALL, OPTIONS),
+            check_sequence(WALL, replace(OPTIONS, full_solve=True)))
+
+
+def test_a_region_without_friction_gives_the_full_verdict(wall_runs):
+    local, full = wall_runs
+    assert [r.stable for r in local] == [r.stable for r in full]
+    used = collections.Counter(r.model.split()[0] for r in local)
+    assert used["local"] >= 3, used
 
 
 def assert_admissible(scene, reports) -> int:
@@ -64,9 +83,9 @@ def assert_admissible(scene, reports) -> int:
     return checked
 
 
-def test_a_local_report_is_an_admissible_state_of_the_whole_partial_assembly(runs):
-    local, _ = runs
-    assert assert_admissible(DOME, local) >= 5
+def test_a_local_report_is_an_admissible_state_of_the_whole_partial_assembly(wall_runs):
+    local, _ = wall_runs
+    assert assert_admissible(WALL, local) >= 3
 
 
 def test_a_second_dome_beside_the_first_is_checked_as_its_own_component(runs):
@@ -114,16 +133,14 @@ def test_a_sequence_can_keep_only_the_slim_reports():
 
 #: The paper's 14 x 10 dome at half its thickness with mu 0.8: at step 107 (course8_slice09,
 #: closing course 8 but for one block) the region around the new block (27 blocks), loaded by
-#: the previous step's forces, passes the placement test, while the whole step set in place
-#: from rest slides (FRICTION_EXCEEDED: course8_slice00 and course8_slice09 across course 7).
+#: the previous step's forces, friction included, passes the placement test, while the whole
+#: step set in place from rest slides (FRICTION_EXCEEDED: course8_slice00 and course8_slice09
+#: across course 7). A region's field that needs friction is no proof (incremental.py).
 THIN_DOME = gen.dome(t_base=0.25, t_oculus=0.125)
 THIN_STEP = 107
 
 
 @pytest.mark.long
-@pytest.mark.xfail(strict=True, reason="the placement test does not compose over regions: a "
-                   "region under the kept forces is STABLE where the whole step is "
-                   "FRICTION_EXCEEDED (StepChecker._restricted runs it on the region only)")
 def test_a_region_says_stable_only_where_the_whole_step_stands():
     options = replace(OPTIONS, solve=replace(OPTIONS.solve, mu=0.8))
     full = validated_assembly(THIN_DOME, options.limits, options.contact)
@@ -133,5 +150,6 @@ def test_a_region_says_stable_only_where_the_whole_step_stands():
         assembly = full.subset(step.present, step.held, step.grips)
         report = checker.check(assembly)
     whole = check(assembly, options)
-    assert step.block == "course8_slice09" and report.model.startswith("local")
-    assert report.stable == whole.stable, (report.message, whole.message)
+    assert step.block == "course8_slice09"
+    assert whole.status == Status.FRICTION_EXCEEDED, whole.message
+    assert report.stable == whole.stable, (report.model, report.message, whole.message)

@@ -6,7 +6,11 @@ without the full problem:
 
 * restriction (sufficient, by the safe theorem): keep the earlier forces on every interface
   outside R, apply those on R's boundary as known loads, and solve R alone. Feasible: an
-  admissible state of the whole assembly exists, so it stands (STABLE, model "local N").
+  admissible state of the whole assembly exists. It stands (STABLE, model "local N") when
+  that state needs no friction (beyond the noise floor, or mu is infinite): the placement
+  test (rbe/prestress.py) does not compose over regions, since the kept friction on R's
+  boundary is friction the whole, set in place from rest, must build up again; a state
+  that needs friction goes on to the relaxation and the full problems.
 * relaxation (necessary): solve R with every neighbour outside it made rigid (a support).
   Infeasible: the whole assembly is infeasible too, so it does not stand (model "relaxed N").
 
@@ -25,12 +29,14 @@ region only.
 from __future__ import annotations
 
 import collections
+import math
 from dataclasses import replace
 
 import numpy as np
 
 from ..geometry.polygon import cross
 from ..rbe.model import build_model
+from ..rbe.prestress import keeps_no_caps
 from ..rbe.result import InterfaceResult, Report, Status
 from .assembly import Assembly
 from .graph import ContactGraph
@@ -194,9 +200,14 @@ class StepChecker:
         if found is None:
             return None
         solution, results = found
-        return self._kept_elsewhere(assembly, local, results, len(region),
-                                    max(float(solution.forces[1].max(initial=0.0)), 0.0),
-                                    f"{_blocks(len(region))} around the new one re-solved")
+        report = self._kept_elsewhere(assembly, local, results, len(region),
+                                      max(float(solution.forces[1].max(initial=0.0)), 0.0),
+                                      f"{_blocks(len(region))} around the new one re-solved")
+        if report is None or not math.isfinite(self.options.deciding.mu):
+            return report
+        whole = build_model(assembly.blocks, assembly.interfaces, assembly.gravity)
+        shears = [float(np.linalg.norm(r.shear)) for r in report.interfaces]
+        return report if keeps_no_caps(whole, shears) else None
 
     def _component(self, assembly: Assembly, graph: ContactGraph,
                    component: set[int]) -> Report | None:

@@ -353,6 +353,17 @@ def _within(model: EquilibriumModel, solution: Solution, bound: np.ndarray, cone
     return bool(np.all(friction <= bound))
 
 
+def keeps_no_caps(model: EquilibriumModel, shears: np.ndarray) -> bool:
+    """Whether a field of ``model`` whose interfaces carry friction resultants ``shears``
+    (|V| per interface) needs no friction beyond the noise floor: the test's first caps
+    (none), so it stands with that field at its first step, wherever the field came from.
+    A field that needs friction proves nothing unless the test runs on the whole model: a
+    region loaded by kept forces, friction included, gets the friction that the whole,
+    set in place from rest, would have to build up again (thin domes' open courses)."""
+    bound = _noise_floor(model) + SHARE_TOL * model.force_scale
+    return bool(np.all(np.asarray(shears, dtype=float) <= bound))
+
+
 def _noise_floor(model: EquilibriumModel) -> np.ndarray:
     """Per interface NOISE_SHARE of the weight of its lighter free block (of the free
     weight W when it joins no free block's weight): a normal resultant below it is the

@@ -31,20 +31,30 @@ def partial_scene(scene, present):
     return make_scene(scene.name, [b for b in scene.blocks if b.id in here])
 
 
+def both_ways(scene):
+    """``scene``'s sequence checked incrementally and with every step solved in full."""
+    return (check_sequence(scene, OPTIONS),
+            check_sequence(scene, replace(OPTIONS, full_solve=True)))
+
+
 @pytest.fixture(scope="module")
 def runs():
-    return (check_sequence(DOME, OPTIONS),
-            check_sequence(DOME, replace(OPTIONS, full_solve=True)))
+    return both_ways(DOME)
 
 
-def test_local_models_give_the_full_verdict_at_every_step(runs):
+def models_used(runs) -> collections.Counter:
+    """The models that answered the incremental run, whose verdicts are the full run's."""
     local, full = runs
     assert [r.stable for r in local] == [r.stable for r in full]
     assert {r.model for r in full} == {"full"}
-    used = collections.Counter(r.model.split()[0] for r in local)
+    return collections.Counter(r.model.split()[0] for r in local)
+
+
+def test_local_models_give_the_full_verdict_at_every_step(runs):
+    used = models_used(runs)
     # a region's field on a dome needs friction: no proof (see the thin dome below)
     assert used["relaxed"] >= 5 and used["local"] == 0, used
-    assert 0 < sum(not r.stable for r in full) < len(full)
+    assert 0 < sum(not r.stable for r in runs[1]) < len(runs[1])
 
 
 #: A running-bond wall of 80 bricks: its fields need no friction, so regions answer.
@@ -53,14 +63,11 @@ WALL = gen.running_bond_wall(courses=10, bricks_per_course=8)
 
 @pytest.fixture(scope="module")
 def wall_runs():
-    return (check_sequence(WALL, OPTIONS),
-            check_sequence(WALL, replace(OPTIONS, full_solve=True)))
+    return both_ways(WALL)
 
 
 def test_a_region_without_friction_gives_the_full_verdict(wall_runs):
-    local, full = wall_runs
-    assert [r.stable for r in local] == [r.stable for r in full]
-    used = collections.Counter(r.model.split()[0] for r in local)
+    used = models_used(wall_runs)
     assert used["local"] >= 3, used
 
 

@@ -184,17 +184,31 @@ def _explain(model: EquilibriumModel, options: CheckOptions) -> Report:
         placement = placed(model, options.deciding)
         if placement.stands or not placement.moving:
             return report
-        first = report.interfaces[placement.sliding[0]] if placement.sliding else None
-        ratio = (f": |V|/N = {first.friction_ratio:.3g} there" if first is not None
-                 and math.isfinite(first.friction_ratio) else "")
         return replace(_sliding_report(model, report, placement), message=(
-            f"friction exceeded: {_motion(model, placement)}{ratio}, more than"
-            f" {_limit(options, True)}"))
+            f"friction exceeded: {_motion(model, placement)}"
+            f"{_needed_ratio(report, placement, options)}, more than {_limit(options, True)}"))
     glued = solve(model, replace(options.solve, friction="plus"))
     if not glued.solved:
         return (_failed(glued) if glued.status == "failed" else
                 Report(Status.INFEASIBLE, "no equilibrium even with tension"))
     return _report(model, glued, options)
+
+
+def _needed_ratio(report: Report, placement: Placement, options: CheckOptions) -> str:
+    """The |V|/N beyond the cone that the field with unlimited friction needs: at the first
+    interface the blocks slide across when it is beyond the cone there, else at the field's
+    worst interface (a block may slide across one where its field is within the cone and be
+    held by shear without normal force at another: the pressed shelf's board); none when
+    no resultant is beyond the cone (its vertices fail through torsion)."""
+    capacity = options.deciding.mu * cone_capacity(options.solve.cone)
+    over = [r for r in report.interfaces if r.friction_ratio > capacity]
+    first = report.interfaces[placement.sliding[0]] if placement.sliding else None
+    if first is not None and first.friction_ratio > capacity:
+        return f": |V|/N = {first.friction_ratio:.3g} there"
+    if not over:
+        return ""
+    worst = max(over, key=lambda r: r.friction_ratio)
+    return f": its field needs |V|/N = {worst.friction_ratio:.3g} at interface {_iface(worst)}"
 
 
 def is_stable(assembly: Assembly, options: CheckOptions = CheckOptions()) -> bool:

@@ -144,12 +144,14 @@ def _done(future, timeout: float):
 
 
 def report_line(report: StabilityReport | None) -> str:
+    """A report in one line: its verdict and message."""
     if report is None:
         return "NO REPORT (timed out)"
     return f"{STATUS.get(report.status, report.status)}: {report.message[:150]}"
 
 
 def execution_line(state: ExecutionState | None) -> str:
+    """An execution state in one line: step, as-built verdict, look-ahead, why."""
     if state is None:
         return "NO EXECUTION STATE (timed out)"
     failing = "none" if state.first_failing_step < 0 else state.first_failing_step
@@ -161,6 +163,7 @@ def execution_line(state: ExecutionState | None) -> str:
 
 
 def main(argv=None) -> int:
+    """Drive the node as the module's docstring says; 0 when every answer came."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("planned", help="the planned scene the node was started with (design_file)")
     ap.add_argument("--node-name", default="rbe_node")

@@ -18,6 +18,7 @@ CLIENT = Path(__file__).resolve().parents[2] / "examples" / "node_client.py"
 
 
 def test_the_example_client_drives_a_planned_arch(tmp_path):
+    """Every step stands as built with the plan's holds, every bad input gets its reason."""
     arch, planned, bag = tmp_path / "arch.json", tmp_path / "planned.json", tmp_path / "run"
     assert main(["generate", "semicircular-arch", "-p", "n=7", "-o", str(arch)]) == 0
     assert main(["plan", str(arch), "--max-held", "2", "-o", str(planned)]) == 0

@@ -413,12 +413,16 @@ def test_markers_and_view_of_the_arch_plan(arch_plan, capsys):
     # place and hold of v02 are one state: one arrow
     assert [a["name"].split(":")[0] for a in step4["robot_arrows"]] == ["r3 place v02"]
     assert {ln["name"] for ln in step4["lines"]} >= {"base of r1", "gripper of r3"}
+    # each robot named above its base; the legend explains the robots' colours
+    assert sorted((lb["text"], lb["x"], lb["y"]) for lb in step4["labels"]) == [
+        (r.name, pytest.approx(r.base[0]), pytest.approx(r.base[1])) for r in cell.robots]
+    assert {"robot base", "gripper"} <= {e["name"] for e in view["line_legend"]}
 
 
 def test_plan_output_keeps_the_hold_capacities(tmp_path, capsys):
     """Without a cell, ``plan -o`` writes the capacities the plan was checked under into
     each hold, and ``check --sequence`` of the file checks with them (the arch's largest hold,
-    694 N at step 4, within 800 N)."""
+    690 N at step 4, within 800 N)."""
     scene_path = write(tmp_path, "arch.json", scene_to_dict(generators.semicircular_arch(7)))
     out = tmp_path / "planned.json"
     assert main(["plan", scene_path, "--max-held", "2", "--hold-force-max", "800",

@@ -191,6 +191,19 @@ def test_a_sliding_message_quotes_only_a_ratio_beyond_the_cone():
                               " allows with mu 0.6")
 
 
+def test_a_pair_meeting_at_two_interfaces_is_named_once():
+    """compas_cra's snake: block 3 slides across two interfaces with block 2 (faces in two
+    planes); the message read "at interface 2|3 (and 2|3)"."""
+    from types import SimpleNamespace as NS
+    model = NS(blocks=[NS(id=str(k)) for k in range(5)],
+               interfaces=[NS(a=2, b=3), NS(a=2, b=3), NS(a=1, b=3), NS(a=0, b=4), NS(a=1, b=4),
+                           NS(a=3, b=4)])
+    assert verdict._motion(model, NS(moving=[3], sliding=[0, 1])) == \
+        "block 3 would slide at interface 2|3"
+    assert verdict._motion(model, NS(moving=[3, 4], sliding=[0, 1, 2, 3, 4, 5])) == \
+        "blocks 3, 4 would slide at interface 2|3 (and 1|3, 0|4 and 2 more)"
+
+
 def test_sliding_on_a_pyramid_cone_is_judged_against_its_capacity():
     """The inscribed 8-sided pyramid holds mu cos(pi/8) = 0.342 at mu 0.37: the 20 deg slope
     (tan 20 = 0.364) exceeds it, so both slopes are flagged (mu / cos(pi/8) would spare it)."""

@@ -258,14 +258,15 @@ def _sliding_report(model, report: Report, placement: Placement) -> Report:
 def _motion(model, placement: Placement) -> str:
     """'block X would slide at interface a|b' from a placement's motion."""
     moving = [model.blocks[j].id for j in placement.moving]
-    len(moving) == 1
-    where = [f"{model.blocks[it.a].id}|{model.blocks[it.b].id}"
-             for it in (model.interfaces[k] for k in placement.sliding[:3])]
+    # two blocks may meet at several interfaces (faces in different planes): named once
+    pairs = list(dict.fromkeys(f"{model.blocks[it.a].id}|{model.blocks[it.b].id}"
+                               for it in (model.interfaces[k] for k in placement.sliding)))
+    where = pairs[:3]
     if not moving:
         return "no equilibrium"
     if not where:
         return f"{_names(moving)} would move"
-    more = f" and {len(placement.sliding) - 3} more" if len(placement.sliding) > 3 else ""
+    more = f" and {len(pairs) - 3} more" if len(pairs) > 3 else ""
     return (f"{_names(moving)} would slide at interface {where[0]}"
             + (f" (and {', '.join(where[1:])}{more})" if len(where) > 1 else ""))
 

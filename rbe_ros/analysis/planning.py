@@ -790,9 +790,9 @@ class _Planner:
         final = self.full.subset(self.present(self.free, n + 1))
         self.final = check(final, self.options)
         if not self.final.stable:
-            return Plan(False, [], [], "the finished assembly does not stand without holds "
-                        "(rbe-ros check names why): no build order can end stable",
-                        failed_step=n, outcome=NO_PLAN)
+            return Plan(False, [], [], "the finished assembly does not stand without holds"
+                        f" ({self.final.status.name}: {self.final.message}): no build order"
+                        " can end stable", failed_step=n, outcome=NO_PLAN)
         margin = report_margin(self.final, final, self.options.deciding,
                                self.options.margin_directions or DEFAULT_DIRECTIONS) \
             if self.margins else None

@@ -190,8 +190,9 @@ def _spent_since(start: float) -> float:
 class Kept:
     """The Clarabel solver of a solve() (``keep``), for the same problem under another load
     or other friction caps: only the right-hand side b differs (-p on the equilibrium rows,
-    the caps on theirs), so Clarabel's data update keeps its equilibration (made from P, A
-    and q: a kept solve is a fresh one's), KKT ordering and symbolic factorisation, and
+    the caps on theirs), so Clarabel's data update keeps its equilibration (made from the
+    problem's matrices, not b: a kept solve is a fresh one's to rounding,
+    tests/test_placement_solves.py), KKT ordering and symbolic factorisation, and
     none of the problem's arrays is built again (the placement test's least forces of a
     motion, whose problem is the motion's with p - e; its steps under new caps)."""
 

@@ -146,12 +146,15 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
     caps = np.zeros(len(model.interfaces))
     floor = _noise_floor(model)
     motion, change_before, tried = None, math.inf, 2 * NEAR_STILL
+    # the solvers kept for the steps' problems, which differ only in load and caps: the
+    # motion's with and without friction, and the RBE problem within the caps
+    motions, within = {True: Kept(), False: Kept()}, Kept()
     for count in range(1, MAX_STEPS + 1):
         bound = caps * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
         if solution is not None and solution.solved and _within(
                 model, solution, bound if caps.any() else bound + floor, options.cone):
             own = _own_caps(model, rigid, options, load, caps, floor, metric,
-                            solution if least else None)
+                            solution if least else None, motions[False], within)
             if own is None:
                 return (Placement(solution, steps=count - 1) if _held(model, solution)
                         else Placement(None, steps=count - 1, beyond=solution))
@@ -162,21 +165,21 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
         # left), without the motion's solve; tried first (again only once the motion has
         # halved since: caps that creep leave a motion near rest step after step)
         early = motion is not None and _unbalance(model, motion) <= tried / 2
-        settled = _settled(model, rigid, options, load, caps, floor) if early else None
+        settled = _settled(model, rigid, options, load, caps, floor, within) if early else None
         if early and settled is None:
             tried = _unbalance(model, motion)
         if settled is None:
             frictionless = not caps.any()       # the first step: no variables of friction
-            kept = Kept()                       # the motion's solver, for its least forces
+            kept = motions[frictionless]        # the motion's solver, for its least forces
             motion = solve(rigid, options, load=load, friction_cap=bound, inertia=metric,
                            frictionless=frictionless, keep=kept)
             if not motion.solved:
                 break
             if not early and _still(model, motion):
-                settled = _settled(model, rigid, options, load, caps, floor)
+                settled = _settled(model, rigid, options, load, caps, floor, within)
         if settled is not None:     # no motion left: stands, unless it rubs on caps it lacks
             own = _own_caps(model, rigid, options, load, caps, floor, metric,
-                            None if model.grips else settled.field)
+                            None if model.grips else settled.field, motions[False], within)
             if own is None:
                 return replace(settled, steps=count)
             caps, motion = own
@@ -196,7 +199,8 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
 
 
 def _own_caps(model: EquilibriumModel, rigid: EquilibriumModel, options: SolveOptions, load,
-              caps: np.ndarray, floor: np.ndarray, metric, field: Solution | None):
+              caps: np.ndarray, floor: np.ndarray, metric, field: Solution | None,
+              motion: Kept, within: Kept):
     """None when the blocks, still under ``caps``, get their friction from normal forces
     the loads make; else lower caps for the next step and the motion they leave. The caps
     came from a step's motion, the frictionless one above all, and a normal force there can
@@ -208,7 +212,9 @@ def _own_caps(model: EquilibriumModel, rigid: EquilibriumModel, options: SolveOp
     it, or the least normal forces of its motion there (those the loads press there: type-b
     turned about y, whose load's moment presses the upper face) give at least the caps, or
     those become the caps. ``field``: the least field within the caps and the cones, if
-    known (skips the solves when no cone binds it)."""
+    known (skips the solves when no cone binds it). ``motion``, ``within``: the solvers
+    kept for the step's motion and the RBE problem within caps (that problem, when one was
+    kept, is tried first: the step leaves no motion exactly when it has a field)."""
     if not caps.any():          # friction within the noise floor: nothing leans on caps
         return None
     if field is not None and not _at_cone(model, field, options):
@@ -225,7 +231,9 @@ def _own_caps(model: EquilibriumModel, rigid: EquilibriumModel, options: SolveOp
     if not rubbing.any():
         return None
     without = np.where(rubbing, 0.0, caps) * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
-    step = solve(rigid, options, load=load, friction_cap=without, inertia=metric)
+    if within.solve(rigid, options, load, without / model.force_scale) is not None:
+        return None             # by the kept solver only: a fresh one costs the motion's
+    step = solve(rigid, options, load=load, friction_cap=without, inertia=metric, keep=motion)
     if not step.solved:
         return np.where(rubbing, 0.0, caps), None
     if _still(model, step):
@@ -291,18 +299,18 @@ def _least_normals(model: EquilibriumModel, options: SolveOptions, load, caps: n
 
 
 def _settled(model: EquilibriumModel, rigid: EquilibriumModel, options: SolveOptions, load,
-             caps: np.ndarray, floor: np.ndarray) -> Placement | None:
+             caps: np.ndarray, floor: np.ndarray, within: Kept) -> Placement | None:
     """The field that stands once a step leaves no motion: the least one within the caps
     (None if there is none). With grips, again with caps from its own normal forces until
     they settle: a robot's wrench is a load, and the normal forces it makes give friction
     (else a robot that holds its block still would carry all of it without friction).
     Of the fields within the settled caps, the robots' is the least wrench that any of them
     needs (_least_hold). Beyond the grips' capacities (``beyond``, that least wrench) unless
-    a field within the caps keeps them."""
+    a field within the caps keeps them. ``within``: the solver kept for the problem."""
     field = None
     for _ in range(MAX_STEPS):
         bound = caps * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
-        found = solve(rigid, options, load=load, friction_cap=bound)
+        found = solve(rigid, options, load=load, friction_cap=bound, keep=within)
         if not found.solved:
             break
         field = found

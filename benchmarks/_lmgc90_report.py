@@ -169,6 +169,11 @@ def section(result: dict) -> list[str]:
           " as its hull (not comparable; listed in results.json under `hulls`).",
           "- LMGC90 knows gravity along -z only: a tilted case is the whole scene turned the other way"
           " (as for compas_cra).",
+          "- LMGC90 reaches one solution of a contact problem that may have several (rigid"
+          " frictional contact is not unique: a block between two faces can slide, or be squeezed"
+          " by any normal force), and which one hangs on how its solver iterates: where its"
+          " verdict changes with the NLGS relaxation the scene is not decided"
+          " (benchmarks/lmgc90_sensitivity.py; the squeeze sections below).",
           "- The dome's tilted cases are not run (as for the physics engines: 140 blocks, a"
           " simulation per case).", ""]
     L += _samples(info)

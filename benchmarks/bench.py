@@ -388,6 +388,8 @@ def lmgc90_squeeze(python: Path) -> list[dict]:
     long beside it (``lmgc90_2T``: whether a verdict hangs on the duration)."""
     from rbe_ros.io.scene_json import load_scene
     rows = []
+    committed = SQUEEZE / "lmgc90_verdicts.json"
+    before = json.loads(committed.read_text())["scenes"] if committed.exists() else {}
     for entry in json.loads((SQUEEZE / "manifest.json").read_text())["scenes"]:
         scene = load_scene(SQUEEZE / entry["file"])
         ours, t = best_of(3, lambda: check_scene(scene, ours_options("qp", "soc", entry["mu"])))
@@ -398,6 +400,10 @@ def lmgc90_squeeze(python: Path) -> list[dict]:
             "time_ours": t} | {k: res.get(k) for k in ("stable", "moved", "max_disp", "max_rot_deg",
                                                        "simulated", "time", "time_process",
                                                        "error")})
+        # whether LMGC90 decides (benchmarks/lmgc90_sensitivity.py), kept while it still holds
+        kept = before.get(entry["name"], {})
+        if "decides" in kept and kept["mu"] == entry["mu"] and kept["lmgc90"] == rows[-1]["lmgc90"]:
+            rows[-1] |= {k: kept[k] for k in ("sensitivity", "decides")}
         print(f"[lmgc90] squeeze {entry['name']}: closed form {entry['closed_form']}, LMGC90"
               f" {rows[-1]['lmgc90']}, rbe_ros {ours.status.name}", flush=True)
     return rows

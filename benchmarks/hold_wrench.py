@@ -77,6 +77,10 @@ class _Counting:
         _Counting.iterations += result.iterations
         return result
 
+    def __getattr__(self, name):
+        """Everything else (data updates of a kept solver) is the wrapped solver's."""
+        return getattr(self.solver, name)
+
 
 _DefaultSolver = solver.clarabel.DefaultSolver
 

@@ -10,8 +10,6 @@ Usage: .venv/bin/python benchmarks/repair.py   (make bench-repair; a few minutes
 """
 from __future__ import annotations
 
-import os
-import subprocess
 import sys
 import time
 from dataclasses import replace
@@ -128,11 +126,6 @@ def one_dome(name: str, scene, window: int = 0) -> list[str]:
     return lines + [""]
 
 
-def _commit() -> str:
-    return subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"],
-                          capture_output=True, text=True).stdout.strip()
-
-
 def main() -> int:
     lines = ["# Repair time", "", "Made by `make bench-repair` (benchmarks/repair.py); machine: "
              f"{machine_summary()}; times of one run, on a machine shared with other work "
@@ -140,9 +133,9 @@ def main() -> int:
     if "--dome527" in sys.argv:
         # its re-check to the end costs minutes (docs/SCALING.md): a node's window only
         scene, _ = load_design(DOME527)
-        made = (f"Made by `benchmarks/repair.py --dome527` at commit {_commit()}, "
+        made = (f"Made by `benchmarks/repair.py --dome527`, "
                 f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; machine: "
-                f"{machine_summary()}; load average {os.getloadavg()[0]:.1f} at the start.")
+                f"{machine_summary()}.")
         lines = one_dome("compas_assembly's 527-block dome (as built, 5 mm / 3.5 deg "
                          "declared)", replace(scene, pose_uncertainty=UNCERTAINTY), window=10)
         lines[1:1] = ["", made]

@@ -62,8 +62,10 @@ def merged_note(result: dict) -> list[str]:
         f" {info['load_average_1min'][0]:.2f}), merged into this run's results; its time ratios"
         " are against ours re-timed in that run.", ""]
     if rechecked:
-        L += [f"**rbe_ros's verdicts** (every configuration's, tilt capacities included, and"
-              " those on compas_cra's samples, the squeeze suite and its variants) are this"
+        scope = rechecked.get("scope") or (
+            "every configuration's, tilt capacities included, and those on compas_cra's"
+            " samples, the squeeze suite and its variants")
+        L += [f"**rbe_ros's verdicts** ({scope}) are this"
               f" tree's: re-checked by `make bench-verdicts` (`benchmarks/bench.py --only ours`)"
               f" at commit {rechecked['commit']}, {rechecked['date']} (load average"
               f" {rechecked['load_average_1min'][0]:.1f} at the start). Every other method's"

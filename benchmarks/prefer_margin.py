@@ -86,7 +86,7 @@ def margin_section(quick: bool = False) -> str:
         lines += [default, better]
         verdicts.append(f"{name}: {m1:.4f} g against {m0:.4f} g: "
                         + ("met" if m1 >= m0 - 1e-9 else "NOT met"))
-    return "\n".join([*lines, f"(load average {os.getloadavg()[0]:.1f} at the end)", "",
+    return "\n".join([*lines, "", f"Load average {os.getloadavg()[0]:.1f} at the end.", "",
                       "The weakest step's margin of --prefer margin at least the default's:",
                       "", *[f"- {v}" for v in verdicts], ""])
 

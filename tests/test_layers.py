@@ -144,3 +144,12 @@ def test_only_rbe_ros_ros_touches_ros():
              for t, deferred, _ in _imports(m, p)
              if t.split(".")[0] in ROS_PACKAGES and (m, t) not in DEFERRED]
     assert not wrong, "\n".join(wrong)
+
+
+def test_every_module_is_named_in_the_architecture():
+    """docs/ARCHITECTURE.md names each module (its name in backticks, or its path)."""
+    text = (PACKAGE.parent / "docs" / "ARCHITECTURE.md").read_text()
+    unnamed = sorted(str(p.relative_to(PACKAGE.parent)) for m, p in MODULES.items()
+                     if p.name != "__init__.py"
+                     and f"`{p.stem}`" not in text and f"{p.stem}.py" not in text)
+    assert not unnamed, f"{unnamed}: name them in docs/ARCHITECTURE.md (layer table or ranks)"

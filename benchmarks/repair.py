@@ -10,13 +10,17 @@ re-checked by `check_sequence` (the oracle). Writes docs/REPAIR.md.
 The plans are kept in build/repair/ (made by the first run; the 527-block dome's plan takes
 many minutes): delete them to plan again.
 
-Usage: .venv/bin/python benchmarks/repair.py [--dome527] [--thin] [--workers N]
-(make bench-repair). ``--thin``: the 0.6-thickness dome only (the one a deviation breaks).
+Usage: .venv/bin/python benchmarks/repair.py [--dome527] [--thin] [--workers N] [--profile]
+(make bench-repair). ``--thin``: the 0.6-thickness dome only (the one a deviation breaks);
+``--workers``: the repairs' worker processes (default 2); ``--profile``: only where the
+in-process repair's time goes (printed, nothing written).
 """
 from __future__ import annotations
 
+import cProfile
 import os
 import pickle
+import pstats
 import sys
 import time
 from dataclasses import replace
@@ -108,8 +112,30 @@ def floor(plan_scene, built, window: int) -> tuple[float, int]:
     return time.perf_counter() - start, runner.checks
 
 
+def profiled(plan_scene, built, window: int) -> list[str]:
+    """Where the in-process repair's time goes (cProfile): its states, the convex solves
+    and the placement test's share."""
+    profile = cProfile.Profile()
+    start = time.perf_counter()
+    profile.enable()
+    found = repair_plan(plan_scene, built, lookahead_steps=window)
+    profile.disable()
+    took = time.perf_counter() - start
+    # (file, line, function) -> (calls, primitive calls, own s, cumulative s, callers)
+    stats = pstats.Stats(profile).stats
+    solves = sum(v[1] for f, v in stats.items() if "'solve' of 'builtins." in f[2])
+    placement = next(v[3] for f, v in stats.items()
+                     if f[0].endswith("rbe/prestress.py") and f[2] == "placed")
+    line = (f"Profiled (`--profile`): the in-process repair, {took:.1f} s under cProfile, "
+            f"{found.checks} states checked, {solves} convex solves (Clarabel) "
+            f"({solves / found.checks:.1f} a state), {placement / took:.0%} of the time in "
+            "the placement test (`rbe_ros/rbe/prestress.py`, `placed`).")
+    print(" ", line, flush=True)
+    return [line, ""]
+
+
 def one_dome(name: str, key: str, scene, window: int = 0, whole: bool = True,
-             workers: int = 1) -> list[str]:
+             workers: int = 1, profile: bool = False) -> list[str]:
     """The section of docs/REPAIR.md of one dome; ``window`` > 0: deviations looked for and
     repaired within the next ``window`` steps only (a node's look-ahead). ``whole`` False:
     no re-planning from scratch and no oracle (the 527-block dome: many minutes each)."""
@@ -151,6 +177,8 @@ def one_dome(name: str, key: str, scene, window: int = 0, whole: bool = True,
     else:
         lines += [f"Deviation: {what} (the first of the list that makes a later step fail; "
                   f"{tried} tried): {ahead.message[:300]}", ""]
+    if profile:
+        return lines + profiled(planned_scene, built, window)
     rows = []
     took, states = floor(planned_scene, built, window)
     print(f"  floor: {took:.2f} s, {states} states", flush=True)
@@ -204,10 +232,28 @@ def one_dome(name: str, key: str, scene, window: int = 0, whole: bool = True,
 def main() -> int:
     workers = int(sys.argv[sys.argv.index("--workers") + 1]) if "--workers" in sys.argv \
         else 2
-    lines = ["# Repair time", "", "Made by `make bench-repair` (benchmarks/repair.py); machine: "
-             f"{machine_summary()}; times of one run, on a machine shared with other work "
+    command = " ".join(["benchmarks/repair.py", *sys.argv[1:]])
+    lines = ["# Repair time", "", f"Made by `{command}` (`make bench-repair`: both domes); "
+             f"machine: {machine_summary()}; times of one run, on a machine shared with other work "
              f"(load average {os.getloadavg()[0]:.0f} on its 2 cores when the run began: "
-             "compare the ratios).", ""]
+             "compare the ratios).", "",
+             "A repair guarantees every remaining step it covers, so it checks each of their "
+             "states (blocks present, blocks held) at least once, whole: a state with the "
+             "deviated block differs from every planned one, and a region of it under the "
+             "plan's forces proves nothing (the placement test does not compose over regions: "
+             "kept friction on a region's boundary is friction the whole, set in place from "
+             "rest, must build up again; on the 0.6-thickness dome below, step 63 stands as a "
+             "region under the plan's forces and fails whole). The floor row is that: one "
+             "check of each remaining state, in order. The repair stops at the first failing "
+             "step, tries its candidates, and goes on from there; every state is checked "
+             "once whichever candidate it belongs to. With worker processes "
+             "(`repair_plan(..., workers=N)`, `repair --workers N`) the same states are "
+             "checked whole on N processes, the plan's remaining states queued ahead of the "
+             "scan and a failing step's hold candidates before them: the same verdicts and "
+             "the same repair, the time the processes' start (a second or more each, "
+             "importing the core) and the checks spread over the cores. On a machine whose "
+             "other work keeps its cores busy, N processes also take N shares of them: the "
+             "speed-up there is not the cores'.", ""]
     if "--dome527" in sys.argv:
         # its re-check to the end costs many minutes (docs/SCALING.md): a node's window only
         scene, _ = load_design(DOME527)
@@ -220,7 +266,10 @@ def main() -> int:
         return 0
     for name, key, params in DOMES[1:] if "--thin" in sys.argv else DOMES:
         lines += one_dome(name, key, replace(generators.dome(**params),
-                                             pose_uncertainty=UNCERTAINTY), workers=workers)
+                                             pose_uncertainty=UNCERTAINTY), workers=workers,
+                          profile="--profile" in sys.argv)
+    if "--profile" in sys.argv:
+        return 0
     lines += ["compas_assembly's 527-block dome: `benchmarks/repair.py --dome527` "
               "(docs/REPAIR_527.md, appended below when made).", ""]
     extra = ROOT / "docs" / "REPAIR_527.md"

@@ -6,6 +6,7 @@ poses, the oracle) and the repair the same as without workers; on the 0.6-thickn
 unsound region re-check hid it), in make test-long."""
 from __future__ import annotations
 
+import json
 import sys
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
@@ -19,8 +20,9 @@ from rbe_ros.analysis.pipeline import check_sequence
 from rbe_ros.analysis.planning import plan_sequence
 from rbe_ros.analysis.repair import repair_plan
 from rbe_ros.io.poses import scene_at_poses
+from rbe_ros.io.scene_json import scene_to_dict
 
-from test_repair import SHIFT, YAW, counterweight, pose
+from test_repair import SHIFT, YAW, counterweight, pose, run
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -70,6 +72,22 @@ def test_the_workers_repair_is_the_repair(threads, max_held, kind):
     reports = check_sequence(pooled.scene)
     assert [r.stable for r in reports] == [True] * len(reports)
     assert [r.stable for r in reports[1:]] == [s.stable for s in pooled.steps]
+
+
+def test_repair_workers_on_the_command_line(threads, tmp_path, capsys):
+    plan, measured = tmp_path / "plan.json", tmp_path / "measured.json"
+    plan.write_text(json.dumps(scene_to_dict(counterweight())))
+    measured.write_text(json.dumps({"poses": {"a": pose(SHIFT, YAW)}}))
+    code, out, _ = run(capsys, "repair", plan, "--poses", measured, "--json")
+    alone = json.loads(out)
+    code, out, _ = run(capsys, "repair", plan, "--poses", measured, "--workers", "2", "--json")
+    pooled = json.loads(out)
+    # the same repair; the workers may have checked a state ahead that it did not need
+    assert pooled["checks"] >= alone["checks"] and len(threads) == 1
+    mine = {k: v for k, v in pooled.items() if k not in ("time", "checks")}
+    assert code == 0 and mine == {k: v for k, v in alone.items() if k not in ("time", "checks")}
+    code, out, err = run(capsys, "repair", plan, "--poses", measured, "--workers", "0")
+    assert code == 2 and out == "" and "--workers must be at least 1" in err
 
 
 @pytest.mark.long

@@ -249,8 +249,8 @@ def main() -> int:
              "once whichever candidate it belongs to. With worker processes "
              "(`repair_plan(..., workers=N)`, `repair --workers N`) the same states are "
              "checked whole on N processes, the plan's remaining states queued ahead of the "
-             "scan and a failing step's hold candidates before them: the same verdicts and "
-             "the same repair, the time the processes' start (a second or more each, "
+             "scan and a failing step's hold candidates before them: the same verdicts, "
+             "the time the processes' start (a second or more each, "
              "importing the core) and the checks spread over the cores. On a machine whose "
              "other work keeps its cores busy, N processes also take N shares of them: the "
              "speed-up there is not the cores'.", ""]

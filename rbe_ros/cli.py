@@ -321,7 +321,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "window; default 0: every remaining step)")
     repair.add_argument("--workers", type=int, default=1, metavar="K",
                         help="local worker processes that check the remaining steps whole, "
-                        "queued ahead (default 1: this process); the same repair")
+                        "queued ahead (default 1: this process); the same verdicts")
     _solver_arguments(repair)
     repair.set_defaults(run=_run_repair)
 

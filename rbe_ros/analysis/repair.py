@@ -79,8 +79,9 @@ def repair_plan(plan: Scene, built: Scene, options: CheckOptions = CheckOptions(
     as-built state are checked and repaired (a node's look-ahead window: the steps beyond
     are the plan's, checked as the build reaches them); 0: every remaining step.
     ``workers`` >= 1: the states checked whole on that many processes, the plan's remaining
-    states queued ahead of the scan and a failing step's hold candidates before them (the
-    same verdicts; the repair is the same for any number of workers).
+    states queued ahead of the scan and a failing step's hold candidates before them: the
+    same verdicts, and the same repair for any number of workers (without, a failing
+    step's incremental report may rank its hold candidates otherwise).
 
     Raises SceneError for bad input (as :func:`rbe_ros.analysis.lookahead.look_ahead`)."""
     start = time.perf_counter()

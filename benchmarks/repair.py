@@ -18,7 +18,6 @@ in-process repair's time goes (printed, nothing written).
 from __future__ import annotations
 
 import cProfile
-import os
 import pickle
 import pstats
 import sys

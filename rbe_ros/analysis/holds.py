@@ -87,7 +87,7 @@ class StabilityOracle:
         self.options = options
         self.graph = ContactGraph(assembly)
         self.ids = self.graph.ids
-        self.index = {bid: k for k, bid in enumerate(self.ids)}
+        self.index = assembly.index
         self.support = self.graph.support
         self.height = np.array([-(b.centroid @ assembly.gravity) for b in assembly.blocks]) \
             if assembly.blocks else np.zeros(0)

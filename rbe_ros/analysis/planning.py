@@ -416,7 +416,7 @@ class _Planner:
                                [h for h in scene.holds if h.block in supports])
         self.full = Assembly.from_scene(self.base, options.contact)
         self.ids = [b.id for b in self.full.blocks]
-        self.position = {bid: k for k, bid in enumerate(self.ids)}
+        self.position = self.full.index
         self.free = [b.id for b in self.full.blocks if not b.support]
         self.free_set = set(self.free)
         up = -np.asarray(self.full.gravity, dtype=float)
@@ -441,7 +441,7 @@ class _Planner:
         self.samples = StepSamples(scene, options, plan.robust) if plan.robust else None
         self.insertions: dict = {}              # order -> insertion of its last block
         # a cell's robots: who grips what, and the hand-over states (analysis/timeline.py)
-        self.cell_check = (CellCheck(cell, self.full, self.base, options, self.position)
+        self.cell_check = (CellCheck(cell, self.full, self.base, options)
                            if cell is not None else None)
         self.checks = 0
         self.models: collections.Counter = collections.Counter()

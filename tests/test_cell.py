@@ -362,18 +362,22 @@ BAD = [
     ("robots: [{name: r1, base: [0, 0, 1.1], reach: 2, payload_force: 9, payload_torque: 5}]",
      "'base' [0.0, 0.0, 1.1] is inside block v03"),
     ("robots: [{name: r1, base: [3, 0, 0], reach: 2, payload_force: 9, payload_torque: 5, "
-     "urdf: missing.urdf}]", "'urdf'"),
+     "urdf: missing.urdf}]", "'urdf' "),
+    ("robots: [{name: r1, base: [3, 0, 0], reach: 2, payload_force: 9, payload_torque: 5, "
+     "urdf: bad.urdf}]", "does not contain a valid URDF model"),
     ("robots: [{name: r1, base: [0, 0, 0]\n  reach: 2", "cell: YAML does not parse (line"),
 ]
 
 
 @pytest.mark.parametrize("text, expected", BAD)
-def test_bad_cell_files_one_line_exit_2(tmp_path, capsys, text, expected):
+def test_bad_cell_files_one_line_exit_2(tmp_path, capfd, text, expected):
+    """One line on the process's stderr (fd 2: the URDF parser's own C++ output too)."""
     scene_path = write(tmp_path, "arch.json", scene_to_dict(generators.semicircular_arch(7)))
     cell_path = write(tmp_path, "cell.yaml", text)
-    capsys.readouterr()
+    write(tmp_path, "bad.urdf", '<robot name="x"><link name=')
+    capfd.readouterr()
     assert main(["plan", scene_path, "--cell", cell_path]) == 2
-    err = capsys.readouterr().err.strip()
+    err = capfd.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "Traceback" not in err
     assert err.startswith("rbe-ros: error: cell") and expected in err
 

@@ -235,8 +235,8 @@ def test_a_stuck_search_ends_within_the_default_budget(monkeypatch):
     arch = generators.semicircular_arch(7)
     stuck = plan_sequence(arch, 0)
     assert stuck.outcome == BUDGET_EXHAUSTED and not stuck.feasible
-    assert stuck.message.startswith("no plan found within the default budget (no deeper "
-                                    "partial plan for 0 s, ")
+    assert stuck.message.startswith("no plan found within the budget (the default's: no "
+                                    "deeper partial plan for 0 s, ")
     assert f"no block can be placed at step {stuck.failed_step} with at most 0 held; the " \
         "best candidate" in stuck.message
     assert plan_sequence(arch, 0, search_budget=1000).outcome == NO_PLAN

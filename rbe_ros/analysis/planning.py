@@ -975,8 +975,8 @@ class _Planner:
     def _over_budget(self) -> str:
         """How the budget ended the search (its states, or the default's stall bound)."""
         if self.stalled:
-            return (f"no plan found within the default budget (no deeper partial plan for "
-                    f"{self.stall:.0f} s, {self.states} states checked; --search-budget N "
+            return (f"no plan found within the budget (the default's: no deeper partial plan "
+                    f"for {self.stall:.0f} s, {self.states} states checked; --search-budget N "
                     "checks N states)")
         return f"no plan found within the budget ({self.budget} states checked; --search-budget N)"
 

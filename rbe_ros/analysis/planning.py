@@ -515,12 +515,17 @@ class _Planner:
         if not self.stopping and (now - self.start > self.plan.time_limit
                 or (self.should_stop is not None and self.should_stop())):
             raise _Stopped
-        if (not self.stopping and not self.plan.search_budget and now - self.deeper > self.stall
-                and (self.backups or self.failure.best is not None)):
+        if not self.stopping and self.stuck and now - self.deeper > self.stall:
             self.stalled = True
             raise _Budget
         if now - self.beat >= HEARTBEAT:
             self._progress(False)
+
+    @property
+    def stuck(self) -> bool:
+        """Whether the default budget's stall bound applies: a candidate of the deepest
+        partial plan refused, or a dead end backed out of."""
+        return not self.plan.search_budget and bool(self.backups or self.failure.best)
 
     @property
     def stall(self) -> float:
@@ -1038,8 +1043,8 @@ class _Planner:
                               / (self.states - since), "budget"))
         if math.isfinite(self.plan.time_limit):
             found.append((max(self.plan.time_limit - elapsed, 0.0), "time limit"))
-        if not self.plan.search_budget and not any(b == "steps" for _, b in found):
-            # stuck: the default budget's stall bound (unless it gets deeper first)
+        if self.stuck and not any(b == "steps" for _, b in found):
+            # the default budget's stall bound (unless it gets deeper first)
             found.append((max(self.stall - (self.start + elapsed - self.deeper), 0.0), "budget"))
         return min(found, default=(-1.0, "unknown"))
 

@@ -227,16 +227,16 @@ def test_progress_counts_candidate_checks():
 
 def test_a_stuck_search_ends_within_the_default_budget(monkeypatch):
     """The default budget ends a search stuck at a step (a candidate refused there, nothing
-    deeper since) after planning.STALL s: 0 s here, so the 7-voussoir arch without holds
-    (no plan: every order searched, above) ends at the check after its first refusal,
-    naming the refused candidate; an explicit budget has no such bound."""
-    monkeypatch.setattr(planning, "STALL", 0.0)
-    monkeypatch.setattr(planning, "STALL_STEPS", 0.0)
+    deeper since) after planning.STALL candidate checks: 0 here, so the 7-voussoir arch
+    without holds (no plan: every order searched, above) ends at the check after its first
+    refusal, naming the refused candidate; an explicit budget has no such bound."""
+    monkeypatch.setattr(planning, "STALL", 0)
+    monkeypatch.setattr(planning, "STALL_STEPS", 0)
     arch = generators.semicircular_arch(7)
     stuck = plan_sequence(arch, 0)
     assert stuck.outcome == BUDGET_EXHAUSTED and not stuck.feasible
     assert stuck.message.startswith("no plan found within the budget (the default's: no "
-                                    "deeper partial plan for 0 s, ")
+                                    "deeper partial plan in 0 checks, ")
     assert f"no block can be placed at step {stuck.failed_step} with at most 0 held; the " \
         "best candidate" in stuck.message
     assert plan_sequence(arch, 0, search_budget=1000).outcome == NO_PLAN

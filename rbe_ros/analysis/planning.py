@@ -37,10 +37,10 @@ step (K holds plus one placing robot): a state reached again by another order is
 unchecked. Each state checked (a partial plan and the block it places) counts against the
 budget (``search_budget``; by default the first descent is free and :func:`backup_budget`
 states follow its first dead end, and a search stuck at a step, a candidate refused there,
-that makes no deeper partial plan for :data:`STALL` s, or :data:`STALL_STEPS` times the
-longest it took to go a step deeper, ends: the default goes on while the search gets
-deeper and answers in bounded time when a step no candidate can take stops it; wall time,
-so where such a search ends depends on the machine);
+that makes no deeper partial plan in :data:`STALL` candidate checks, or :data:`STALL_STEPS`
+times the most it took to go a step deeper, ends: the default goes on while the search gets
+deeper and answers in bounded time when a step no candidate can take stops it; counted in
+checks, not seconds, so that where it ends does not depend on the machine or its load);
 ``time_limit`` and ``should_stop`` end it too.
 
 The outcome (:attr:`Plan.outcome`): ``planned``; ``no_plan`` when the search is exhausted
@@ -124,10 +124,11 @@ STOPPED = "stopped after"
 #: MIN_BACKUP states.
 BACKUP_BLOCK_STATES, MIN_BACKUP = 2000, 10
 #: The default budget also ends a search stuck at a step (a candidate of its deepest
-#: partial plan refused, or a dead end backed out of) that made no deeper partial plan for
-#: this many s, or STALL_STEPS times the longest it took to go one step deeper before,
-#: whichever is longer (wall time: a search that gets deeper goes on).
-STALL, STALL_STEPS = 30.0, 3.0
+#: partial plan refused, or a dead end backed out of) that made no deeper partial plan in
+#: this many candidate checks (each hold search's included), or STALL_STEPS times the most
+#: it took to go one step deeper before, whichever is more (checks, not seconds: the same
+#: input ends at the same step on any machine; a search that gets deeper goes on).
+STALL, STALL_STEPS = 100, 3
 #: s between two progress heartbeats while the search checks candidates.
 HEARTBEAT = 1.0
 #: The last steps of the first descent whose mean time estimates the time left.
@@ -159,7 +160,7 @@ class PlanOptions:
     time_limit: float = math.inf  # s: then the deepest partial plan is returned
     #: states the search may check (a state: a partial plan and the block it places, checked
     #: for its holds); 0: the first descent, then :func:`backup_budget` states more, and no
-    #: longer than :data:`STALL` s without a deeper partial plan
+    #: more than :data:`STALL` candidate checks without a deeper partial plan
     search_budget: int = 0
     #: which feasible candidate a partial plan keeps: "holds" (fewest hold-steps) or
     #: "margin" (the largest weakest margin so far, then fewest hold-steps)
@@ -502,9 +503,10 @@ class _Planner:
         self.descent = 0.0                      # s to the last step of the first descent
         self.backed = (0.0, 0)                  # (s, states) at the first dead end
         self.recent: collections.deque = collections.deque(maxlen=RECENT)   # s of steps
-        # the default budget's stall bound: when the search last went deeper, and the longest
-        # it took to (s)
-        self.deeper, self.slowest = self.start, 0.0
+        # the default budget's stall bound: the checks when the search last went deeper (and
+        # when, for the progress estimate), and the most it took to go one step deeper
+        self.deeper = self.slowest = 0
+        self.deeper_at = self.start
         self.stalled = False
         self.failure = _Failure()               # why no block followed the deepest so far
 
@@ -515,7 +517,7 @@ class _Planner:
         if not self.stopping and (now - self.start > self.plan.time_limit
                 or (self.should_stop is not None and self.should_stop())):
             raise _Stopped
-        if not self.stopping and self.stuck and now - self.deeper > self.stall:
+        if not self.stopping and self.stuck and self.checks - self.deeper > self.stall:
             self.stalled = True
             raise _Budget
         if now - self.beat >= HEARTBEAT:
@@ -528,15 +530,15 @@ class _Planner:
         return not self.plan.search_budget and bool(self.backups or self.failure.best)
 
     @property
-    def stall(self) -> float:
-        """s without a deeper partial plan after which the default budget ends the search."""
+    def stall(self) -> int:
+        """Checks without a deeper partial plan after which the default budget ends the
+        search."""
         return max(STALL, STALL_STEPS * self.slowest)
 
     def went_deeper(self) -> None:
         """The search made a partial plan deeper than any before (the stall bound restarts)."""
-        now = time.perf_counter()
-        self.slowest = max(self.slowest, now - self.deeper)
-        self.deeper = now
+        self.slowest = max(self.slowest, self.checks - self.deeper)
+        self.deeper, self.deeper_at = self.checks, time.perf_counter()
 
     def checked(self) -> None:
         """A check of a hold search (StabilityOracle.on_check): counted, then a poll."""
@@ -981,7 +983,7 @@ class _Planner:
         """How the budget ended the search (its states, or the default's stall bound)."""
         if self.stalled:
             return (f"no plan found within the budget (the default's: no deeper partial plan "
-                    f"for {self.stall:.0f} s, {self.states} states checked; --search-budget N "
+                    f"in {self.stall} checks, {self.states} states checked; --search-budget N "
                     "checks N states)")
         return f"no plan found within the budget ({self.budget} states checked; --search-budget N)"
 
@@ -1043,9 +1045,12 @@ class _Planner:
                               / (self.states - since), "budget"))
         if math.isfinite(self.plan.time_limit):
             found.append((max(self.plan.time_limit - elapsed, 0.0), "time limit"))
-        if self.stuck and not any(b == "steps" for _, b in found):
-            # the default budget's stall bound (unless it gets deeper first)
-            found.append((max(self.stall - (self.start + elapsed - self.deeper), 0.0), "budget"))
+        since = self.checks - self.deeper
+        if self.stuck and since and not any(b == "steps" for _, b in found):
+            # the default budget's stall bound (unless it gets deeper first): the checks left
+            # at the mean time per check since the search last went deeper
+            found.append((max(self.stall - since, 0) * (self.start + elapsed - self.deeper_at)
+                          / since, "budget"))
         return min(found, default=(-1.0, "unknown"))
 
     def _stopped(self) -> Plan:
@@ -1228,7 +1233,7 @@ def plan_sequence(scene: Scene, max_held: int = 2, options: CheckOptions = Check
     returns True (or ``time_limit`` s have passed) the deepest partial plan is returned (not
     feasible, "stopped after K of N blocks"). ``search_budget``: the states the search may
     check (0: the first descent, then :func:`backup_budget` states, ending a search stuck
-    at a step for :data:`STALL` s). :attr:`Plan.outcome`
+    at a step for :data:`STALL` checks). :attr:`Plan.outcome`
     says how the search ended.
     ``on_report`` receives each step's full report as the plan makes it (those of steps
     the search backed up over, and a beam's, after the search). ``look_ahead(assembly,

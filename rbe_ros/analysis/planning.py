@@ -1045,12 +1045,12 @@ class _Planner:
                               / (self.states - since), "budget"))
         if math.isfinite(self.plan.time_limit):
             found.append((max(self.plan.time_limit - elapsed, 0.0), "time limit"))
-        since = self.checks - self.deeper
-        if self.stuck and since and not any(b == "steps" for _, b in found):
+        done = self.checks - self.deeper
+        if self.stuck and done and not any(b == "steps" for _, b in found):
             # the default budget's stall bound (unless it gets deeper first): the checks left
             # at the mean time per check since the search last went deeper
-            found.append((max(self.stall - since, 0) * (self.start + elapsed - self.deeper_at)
-                          / since, "budget"))
+            found.append((max(self.stall - done, 0) * (self.start + elapsed - self.deeper_at)
+                          / done, "budget"))
         return min(found, default=(-1.0, "unknown"))
 
     def _stopped(self) -> Plan:

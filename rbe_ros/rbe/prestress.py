@@ -144,7 +144,7 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
                                        for g in model.grips))
     load = model.dead_load if load is None else np.asarray(load, dtype=float)
     caps = np.zeros(len(model.interfaces))
-    floor = _noise_floor(model)
+    floor = _noise_floor(model.blocks, model.interfaces, model.free, model.force_scale)
     motion, change_before, tried = None, math.inf, 2 * NEAR_STILL
     for count in range(1, MAX_STEPS + 1):
         bound = caps * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
@@ -353,27 +353,28 @@ def _within(model: EquilibriumModel, solution: Solution, bound: np.ndarray, cone
     return bool(np.all(friction <= bound))
 
 
-def keeps_no_caps(model: EquilibriumModel, shears: np.ndarray) -> bool:
-    """Whether a field of ``model`` whose interfaces carry friction resultants ``shears``
-    (|V| per interface) needs no friction beyond the noise floor: the test's first caps
-    (none), so it stands with that field at its first step, wherever the field came from.
-    A field that needs friction proves nothing unless the test runs on the whole model: a
-    region loaded by kept forces, friction included, gets the friction that the whole,
-    set in place from rest, would have to build up again (thin domes' open courses)."""
-    bound = _noise_floor(model) + SHARE_TOL * model.force_scale
-    return bool(np.all(np.asarray(shears, dtype=float) <= bound))
+def no_caps_bound(blocks, interfaces, free, force_scale: float) -> np.ndarray:
+    """Per interface the friction resultant (N) up to which a field keeps the test's first
+    caps (none), so that it stands with that field at its first step, wherever the field
+    came from: the noise floor and the solver's tolerance. ``free``: the indices of the free
+    blocks, weighing ``force_scale`` (W) in all. A field that needs more proves nothing
+    unless the test runs on the whole model: a region loaded by kept forces, friction
+    included, gets the friction that the whole, set in place from rest, would have to
+    build up again (thin domes' open courses)."""
+    return _noise_floor(blocks, interfaces, free, force_scale) + SHARE_TOL * force_scale
 
 
-def _noise_floor(model: EquilibriumModel) -> np.ndarray:
+def _noise_floor(blocks, interfaces, free, force_scale: float) -> np.ndarray:
     """Per interface NOISE_SHARE of the weight of its lighter free block (of the free
-    weight W when it joins no free block's weight): a normal resultant below it is the
-    interior-point solver's offset from the cone's apex, not a force of the motion."""
-    weight = np.full(len(model.blocks), np.inf)
-    weight[model.free] = [model.blocks[j].mass for j in model.free]
-    weight *= model.force_scale / max(sum(model.blocks[j].mass for j in model.free), 1e-300)
-    pairs = np.array([(it.a, it.b) for it in model.interfaces], dtype=int).reshape(-1, 2)
+    weight W, ``force_scale``, when it joins no free block's weight): a normal resultant
+    below it is the interior-point solver's offset from the cone's apex, not a force of the
+    motion. ``free``: the indices of the free blocks."""
+    weight = np.full(len(blocks), np.inf)
+    weight[free] = [blocks[j].mass for j in free]
+    weight *= force_scale / max(sum(blocks[j].mass for j in free), 1e-300)
+    pairs = np.array([(it.a, it.b) for it in interfaces], dtype=int).reshape(-1, 2)
     lighter = np.minimum(weight[pairs[:, 0]], weight[pairs[:, 1]])
-    return NOISE_SHARE * np.where(np.isfinite(lighter), lighter, model.force_scale)
+    return NOISE_SHARE * np.where(np.isfinite(lighter), lighter, force_scale)
 
 
 def _above_noise(normal: np.ndarray, floor: np.ndarray) -> np.ndarray:

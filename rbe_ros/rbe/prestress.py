@@ -45,6 +45,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
+import clarabel
 import numpy as np
 import scipy.sparse as sp
 
@@ -93,6 +94,13 @@ SHARE_TOL = 1e-7
 #: A vertex whose friction is within this share of mu fn binds its cone (an interior-point
 #: solution comes no closer to a cone it sits on than about 1e-4).
 CONE_SLACK = 1e-2
+#: Clarabel's tolerances (gap and feasibility) on the least normal forces' programs: with
+#: its default (1e-8) a partial dome's least is up to 1e-6 W off the optimum, with this one
+#: within 1e-10 W of HiGHS' at the same tolerances, for a step or two more.
+LEAST_TOL = 1e-10
+#: Clarabel's iterations on one of them, then HiGHS: a partial dome's take 31-33; those it
+#: does not solve (a shelf's, with caps at the solver's tolerance) it fails after some 170.
+LEAST_MAX_ITER = 50
 #: The settled caps' least hold: the check's objective scaled by this against the robots'
 #: wrenches, so that solver.HOLD_WEIGHT's bound on how far the wrench is from the least,
 #: O(g / w), is this much tighter (docs/METHOD.md, Holds: the dome state of issue 31).
@@ -254,9 +262,13 @@ def _least_normals(model: EquilibriumModel, options: SolveOptions, load, caps: n
     least normal resultant of the forces that leave the net wrenches of ``load`` (a step's
     motion taken out of it): the normal force the motion makes there, not a share of one
     that friction elsewhere could make as well (the least |f|^2 splits a force between
-    them). A linear program each (HiGHS), in cones relaxed to their circumscribed octagon
-    (the soc) and caps likewise: the least is never above the exact one. None when a grip
-    or a failed program leaves it open."""
+    them). A linear program each, in cones relaxed to their circumscribed octagon (the soc)
+    and caps likewise: the least is never above the exact one. Solved by Clarabel, one
+    solver whose cost alone changes from one interface to the next, its least the lower of
+    its primal and dual objectives (HiGHS' simplex took 7 times the time on a partial dome);
+    by HiGHS where Clarabel does not solve it (a cap of the solver's tolerance makes the
+    program nearly infeasible for an interior point: type-b turned about y). None when a
+    grip or a failed program leaves it open."""
     if model.grips:
         return None
     from scipy.optimize import linprog
@@ -277,16 +289,36 @@ def _least_normals(model: EquilibriumModel, options: SolveOptions, load, caps: n
         bounds_up += [np.tile(h * caps[capped] / model.force_scale, len(angles))]
     a = model.a_eq
     equal = sp.hstack([a[:, :nv], a[:, 2 * nv:4 * nv]]).tocsc()
-    bounds = [(0, None)] * nv + [(None, None)] * (2 * nv)
+    upper = sp.vstack(rows).tocsc() if rows else None
+    up, rhs = np.concatenate(bounds_up), -np.asarray(load, dtype=float)
+    # Clarabel's rows: the equilibrium, then G x <= g: the rows above and -fn <= 0
+    signs = sp.hstack([-sp.identity(nv), sp.csr_matrix((nv, 2 * nv))])
+    matrix = sp.vstack([equal] + ([upper] if rows else []) + [signs]).tocsc()
+    cones = [clarabel.ZeroConeT(equal.shape[0]), clarabel.NonnegativeConeT(len(up) + nv)]
+    settings = clarabel.DefaultSettings()
+    settings.verbose = False
+    settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = LEAST_TOL
+    settings.max_iter = LEAST_MAX_ITER
+    solver = None
     out = np.zeros(len(model.interfaces))
     for k in interfaces:
         cost = np.concatenate([(model.vertex_interface == k).astype(float), np.zeros(2 * nv)])
-        res = linprog(cost, A_ub=sp.vstack(rows).tocsc() if rows else None,
-                      b_ub=np.concatenate(bounds_up) if rows else None, A_eq=equal,
-                      b_eq=-np.asarray(load, dtype=float), bounds=bounds, method="highs")
-        if res.status != 0:
-            return None
-        out[k] = max(res.fun, 0.0) * model.force_scale
+        if solver is None:
+            solver = clarabel.DefaultSolver(sp.csc_matrix((3 * nv, 3 * nv)), cost, matrix,
+                                            np.concatenate([rhs, up, np.zeros(nv)]), cones,
+                                            settings)
+        else:
+            solver.update(q=cost)
+        result = solver.solve()
+        if str(result.status) == "Solved":
+            least = min(result.obj_val, result.obj_val_dual)
+        else:
+            res = linprog(cost, A_ub=upper, b_ub=up if rows else None, A_eq=equal, b_eq=rhs,
+                          bounds=[(0, None)] * nv + [(None, None)] * (2 * nv), method="highs")
+            if res.status != 0:
+                return None
+            least = res.fun
+        out[k] = max(least, 0.0) * model.force_scale
     return out
 
 

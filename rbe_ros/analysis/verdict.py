@@ -219,7 +219,18 @@ def stable_forces(model: EquilibriumModel, options: CheckOptions, load=None
                   ) -> tuple[Solution, list[InterfaceResult]] | None:
     """The solution and interface results of the deciding problem under ``load`` (scaled p;
     default the dead load) when they pass the criterion of :func:`check`: solved, no
-    tension, every interface within the friction threshold. None otherwise."""
+    tension, every interface within the friction threshold, and the placement test. None
+    otherwise."""
+    found = admissible_forces(model, options, load)
+    if found is None or not placed(model, options.deciding, load, found[0]).stands:
+        return None
+    return found
+
+
+def admissible_forces(model: EquilibriumModel, options: CheckOptions, load=None
+                      ) -> tuple[Solution, list[InterfaceResult]] | None:
+    """:func:`stable_forces` before the placement test (whose solves a caller may know to
+    be needless: a field that needs friction where the test cannot give it)."""
     solution = solve(model, options.deciding, load=load)
     if not solution.solved:
         return None
@@ -227,8 +238,6 @@ def stable_forces(model: EquilibriumModel, options: CheckOptions, load=None
                                 tension_tol=options.tension_tol, mu=options.deciding.mu)
     if any(r.tension or (r.friction_exceeded and counts)
            for r, counts in zip(results, _loaded(model, results, options))):
-        return None
-    if not placed(model, options.deciding, load, solution).stands:
         return None
     return solution, results
 

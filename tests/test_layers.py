@@ -21,7 +21,7 @@ LAYERS = {"rbe_ros": 0, "rbe_ros.scene": 0, "rbe_ros.cell": 0, "rbe_ros.generato
 #: verdict, the graph and the steps, and the pipeline may use it.
 ANALYSIS_RANKS = {"options": 0, "assembly": 0, "validate": 1, "graph": 1, "steps": 1,
                   "verdict": 2, "pipeline": 4, "planning": 5, "robust": 5, "lookahead": 5,
-                  "executors": 6, "repair": 6, "cell_execution": 7}
+                  "executors": 5, "repair": 6, "cell_execution": 7}
 ANALYSIS_DEFAULT = 3
 #: Imports inside a function that are allowed, with the reason.
 DEFERRED = {("rbe_ros.cli", "rbe_ros.ros.live"): "rclpy is loaded only for replay --live"}

@@ -82,6 +82,16 @@ def _plan_worker(assembly: Assembly, options: CheckOptions) -> None:
     _PLAN.update(assembly=assembly, options=options)
 
 
+def _planner_processes(assembly: Assembly, options: CheckOptions,
+                       workers: int) -> ProcessPoolExecutor:
+    """``workers`` spawned processes, each given the assembly and options once."""
+    if workers < 1:
+        raise ValueError(f"workers must be at least 1, not {workers}")
+    return ProcessPoolExecutor(max_workers=workers, initializer=_plan_worker,
+                               initargs=(assembly, options),
+                               mp_context=multiprocessing.get_context("spawn"))
+
+
 def _check_step(present: tuple[str, ...], held: tuple[str, ...], assembly=None, options=None):
     """The full check of one step of the planner's assembly (a worker's, or the given), a
     robot's grip on each held block: the check the planner makes of a trial itself when
@@ -96,12 +106,7 @@ class CheckPool:
     ``workers`` spawned processes, each given the assembly once."""
 
     def __init__(self, assembly: Assembly, options: CheckOptions, workers: int):
-        if workers < 1:
-            raise ValueError(f"workers must be at least 1, not {workers}")
-        self.workers = workers
-        self.pool = ProcessPoolExecutor(max_workers=workers, initializer=_plan_worker,
-                                        initargs=(assembly, options),
-                                        mp_context=multiprocessing.get_context("spawn"))
+        self.workers, self.pool = workers, _planner_processes(assembly, options, workers)
 
     def submit(self, present, held):
         with _one_thread_env():                 # workers are spawned on submission
@@ -127,12 +132,7 @@ class StepPool:
     arguments and returns a future of the step's slim report."""
 
     def __init__(self, assembly: Assembly, options: CheckOptions, workers: int):
-        if workers < 1:
-            raise ValueError(f"workers must be at least 1, not {workers}")
-        self.workers = workers
-        self.pool = ProcessPoolExecutor(max_workers=workers, initializer=_plan_worker,
-                                        initargs=(assembly, options),
-                                        mp_context=multiprocessing.get_context("spawn"))
+        self.workers, self.pool = workers, _planner_processes(assembly, options, workers)
 
     def submit(self, *args):
         with _one_thread_env():                 # workers are spawned on submission

@@ -65,8 +65,11 @@ def test_the_workers_repair_is_the_repair(threads, max_held, kind):
     assert [(s.step, s.stable, s.status) for s in pooled.steps] == \
         [(s.step, s.stable, s.status) for s in alone.steps]
     # every state asked of the workers once; the as-built state and the plan's steps queued
+    # ahead of the scan, so a state may be asked before the scan knows it needs it (a
+    # failing step's hold candidate queued while the step before is still out): at least
+    # the states the repair counts
     submitted = threads[0].submitted
-    assert len(submitted) == len(set(submitted)) == pooled.checks
+    assert len(submitted) == len(set(submitted)) >= pooled.checks
     assert submitted[0][0] == ("ground", "a")
     # the oracle: the repaired plan, every step checked whole at the measured poses
     reports = check_sequence(pooled.scene)

@@ -179,23 +179,24 @@ class StepChecker:
             region = region | graph.free_neighbours(region)
         return None
 
-    def _no_caps(self, assembly: Assembly) -> tuple[np.ndarray, set[tuple]] | None:
-        """For a finite mu, per interface of ``assembly`` the friction up to which a field
-        keeps the placement test's first caps (none: prestress.no_caps_bound), and the keys
-        of the kept interfaces that carry more: a region that keeps one of them settles
-        nothing. None for an infinite mu (nothing can slide)."""
+    def _no_caps(self, assembly: Assembly) -> tuple[dict[tuple, float], set[tuple]] | None:
+        """For a finite mu, per interface key of ``assembly`` the friction up to which a
+        field keeps the placement test's first caps (none: prestress.no_caps_bound), and the
+        keys of the kept interfaces that carry more: a region that keeps one of them settles
+        nothing. Made once per step for all its regions. None for an infinite mu (nothing
+        can slide)."""
         if not math.isfinite(self.options.deciding.mu):
             return None
         free = [k for k, b in enumerate(assembly.blocks) if not b.support]
         bound = no_caps_bound(assembly.blocks, assembly.interfaces, free,
                               free_weight(assembly.blocks, free, assembly.gravity))
-        keys = [_key(assembly, it) for it in assembly.interfaces]
-        return bound, {key for key, limit in zip(keys, bound)
-                       if key in self._results
-                       and np.linalg.norm(self._results[key].shear) > limit}
+        limits = {_key(assembly, it): limit for it, limit in zip(assembly.interfaces, bound)}
+        return limits, {key for key, limit in limits.items()
+                        if key in self._results
+                        and np.linalg.norm(self._results[key].shear) > limit}
 
     def _restricted(self, assembly: Assembly, graph: ContactGraph, region: set[int],
-                    no_caps: tuple[np.ndarray, set[tuple]] | None) -> Report | None:
+                    no_caps: tuple[dict[tuple, float], set[tuple]] | None) -> Report | None:
         """Stable report if R alone, loaded by the kept forces on its boundary, stands with
         no friction beyond the floor anywhere (``no_caps``: see :meth:`_no_caps`; None: mu
         is infinite). Friction is tested first, kept then solved, so that a region whose
@@ -224,11 +225,9 @@ class StepChecker:
         if found is None:
             return None
         solution, results = found
-        if no_caps is not None:
-            limit = dict(zip((_key(assembly, it) for it in assembly.interfaces), no_caps[0]))
-            if any(np.linalg.norm(r.shear) > limit[_key(local, it)]
-                   for it, r in zip(local.interfaces, results)):
-                return None
+        if no_caps is not None and any(np.linalg.norm(r.shear) > no_caps[0][_key(local, it)]
+                                       for it, r in zip(local.interfaces, results)):
+            return None
         # stable_forces' placement test, after the friction that makes it needless (a
         # field without friction passes at its first step, without a solve)
         if not placed(model, self.options.deciding, load, solution).stands:

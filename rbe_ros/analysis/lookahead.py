@@ -38,7 +38,7 @@ from .incremental import StepChecker
 from .margin import DEFAULT_DIRECTIONS
 from .options import CheckOptions
 from .pipeline import Placed, _completed, slim
-from .steps import sequence_step, step_count, step_state
+from .steps import Step, sequence_step, step_count, step_state
 from .validate import validated_assembly
 
 #: Look-ahead steps of the node by default (its ``lookahead_steps`` parameter).
@@ -206,18 +206,18 @@ class StepRunner:
         if self.pool is not None:
             self.pool.close()
 
-    def _task(self, plan: Scene, k: int) -> tuple[tuple, tuple]:
-        """(state, the arguments of its whole check in a worker) of step ``k``."""
-        step = sequence_step(plan, k)
+    def _task(self, plan: Scene, step: Step) -> tuple[tuple, tuple]:
+        """(state, the arguments of its whole check in a worker) of ``step`` of ``plan``."""
         return (step.present, step.held), (step.present, step.held, step.grips, step.block,
-                                           plan.approach_of(step.block), k < self.placed)
+                                           plan.approach_of(step.block),
+                                           step.index < self.placed)
 
     def prefetch(self, plan: Scene, steps: Iterable[int], first: bool = False) -> None:
         """Queue the states of ``steps`` of ``plan`` for the workers (no workers: nothing),
         after those queued already or, ``first``, before them."""
         if self.pool is None:
             return
-        tasks = [t for t in (self._task(plan, k) for k in steps)
+        tasks = [t for t in (self._task(plan, sequence_step(plan, k)) for k in steps)
                  if t[0] not in self.memo and t[0] not in self._pending]
         if first:
             self._queue.extendleft(reversed(tasks))
@@ -231,14 +231,15 @@ class StepRunner:
             if key not in self.memo and key not in self._pending:
                 self._pending[key] = self.pool.submit(*task)
 
-    def _pooled(self, key: tuple, task: tuple, k: int, block: str) -> Report:
-        """The report of state ``key`` from the workers (submitted now unless it is under
-        way), the others that finish meanwhile kept."""
+    def _pooled(self, plan: Scene, step: Step) -> Report:
+        """The report of the state of ``step`` of ``plan`` from the workers (submitted now
+        unless it is under way), the others that finish meanwhile kept."""
+        key, task = self._task(plan, step)
         if key not in self._pending:
             self._pending[key] = self.pool.submit(*task)
         while key not in self.memo:
             if self.should_stop is not None and self.should_stop():
-                raise TimeoutError(f"stopped at {where(k, block)}")
+                raise TimeoutError(f"stopped at {where(step.index, step.block)}")
             wait(list(self._pending.values()), timeout=0.5, return_when=FIRST_COMPLETED)
             for state, future in list(self._pending.items()):
                 if future.done():
@@ -255,7 +256,7 @@ class StepRunner:
         key = (step.present, step.held)
         found = self.memo.get(key)
         if found is None and self.pool is not None:
-            found = self._pooled(key, self._task(plan, k)[1], k, step.block)
+            found = self._pooled(plan, step)
         if found is None:
             if self.should_stop is not None and self.should_stop():
                 raise TimeoutError(f"stopped before {where(k, step.block)}")

@@ -499,7 +499,9 @@ class _Planner:
         self.streamed = 0                       # steps of the path streamed to on_report
         self.streaming = False                  # the stream is the path's so far
         self.start = self.beat = time.perf_counter()
-        self.stopping = False                   # stopped: the failure's message is made
+        #: poll() enforces the time limit, the stop request and the stall bound; off once
+        #: the search has ended and only its failure's note is being made (_note)
+        self.bounded = True
         self.descent = 0.0                      # s to the last step of the first descent
         self.backed = (0.0, 0)                  # (s, states) at the first dead end
         self.recent: collections.deque = collections.deque(maxlen=RECENT)   # s of steps
@@ -514,10 +516,10 @@ class _Planner:
         """Raise _Stopped when the time limit ran out or the caller asks to stop; a
         progress heartbeat at most every :data:`HEARTBEAT` s."""
         now = time.perf_counter()
-        if not self.stopping and (now - self.start > self.plan.time_limit
+        if self.bounded and (now - self.start > self.plan.time_limit
                 or (self.should_stop is not None and self.should_stop())):
             raise _Stopped
-        if not self.stopping and self.stuck and self.checks - self.deeper > self.stall:
+        if self.bounded and self.stuck and self.checks - self.deeper > self.stall:
             self.stalled = True
             raise _Budget
         if now - self.beat >= HEARTBEAT:
@@ -1064,8 +1066,7 @@ class _Planner:
                 "not placed")
         if failure.best is None:
             return self._finish(partial, False, k, head, HALTED)
-        self.stopping = True
-        why, details = self._why(partial, failure)
+        why, details = self._note(partial, failure)
         return self._finish(partial, False, k, head + why, HALTED, details)
 
     def _failed(self, outcome: str, head: str) -> Plan:
@@ -1074,13 +1075,19 @@ class _Planner:
         the capacity)."""
         partial, failure = self.deepest, self.failure
         k = len(partial.order)
-        self.stopping = True        # the failure's note is made whatever the bounds
-        why, details = self._why(partial, failure)
+        why, details = self._note(partial, failure)
         message = (f"{head}: the deepest partial plan places {k} of {self.n} blocks "
                    f"({self.states} states checked, {self.backups} dead ends backed out of); "
                    f"no block can be placed at step {k} with at most {self.plan.max_held} "
                    f"held{why}")
         return self._finish(partial, False, k, message, outcome, details)
+
+    def _note(self, partial: _Partial, failure: _Failure) -> tuple[str, dict]:
+        """:meth:`_why`, past the bounds: the search has ended (a bound, a stop or a failure)
+        and its note costs a check or two more, which must not be cut short by the bound
+        that ended it."""
+        self.bounded = False
+        return self._why(partial, failure)
 
     def _why(self, partial: _Partial, failure: _Failure) -> tuple[str, dict]:
         """Why no block followed ``partial`` (a message tail) and the failure's details."""

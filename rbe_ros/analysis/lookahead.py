@@ -91,6 +91,24 @@ def as_built_plan(plan: Scene, built: Scene) -> Scene:
     return replace(plan, blocks=tuple(at.get(b.id, b) for b in plan.blocks))
 
 
+def as_built_state(plan: Scene, built: Scene) -> Scene:
+    """The as-built scene ``built`` as ``plan`` has it at its step (the state of the
+    look-ahead's as-built check: :func:`look_ahead`'s ``as_built``), to check as a whole:
+    the blocks present at the step placed last (the placed ones at their measured poses, the
+    supports the plan keeps then) with the holds active then, held to the end (their grips
+    kept). ``built`` itself when nothing is placed. SceneError as :func:`placed_count`."""
+    placed = placed_count(plan, built)
+    if not placed:
+        return built
+    scene = as_built_plan(plan, built)
+    step = sequence_step(scene, placed - 1)
+    present = set(step.present)
+    return replace(scene, blocks=tuple(b for b in scene.blocks if b.id in present),
+                   sequence=plan_order(plan)[:placed], approach=scene.approach[:placed],
+                   holds=tuple(replace(h, from_step=0, until_step=None) for h in scene.holds
+                               if h.active(placed - 1) and h.block in present))
+
+
 def check_plan_design(plan: Scene, design: Scene) -> None:
     """SceneError unless ``plan`` is a plan of ``design``: the same blocks (ids, supports,
     shapes and masses); poses may differ (a plan may be written at measured poses)."""
@@ -384,5 +402,6 @@ def with_plan(scene: Scene, order, held: list[tuple[str, ...]]) -> Scene:
 
 
 __all__ = ["DEFAULT_LOOKAHEAD", "Lookahead", "StepAhead", "StepRunner", "as_built_plan",
+           "as_built_state",
            "check_plan_design", "failure", "held_by_step", "holds_of", "look_ahead",
            "placed_count", "plan_order", "where", "with_plan"]

@@ -23,7 +23,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 from ..analysis.cell_execution import CellPlan, repair_cell
-from ..analysis.lookahead import DEFAULT_LOOKAHEAD, check_plan_design, look_ahead
+from ..analysis.lookahead import (DEFAULT_LOOKAHEAD, as_built_state, check_plan_design,
+                                  look_ahead)
 from ..analysis.options import CheckOptions
 from ..analysis.repair import Repair, repair_plan
 from ..analysis.timeline import Timeline
@@ -92,6 +93,7 @@ class Execution:
         self._seen: tuple = ()
         self._outputs: list[tuple[str, dict]] = []
         self._repaired = None               # the as-built scene a repair was last tried at
+        self._held: tuple = (None, None, None)  # (built, plan, holding(built)) of the last
 
     def set_design(self, design: Scene | None, cell: Cell | None = None) -> None:
         """A new design: its sequence (and holds) is the plan, for ``cell``'s robots when
@@ -110,6 +112,25 @@ class Execution:
             except SceneError as exc:
                 self.error = str(exc)
         self.last, self._seen, self._repaired = None, (), None
+
+    def holding(self, built: Scene | SceneError) -> Scene | SceneError:
+        """The as-built scene ``built`` as ~/report checks it: with the holds the plan under
+        execution has at its step (:func:`rbe_ros.analysis.lookahead.as_built_state`, the
+        state of ExecutionState's ``as_built``); ``built`` itself without a plan, with
+        nothing placed, or with poses that do not fit the plan (~/execution says why). The
+        same scene object for the same ``built`` and plan (a state is checked once)."""
+        plan = self.plan
+        if plan is None or self.error or isinstance(built, SceneError):
+            return built
+        last_built, last_plan, held = self._held
+        if last_built is built and last_plan is plan:
+            return held
+        try:
+            held = as_built_state(plan, built)
+        except SceneError:
+            held = built
+        self._held = (built, plan, held)
+        return held
 
     def advance(self, built: Scene | SceneError, as_built: dict | None, header: dict,
                 options: CheckOptions, settings: Settings, repairer: Repairer = repair,

@@ -147,6 +147,9 @@ class Run:
     settings: dict | None = None    # the node's settings when it got the state (~/settings)
     #: a design or poses run: the as-built scene after it (or why there is none)
     asbuilt: Scene | SceneError | None = None
+    #: a design or poses run: the as-built scene as the node checked it, with the holds of
+    #: the plan it executed then (:meth:`Execution.holding`; None: ``asbuilt``)
+    held: Scene | SceneError | None = None
     #: a design or poses run: what the node made of it for the plan it executes, in order:
     #: (EXECUTION, an ExecutionState dict) or (PLAN_UPDATE, a PlanUpdate dict)
     execution: list[tuple[str, dict]] = field(default_factory=list)
@@ -373,13 +376,22 @@ def asbuilt_scenes(runs: list[Run]) -> list[Scene | SceneError | None]:
 def asbuilt_check(scene: Scene | SceneError, options: CheckOptions = CheckOptions()
                   ) -> StateCheck:
     """The check ``rbe_node`` makes of an as-built scene (as a whole), or the report of why
-    there is none: the node's own dispatch, as for a state."""
+    there is none: the node's own dispatch, as for a state. A scene with holds is the state
+    a plan has at its step (:meth:`Execution.holding`): its report's message ends with the
+    step and the blocks held."""
     def read(_sequence: bool) -> Scene:
         if isinstance(scene, SceneError):
             raise scene
         return scene
 
-    return check_state(read, False, options)
+    result = check_state(read, False, options)
+    if result.error is not None or not scene.holds:
+        return result
+    report = result.reports[0]
+    held = ", ".join(report.held_blocks) or "nothing"
+    report = replace(report, message=f"{report.message} | as the plan has it at step "
+                                     f"{len(scene.sequence) - 1}: held {held}")
+    return replace(result, reports=[report])
 
 
 def state_reports(state: dict, options: CheckOptions = CheckOptions()) -> list[Report]:
@@ -1027,13 +1039,14 @@ class _LastCheck:
         header = report_header(run.state.get("header"), frame_id)
         # a state by its contents; an as-built scene by identity (AsBuilt returns the same
         # scene for an update that changes nothing)
-        content = {**run.state, "header": None} if run.kind == STATE else run.asbuilt
+        asbuilt = run.asbuilt if run.held is None else run.held
+        content = {**run.state, "header": None} if run.kind == STATE else asbuilt
         what = (run.kind == STATE, options_to_json(run_options))
         if self.what != what or not (content is self.content or (
                 run.kind == STATE and content == self.content)):
             self.what, self.content = what, content
             check = state_reports(run.state, run_options) if run.kind == STATE else \
-                asbuilt_check(run.asbuilt, run_options).reports
+                asbuilt_check(asbuilt, run_options).reports
             self.reports = [report_to_dict(r, header) for r in check]
         return [{**r, "header": header} for r in self.reports]
 
@@ -1080,8 +1093,16 @@ def replay_bag(path, output=None, *, options: CheckOptions | None = None, compar
     options = options or bag_options(path)
     result = ReplayResult([], [], [], out if write else None, options)
     writer = RunWriter(out, options, markers=markers) if write else None
-    pairs = recheck(runs, options, on_run)
     execution = Execution()         # the plan the node executed, as the runs leave it
+
+    def holding(runs: Iterable[Run]) -> Iterator[Run]:
+        # each run taken once the runs before it are executed: the plan then in force
+        for run in runs:
+            if run.kind in (DESIGN, POSES) and run.asbuilt is not None:
+                run.held = execution.holding(run.asbuilt)
+            yield run
+
+    pairs = recheck(holding(runs), options, on_run)
     try:
         for i, (run, reports) in enumerate(pairs):
             if writer is not None:

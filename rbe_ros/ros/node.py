@@ -255,12 +255,15 @@ class RbeChecks:
         self.foxglove = None
         # ~/execution: the plan under execution, advanced by its own thread from the as-built
         # states the worker checked (the newest; a design never dropped), so that looking
-        # ahead and repairing never hold up the as-built checks; repairs run in a process
+        # ahead and repairing hold up no as-built check but that of a state with a block
+        # placed since (which waits for the plan's holds at its step: _holding); repairs
+        # run in a process
         self._execution = Execution()
         self._designs = 0               # designs merged; the one the execution follows
         self._plan_cell = None          # the robot cell of the plan sent last with a design
         self._exec_design = 0
         self._exec_slot: dict = {}
+        self._exec_running: tuple = (None, None)     # (design, as-built scene) advanced now
         self._exec_cond = threading.Condition()
         self._exec_thread: threading.Thread | None = None
         self._workers: Workers | None = None    # plans and repairs: processes of their own
@@ -833,6 +836,7 @@ class RbeChecks:
                     with self._exec_cond:
                         self._exec_slot["design"] = (self._designs, self._asbuilt.design,
                                                      self._plan_cell)
+                        self._exec_cond.notify_all()    # taken at once (_holding)
                 else:
                     self._carry(topic, self._measured_poses)
                 self._put((header, scene, self._designs))
@@ -847,7 +851,7 @@ class RbeChecks:
     def _check_asbuilt(self, header: dict, scene, design: int) -> None:
         """Check an as-built scene (or report why there is none) as a whole, then hand it
         to the plan's execution (``design``: the number of the design it was merged on)."""
-        result = asbuilt_check(scene, self.check_options())
+        result = asbuilt_check(self._holding(scene, design), self.check_options())
         if result.error is None:
             report = result.reports[0]
             self._publish(result.scene, report, header)
@@ -863,6 +867,31 @@ class RbeChecks:
 
     # --- plan execution (rbe_ros.io.execution) ----------------------------------------------
 
+    def _holding(self, scene, design: int):
+        """``scene`` with the holds of the plan under execution at its step
+        (:meth:`Execution.holding`), once the execution has taken the design ``design`` and
+        advanced the states before it that place fewer blocks: a repair there may change the
+        holds of this state's step (one of the blocks placed since), not of its own or an
+        earlier one. So the plan is the one the replay, which executes each state before
+        checking the next, has then; the execution's look-ahead and repair of a state with
+        as many blocks placed (a cell's same poses at 10 Hz) hold nothing up."""
+        placed = _free(scene)
+        with self._exec_cond:
+            while not self._closing and self._behind(design, placed):
+                self._exec_cond.wait(0.5)
+        return self._execution.holding(scene)
+
+    def _behind(self, design: int, placed: int) -> bool:
+        """Whether the execution has yet to take the design ``design``, or to advance a
+        state before (waiting or under way) with fewer than ``placed`` free blocks (called
+        with ``_exec_cond``)."""
+        if "design" in self._exec_slot or self._exec_design != design:
+            return True
+        waiting = self._exec_slot.get("state")
+        states = [self._exec_running, (waiting[3], waiting[1]) if waiting else (None, None)]
+        return any(built is not None and (d != design or _free(built) < placed)
+                   for d, built in states)
+
     def _execution_settings(self) -> Settings:
         return Settings(self.get_parameter("lookahead_steps").value,
                         self.get_parameter("min_margin_g").value)
@@ -872,11 +901,13 @@ class RbeChecks:
         (a new design first), until the node stops."""
         while True:
             with self._exec_cond:
-                while "state" not in self._exec_slot and not self._closing:
+                while not self._exec_slot and not self._closing:
                     self._exec_cond.wait()
                 if self._closing:
                     return
                 slot, self._exec_slot = self._exec_slot, {}
+                if "state" in slot:
+                    self._exec_running = (slot["state"][3], slot["state"][1])
             try:
                 if "design" in slot:
                     self._exec_design, design, cell = slot["design"]
@@ -886,11 +917,16 @@ class RbeChecks:
                             self._robot_markers = []
                     if self._execution.plan is not None:
                         self._pool().warm()     # a repair may come: its process ready
-                header, scene, report, design = slot["state"]
-                if design == self._exec_design:    # not of a design replaced since
-                    self._advance(header, scene, report)
+                if "state" in slot:
+                    header, scene, report, design = slot["state"]
+                    if design == self._exec_design:    # not of a design replaced since
+                        self._advance(header, scene, report)
             except Exception as exc:   # publishing failed (shutdown): say so, go on
                 self.get_logger().error(f"execution not advanced: {type(exc).__name__}: {exc}")
+            finally:
+                with self._exec_cond:   # the as-built checks waiting for it (_holding)
+                    self._exec_running = (None, None)
+                    self._exec_cond.notify_all()
 
     def _advance(self, header: dict, scene, report: Report) -> None:
         """Publish (and record) what the as-built state means for the plan: its
@@ -1133,6 +1169,11 @@ class RbeNode(RbeChecks, Node):
                 state.header.frame_id = self.get_parameter("frame_id").value
                 state.header.stamp = self.get_clock().now().to_msg()
             self._send_design(state, cell)
+
+
+def _free(scene) -> int:
+    """The free blocks of an as-built scene (0 for poses refused: a SceneError)."""
+    return 0 if isinstance(scene, SceneError) else sum(not b.support for b in scene.blocks)
 
 
 def _stamp(header: dict) -> str:

@@ -16,6 +16,7 @@ from rbe_msgs.msg import BlockPoses, ExecutionState, PlanUpdate
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import serialize_message
 from scipy.spatial.transform import Rotation
 
 from helpers import ONE_ROBOT, overhang_stack, stack_stands
@@ -642,3 +643,52 @@ def test_a_cell_plan_of_the_node_is_executed_for_its_cell(make_node, tmp_path):
               if k == "plan_update" else m) for k, m in run.execution]
     found = compare_execution(0, run, other)
     assert [(d.where, d.field) for d in found] == [("plan_update", "timeline")]
+
+
+def _reports(node) -> list:
+    """The reports ``node`` publishes from now on (its _publish wrapped)."""
+    out: list = []
+    publish = node._publish
+
+    def keep(scene, report, header, state=None):
+        out.append(report)
+        return publish(scene, report, header, state)
+
+    node._publish = keep
+    return out
+
+
+@pytest.mark.long      # ~4 s here (its core: tests/test_execution_report.py, 1 s)
+def test_the_report_of_a_held_step_applies_the_plans_holds(make_node, tmp_path):
+    """While the plan holds blocks, ~/report checks the measured blocks with the holds the
+    plan has at that step (as ~/execution's as_built does), and says so; not the measured
+    blocks alone (which need tension there)."""
+    from rbe_ros import generators as gen
+    from rbe_ros.analysis.pipeline import check_sequence
+    from rbe_ros.analysis.planning import plan_sequence
+
+    plan = plan_sequence(gen.semicircular_arch(7), max_held=2).scene
+    steps = check_sequence(plan)
+    k = next(i for i, r in enumerate(steps) if r.held_blocks)
+    path = tmp_path / "planned.json"
+    path.write_text(json.dumps(scene_to_dict(plan)))
+    node = make_node(design_file=str(path), mcap_path=str(tmp_path / "bag"), lookahead_steps=1)
+    reports = _reports(node)
+    states: list[dict] = []
+    node._send_execution = (lambda send: lambda kind, m: (states.append(m), send(kind, m)))(
+        node._send_execution)
+    at = {b.id: (b.position.tolist(), b.orientation.tolist()) for b in plan.blocks}
+    for sec, block in enumerate(plan.sequence[:k + 1], 1):
+        node._on_poses(serialize_message(dict_to_message(
+            poses_to_dict({block: at[block]}, "cell", sec * 1_000_000_000), BlockPoses)))
+        wait_until(lambda: any(m["header"]["stamp"]["sec"] == sec for m in states), 30.0,
+                   f"the execution state of {sec}")
+    node.destroy_node()
+    report = reports[-1]
+    assert report.stable and report.held_blocks == steps[k].held_blocks
+    assert report.message.endswith(f"as the plan has it at step {k}: held "
+                                   f"{', '.join(steps[k].held_blocks)}")
+    assert states[-1]["as_built"]["status"] == 0
+    assert states[-1]["as_built"]["held_blocks"] == list(steps[k].held_blocks)
+    assert_bag_replays(tmp_path / "bag")
+

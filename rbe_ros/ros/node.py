@@ -799,22 +799,20 @@ class RbeChecks:
         alone are checked (nothing measured yet)."""
         self._on_asbuilt(data, AssemblyState, self.design_topic, DESIGN)
 
-    def _on_plan_design(self, data: bytes, cell) -> None:
-        """A design with a sequence that is a plan for the robot cell ``cell`` (None: K
-        holds), as :meth:`_on_design`."""
-        self._on_asbuilt(data, AssemblyState, self.design_topic, DESIGN, cell)
-
     def _on_poses(self, data: bytes) -> None:
         """Measured poses (raw CDR): recorded, merged into the as-built state (an update
         that cannot be merged changes nothing and is answered INVALID_INPUT)."""
         self._on_asbuilt(data, BlockPoses, self.poses_topic, POSES)
 
-    def _on_asbuilt(self, data: bytes, msg_type, topic: str, kind: str, cell=None) -> None:
+    def _on_asbuilt(self, data: bytes, msg_type, topic: str, kind: str, cell=None,
+                    unread: str = "") -> None:
         """Record a design or poses message, merge it into the as-built state
         (:func:`rbe_ros.replay.merge_message`) and put the result in the slot, inactive too
         (merged as an overload's dropped updates are); never raises. A design with a
         sequence is a plan for ``cell`` (recorded first with the settings, for its replay);
-        one without keeps the plan's."""
+        one without keeps the plan's. ``unread``: the (empty) design stands for a design
+        file that could not be read, and this is why: its report and those of the poses
+        after it say so (a replay of the bag says the design has no blocks)."""
         try:
             msg = deserialize_message(data, msg_type)
             # recorded in the order merged (a replay merges them so): the topic callbacks
@@ -825,7 +823,8 @@ class RbeChecks:
                     self._record_settings()
                 header = self._received(msg, data, topic)
                 try:
-                    scene = merge_message(self._asbuilt, kind, message_to_dict(msg))
+                    scene = self._asbuilt.set_design(None, unread) if unread else \
+                        merge_message(self._asbuilt, kind, message_to_dict(msg))
                 except SceneError as exc:
                     scene = exc
                 # a later file of a split bag begins with the design and the poses measured
@@ -1011,10 +1010,12 @@ class RbeChecks:
                                     "without a cell")
             return None
 
-    def _send_design(self, state: AssemblyState, cell=None) -> None:
+    def _send_design(self, state: AssemblyState, cell=None, unread: str = "") -> None:
         """Through :meth:`_on_design`, so that it is recorded, and replayed, like one sent
-        (``cell``: the robot cell a plan with a sequence is for)."""
-        self._on_plan_design(serialize_message(state), cell)
+        (``cell``: the robot cell a plan with a sequence is for; ``unread``: why the design
+        file could not be read, the design empty)."""
+        self._on_asbuilt(serialize_message(state), AssemblyState, self.design_topic, DESIGN,
+                         cell, unread)
 
     def _on_check(self, request: CheckAssembly.Request, response: CheckAssembly.Response):
         try:
@@ -1159,16 +1160,18 @@ class RbeNode(RbeChecks, Node):
         self._start_interfaces()
         path = self.get_parameter("design_file").value
         if path:
-            cell = None
+            cell, unread = None, ""
             try:
                 state = self.design_message(path)
                 cell = self.design_cell(path)
-            except SceneError as exc:   # answered as an empty design: INVALID_INPUT
-                self.get_logger().error(f"design_file {path!r}: {exc}")
+            except SceneError as exc:   # answered as an empty design: INVALID_INPUT, why
+                unread = f"design_file {path!r} could not be read: {exc} (send a design on " \
+                    "~/design)"
+                self.get_logger().error(unread)
                 state = AssemblyState()
                 state.header.frame_id = self.get_parameter("frame_id").value
                 state.header.stamp = self.get_clock().now().to_msg()
-            self._send_design(state, cell)
+            self._send_design(state, cell, unread)
 
 
 def _free(scene) -> int:

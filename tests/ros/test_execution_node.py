@@ -27,6 +27,7 @@ from rbe_ros.io.messages import poses_to_dict
 from rbe_ros.io.replay import compare_execution
 from rbe_ros.io.scene_json import scene_to_dict
 from rbe_ros.io.testing import assert_bag_replays
+from rbe_ros.rbe.result import Status
 from rbe_ros.ros.convert import dict_to_message, message_to_dict
 from rbe_ros.scene import Hold, box_block, make_block, make_scene
 
@@ -692,3 +693,27 @@ def test_the_report_of_a_held_step_applies_the_plans_holds(make_node, tmp_path):
     assert states[-1]["as_built"]["held_blocks"] == list(steps[k].held_blocks)
     assert_bag_replays(tmp_path / "bag")
 
+
+def test_an_unreadable_design_file_is_named_on_the_report_and_the_node_goes_on(make_node,
+                                                                              tmp_path):
+    """A design_file that cannot be read: one ERROR line at start naming the path and why,
+    ~/report INVALID_INPUT saying the same (not "the scene has no blocks"), and so do poses
+    after it; a design sent on ~/design is then checked."""
+    from rbe_msgs.msg import AssemblyState
+    from rbe_ros import generators as gen
+    from rbe_ros.io.messages import state_to_dict
+
+    path = tmp_path / "missing.json"
+    node = make_node(design_file=str(path))
+    reports = _reports(node)        # (the design's report may be out already: wait for one)
+    node._on_poses(serialize_message(dict_to_message(
+        poses_to_dict({"b00": ([0, 0, 0.5], [0, 0, 0, 1])}, "cell", 10**9), BlockPoses)))
+    wait_until(lambda: reports, 30.0, "the report of the poses")
+    why = f"design_file {str(path)!r} could not be read: cannot read scene {str(path)!r}: " \
+        "No such file or directory (send a design on ~/design)"
+    assert reports[0].status == Status.INVALID_INPUT and why in reports[0].message
+    design = gen.stack(2)
+    node._on_design(serialize_message(dict_to_message(state_to_dict(design, "cell", 2 * 10**9),
+                                                      AssemblyState)))
+    wait_until(lambda: reports[-1].status == Status.STABLE, 30.0, "the design's report")
+    assert all(why in r.message for r in reports[:-1])

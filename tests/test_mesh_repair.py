@@ -4,6 +4,7 @@ of closedness and volume); a mesh that cannot be closed stays INVALID_INPUT with
 reason; an overlap's message names the pose uncertainty that accepts it, and with it the
 check runs."""
 import json
+import math
 import re
 from pathlib import Path
 
@@ -207,6 +208,43 @@ def test_an_overlap_names_the_pose_uncertainty_that_accepts_it(tmp_path, capsys)
     assert code == 2 and "--pose-uncertainty 0.0021,0.2 would make it a contact" in err
     assert touching("--pose-uncertainty", "0.0021,0.2")
     assert not touching("--pose-uncertainty", "0.002,0.2")
+
+
+def test_an_overlap_of_turned_faces_names_the_angle_too(tmp_path, capsys):
+    """A 0.4 x 0.4 x 0.2 m box turned 4.3 deg about x on an equal box, its low edge 8 mm
+    into it: the overlap is 8 mm (along the lower box's normal; the turned box's lowest
+    point is at -d), the faces are 4.3 deg from opposite (the turn). Beyond the contact
+    angle (1 deg) no position makes them touch (what the 527-block dome's hint said and
+    INFEASIBLE followed): the hint names the least angle on the 0.1 deg grid with
+    1 + 2 angle > 4.3, 1.7 deg, and the position that then makes it a contact."""
+    alpha, d = math.radians(4.3), 0.008
+    z = -d + 0.2 * math.sin(alpha) + 0.1 * math.cos(alpha)     # lowest vertex at z = -d
+    doc = {"blocks": [
+        {"id": "base", "support": True, "density": 2000, "box": [0.4, 0.4, 0.2],
+         "position": [0, 0, -0.1]},
+        {"id": "top", "density": 2000, "box": [0.4, 0.4, 0.2], "position": [0, 0, z],
+         "orientation": [math.sin(alpha / 2), 0, 0, math.cos(alpha / 2)]}]}
+    (tmp_path / "s.json").write_text(json.dumps(doc))
+    code, _, err = _check(capsys, tmp_path / "s.json")
+    assert code == 2
+    assert f"they overlap by {d:.4g} m" in err and "their faces 4.3 deg from opposite" in err
+    hint = re.search(r"--pose-uncertainty ([0-9.]+),1\.7 would make it a contact", err)
+    assert hint, err
+    position = float(hint.group(1))
+    assert position > 0        # the turned face rises off the other: a gap to accept too
+
+    def touching(*more) -> bool:
+        code, out, err = _check(capsys, tmp_path / "s.json", "--pose-uncertainty", *more)
+        assert code in (0, 1, 2), err
+        return any({i["block_a"], i["block_b"]} == {"base", "top"}
+                   for i in out.get("interfaces", []))
+
+    assert touching(f"{position:g},1.7")
+    code, out, _ = _check(capsys, tmp_path / "s.json", "--pose-uncertainty", f"{position:g},1.7")
+    assert code == 0 and out["stable"]
+    assert not touching(f"{position:g},1.6")               # the faces too far from opposite
+    assert not touching(f"{position + 0.01:g}")            # a position alone never does
+    assert not touching(f"{position - 1e-4:g},1.7")        # the least position on its grid
 
 
 def test_an_assembly_state_with_an_open_mesh_is_repaired_as_a_file_is():

@@ -109,14 +109,16 @@ IGNORED = frozenset({"solve_time", "dropped_states"})
 # --- check options <-> JSON ------------------------------------------------------------------
 
 def settings_dict(options: CheckOptions, frame_id: str, execution: Settings,
-                  cell: Cell | None = None) -> dict:
+                  cell: Cell | None = None, design_name: str = "") -> dict:
     """What the node records on ~/settings: its check options, frame_id and execution
-    parameters, and the robot cell of the plan it executes (recorded before the design that
-    brings the plan: its replay executes it for that cell)."""
+    parameters, the robot cell of the plan it executes (recorded before the design that
+    brings the plan: its replay executes it for that cell) and the name of the design it
+    sent itself (a design file's scene name, recorded before it: a message has no name)."""
     return {"options": json.loads(options_to_json(options)), "frame_id": frame_id,
             "execution": {"lookahead_steps": execution.lookahead_steps,
                           "min_margin_g": execution.min_margin_g,
-                          **({"cell": cell_to_dict(cell)} if cell is not None else {})}}
+                          **({"cell": cell_to_dict(cell)} if cell is not None else {})},
+            **({"design_name": design_name} if design_name else {})}
 
 
 def settings_cell(settings: dict | None) -> Cell | None:
@@ -307,7 +309,7 @@ class RunReader:
                     run.asbuilt = last[m.topic][2]     # the same poses again: no change
                 elif kind != STATE:
                     try:
-                        run.asbuilt = merge_message(asbuilt, kind, run.state)
+                        run.asbuilt = merge_message(asbuilt, kind, run.state, settings)
                     except SceneError as exc:
                         run.asbuilt = exc
                 if kind == DESIGN:      # the measured poses are forgotten: merge again
@@ -344,13 +346,24 @@ def read_runs(path) -> list[Run]:
     return list(RunReader(path))
 
 
-def merge_message(asbuilt: AsBuilt, kind: str, message: dict) -> Scene:
-    """The as-built scene after a design (``kind`` DESIGN, an AssemblyState dict) or
-    measured poses (POSES, a BlockPoses dict): the node's and the replay's one step
-    (SceneError: the message's report is INVALID_INPUT)."""
+def design_scene(message: dict, settings: dict | None = None) -> Scene:
+    """The design of an AssemblyState dict, named as the node named it: the
+    ``design_name`` of its recorded ``settings`` (a design file's scene name), else after
+    its frame (SceneError)."""
+    scene = scene_from_state_dict(message)
+    name = (settings or {}).get("design_name")
+    return replace(scene, name=name) if name else scene
+
+
+def merge_message(asbuilt: AsBuilt, kind: str, message: dict,
+                  settings: dict | None = None) -> Scene:
+    """The as-built scene after a design (``kind`` DESIGN, an AssemblyState dict, named
+    by :func:`design_scene` from ``settings``) or measured poses (POSES, a BlockPoses
+    dict): the node's and the replay's one step (SceneError: the message's report is
+    INVALID_INPUT)."""
     if kind == DESIGN:
         try:
-            design, error = scene_from_state_dict(message), ""
+            design, error = design_scene(message, settings), ""
         except SceneError as exc:
             design, error = None, str(exc)
         return asbuilt.set_design(design, error)
@@ -367,7 +380,7 @@ def asbuilt_scenes(runs: list[Run]) -> list[Scene | SceneError | None]:
             out.append(None)
             continue
         try:
-            out.append(merge_message(asbuilt, run.kind, run.state))
+            out.append(merge_message(asbuilt, run.kind, run.state, run.settings))
         except SceneError as exc:
             out.append(exc)
     return out
@@ -764,7 +777,7 @@ def replay_execution(tracker: Execution, run: Run, reports: list[dict],
     a design or poses run the node answered on ~/execution is advanced as the node did."""
     if run.kind == DESIGN:
         try:
-            design = scene_from_state_dict(run.state)
+            design = design_scene(run.state, run.settings)
         except SceneError:
             design = None
         tracker.set_design(design, settings_cell(run.settings))
@@ -1123,7 +1136,8 @@ def replay_bag(path, output=None, *, options: CheckOptions | None = None, compar
 __all__ = ["DESIGN", "Difference", "KEPT_DIFFERENCES", "OPTIONS_KEY", "PLAN", "POSES",
            "ReplayResult", "Run", "RunReader", "RunWriter", "STATE", "Tolerances",
            "asbuilt_check", "asbuilt_scenes", "bag_options", "compare_plan", "compare_report",
-           "compare_execution", "compare_run", "compare_runs", "default_output", "free_weights",
+           "compare_execution", "compare_run", "compare_runs", "default_output", "design_scene",
+           "free_weights",
            "merge_message",
            "offline_reports", "options_from_json", "options_to_json", "read_runs", "record_bag",
            "replay_bag", "replay_execution", "replay_plan", "replay_run", "report_repeats",

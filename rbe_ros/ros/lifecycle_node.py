@@ -46,7 +46,7 @@ class RbeLifecycleNode(RbeChecks, LifecycleNode):
         try:
             self.check_options()
             self._open_bag()
-            self._design = (self.design_message(path), self.design_cell(path)) if path \
+            self._design = (*self.design_message(path), self.design_cell(path)) if path \
                 else None
             self._asbuilt = AsBuilt()
             self._execution = Execution()
@@ -64,7 +64,8 @@ class RbeLifecycleNode(RbeChecks, LifecycleNode):
         self._start_interfaces()
         if self._design is not None:    # once: a second activate keeps the measured poses
             design, self._design = self._design, None
-            self._send_design(*design)
+            state, name, cell = design
+            self._send_design(state, cell, name=name)
         self.get_logger().info("activated")
         return super().on_activate(state)
 

@@ -261,6 +261,7 @@ class RbeChecks:
         self._execution = Execution()
         self._designs = 0               # designs merged; the one the execution follows
         self._plan_cell = None          # the robot cell of the plan sent last with a design
+        self._design_name = ""          # the name of the design sent last ("": its frame)
         self._exec_design = 0
         self._exec_slot: dict = {}
         self._exec_running: tuple = (None, None)     # (design, as-built scene) advanced now
@@ -512,7 +513,8 @@ class RbeChecks:
         if self._bag is None:
             return
         settings = settings_dict(self.check_options(), self.get_parameter("frame_id").value,
-                                 self._execution_settings(), self._plan_cell)
+                                 self._execution_settings(), self._plan_cell,
+                                 self._design_name)
         data = serialize_message(String(data=json.dumps(settings, sort_keys=True)))
         self._record(self.settings_topic, data)
         self._carry(self.settings_topic, data)
@@ -587,8 +589,11 @@ class RbeChecks:
         self._markers_of(scene, report, header, state)
         where = f" step {report.step_index} ({report.block_placed})" \
             if report.step_index >= 0 else ""
-        self._log_report(f"{header['frame_id']}{where}: {report.status.name}: "
-                         f"{report.message}", report)
+        # the scene's own name where the node knows one (a design file's), with the frame
+        frame = header["frame_id"]
+        name = frame if scene is None or scene.name in (frame, "assembly") else \
+            f"{scene.name} ({frame})"
+        self._log_report(f"{name}{where}: {report.status.name}: {report.message}", report)
         return data
 
     def _markers_of(self, scene: Scene | None, report: Report, header: dict,
@@ -805,26 +810,31 @@ class RbeChecks:
         self._on_asbuilt(data, BlockPoses, self.poses_topic, POSES)
 
     def _on_asbuilt(self, data: bytes, msg_type, topic: str, kind: str, cell=None,
-                    unread: str = "") -> None:
+                    unread: str = "", name: str = "") -> None:
         """Record a design or poses message, merge it into the as-built state
         (:func:`rbe_ros.replay.merge_message`) and put the result in the slot, inactive too
         (merged as an overload's dropped updates are); never raises. A design with a
         sequence is a plan for ``cell`` (recorded first with the settings, for its replay);
         one without keeps the plan's. ``unread``: the (empty) design stands for a design
         file that could not be read, and this is why: its report and those of the poses
-        after it say so (a replay of the bag says the design has no blocks)."""
+        after it say so (a replay of the bag says the design has no blocks). ``name``: the
+        design's (a message has none: "" names it after its frame), recorded with the
+        settings."""
         try:
             msg = deserialize_message(data, msg_type)
             # recorded in the order merged (a replay merges them so): the topic callbacks
             # run one at a time, and a plan's design (_adopt) comes from another thread
             with self._asbuilt_lock:
-                if kind == DESIGN and msg.sequence and cell != self._plan_cell:
-                    self._plan_cell = cell
+                if kind == DESIGN and ((msg.sequence and cell != self._plan_cell)
+                                       or name != self._design_name):
+                    self._plan_cell = cell if msg.sequence else self._plan_cell
+                    self._design_name = name
                     self._record_settings()
                 header = self._received(msg, data, topic)
                 try:
                     scene = self._asbuilt.set_design(None, unread) if unread else \
-                        merge_message(self._asbuilt, kind, message_to_dict(msg))
+                        merge_message(self._asbuilt, kind, message_to_dict(msg),
+                                      {"design_name": self._design_name})
                 except SceneError as exc:
                     scene = exc
                 # a later file of a split bag begins with the design and the poses measured
@@ -984,9 +994,9 @@ class RbeChecks:
             self.get_logger().warning(warning)
         return scene
 
-    def design_message(self, path: str) -> AssemblyState:
-        """The design of ``design_file`` as the message a pipeline would send on ~/design
-        (SceneError if it cannot be read)."""
+    def design_message(self, path: str) -> tuple[AssemblyState, str]:
+        """The design of ``design_file`` as the message a pipeline would send on ~/design,
+        and its scene name (a message has none; SceneError if it cannot be read)."""
         scene, _ = load_design(path)
         for warning in scene.warnings:
             self.get_logger().warning(f"design_file {path!r}: {warning}")
@@ -997,7 +1007,7 @@ class RbeChecks:
                 "bag records for replay")
         return dict_to_message(state_to_dict(scene, self.get_parameter("frame_id").value,
                                              self.get_clock().now().nanoseconds),
-                               AssemblyState)
+                               AssemblyState), scene.name
 
     def design_cell(self, path: str):
         """The robot cell a planned scene at ``path`` was planned for (``rbe-ros plan --cell
@@ -1010,12 +1020,14 @@ class RbeChecks:
                                     "without a cell")
             return None
 
-    def _send_design(self, state: AssemblyState, cell=None, unread: str = "") -> None:
+    def _send_design(self, state: AssemblyState, cell=None, *, name: str = "",
+                     unread: str = "") -> None:
         """Through :meth:`_on_design`, so that it is recorded, and replayed, like one sent
-        (``cell``: the robot cell a plan with a sequence is for; ``unread``: why the design
-        file could not be read, the design empty)."""
+        (``cell``: the robot cell a plan with a sequence is for; ``name``: the design's, a
+        design file's scene name; ``unread``: why the design file could not be read, the
+        design empty)."""
         self._on_asbuilt(serialize_message(state), AssemblyState, self.design_topic, DESIGN,
-                         cell, unread)
+                         cell, unread, name)
 
     def _on_check(self, request: CheckAssembly.Request, response: CheckAssembly.Response):
         try:
@@ -1143,7 +1155,8 @@ class RbeChecks:
             if not why:
                 self._send_design(dict_to_message(state_to_dict(
                     plan.scene, header["frame_id"], self.get_clock().now().nanoseconds),
-                    AssemblyState), plan.timeline.cell if plan.timeline is not None else None)
+                    AssemblyState), plan.timeline.cell if plan.timeline is not None else None,
+                    name=self._asbuilt.design.name)
         self.get_logger().info(f"the plan is not executed: {why}" if why else
                                f"executing the plan: {' '.join(plan.order)}")
 
@@ -1160,9 +1173,9 @@ class RbeNode(RbeChecks, Node):
         self._start_interfaces()
         path = self.get_parameter("design_file").value
         if path:
-            cell, unread = None, ""
+            cell, unread, name = None, "", ""
             try:
-                state = self.design_message(path)
+                state, name = self.design_message(path)
                 cell = self.design_cell(path)
             except SceneError as exc:   # answered as an empty design: INVALID_INPUT, why
                 unread = f"design_file {path!r} could not be read: {exc} (send a design on " \
@@ -1171,7 +1184,7 @@ class RbeNode(RbeChecks, Node):
                 state = AssemblyState()
                 state.header.frame_id = self.get_parameter("frame_id").value
                 state.header.stamp = self.get_clock().now().to_msg()
-            self._send_design(state, cell, unread)
+            self._send_design(state, cell, name=name, unread=unread)
 
 
 def _free(scene) -> int:

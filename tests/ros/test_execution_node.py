@@ -488,7 +488,8 @@ def test_a_step_ahead_below_min_margin_g_is_repaired(make_node, tmp_path):
     node = make_node(design_file=str(path), mcap_path=str(tmp_path / "bag"), min_margin_g=0.1)
     node._send_execution = (lambda send: lambda kind, m: (states.append((kind, m)),
                                                           send(kind, m)))(node._send_execution)
-    node._send_design(node.design_message(str(path)))   # as at start, now observed
+    state, name = node.design_message(str(path))
+    node._send_design(state, name=name)                 # as at start, now observed
     wait_until(lambda: len(states) >= 3, 60.0, "the design's state, update and state")
     node.destroy_node()
     (_, first), (kind, update), (_, repaired) = states[:3]
@@ -557,7 +558,8 @@ def test_a_cell_plan_file_is_executed_its_robots_drawn_bad_poses_refused(make_no
     assert not ghost["active"] and ghost["current_step"] == 1 and "'ghost'" in ghost["message"]
     # the as-built state kept s3 as measured: the design again forgets the poses
     sent = len(states)
-    node._send_design(node.design_message(str(path)), node.design_cell(str(path)))
+    state, name = node.design_message(str(path))
+    node._send_design(state, node.design_cell(str(path)), name=name)
     wait_until(lambda: len(states) > sent, 30.0, "the design's state")
     assert states[-1][1]["active"] and states[-1][1]["current_step"] == 0, states[-1][1]["message"]
     poses(31, {"s1": at["s1"]})
@@ -717,3 +719,25 @@ def test_an_unreadable_design_file_is_named_on_the_report_and_the_node_goes_on(m
                                                       AssemblyState)))
     wait_until(lambda: reports[-1].status == Status.STABLE, 30.0, "the design's report")
     assert all(why in r.message for r in reports[:-1])
+
+
+def test_a_design_file_scene_keeps_its_name_in_reports_and_their_replay(make_node, tmp_path):
+    """A message has no name field, so a design came out named after its frame ("world");
+    the node knows the design file's scene name: the reports and the log name the design
+    by it, the settings record it, and the replay names it so too (messages compared)."""
+    from rbe_ros import generators as gen
+    from rbe_ros.io.replay import Tolerances
+
+    design = gen.stack(2)
+    path = tmp_path / "design.json"
+    path.write_text(json.dumps(scene_to_dict(design)))
+    node = make_node(design_file=str(path), mcap_path=str(tmp_path / "bag"))
+    reports = _reports(node)
+    node._on_poses(serialize_message(dict_to_message(
+        poses_to_dict({"b7": ([0, 0, 0.5], [0, 0, 0, 1])}, "cell", 10**9), BlockPoses)))
+    wait_until(lambda: any("'b7'" in r.message for r in reports), 30.0, "the report")
+    node.destroy_node()
+    [unknown] = [r for r in reports if "'b7'" in r.message]
+    assert f"not in the design {design.name!r}: 'b7'" in unknown.message, unknown.message
+    assert design.name != "world"
+    assert_bag_replays(tmp_path / "bag", tolerances=Tolerances(message=1e-9))

@@ -358,7 +358,7 @@ def test_bad_poses_give_a_reason_keep_the_state_and_the_bag(make_node, tmp_path)
     done = by_sec[4]
     assert done["active"] and done["current_step"] == 3 and done["as_built"]["status"] == 0
     assert not by_sec[5]["active"] and by_sec[5]["message"] == (
-        "the plan 'world' does not match the design 'cell': blocks 'left', 'right' are in "
+        "the plan 'plank' does not match the design 'cell': blocks 'left', 'right' are in "
         "only one")
     topics = [m.topic.rsplit("/", 1)[1] for m in read_bag(tmp_path / "bag")]
     assert topics.count("poses") == 4 and topics.count("design") == 2

@@ -93,7 +93,7 @@ class Execution:
         self._seen: tuple = ()
         self._outputs: list[tuple[str, dict]] = []
         self._repaired = None               # the as-built scene a repair was last tried at
-        self._held: tuple = (None, None, None)  # (built, plan, holding(built)) of the last
+        self._held: tuple = (None, None, None)  # the last (built, plan, holding(built))
 
     def set_design(self, design: Scene | None, cell: Cell | None = None) -> None:
         """A new design: its sequence (and holds) is the plan, for ``cell``'s robots when

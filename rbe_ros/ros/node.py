@@ -878,12 +878,14 @@ class RbeChecks:
 
     def _holding(self, scene, design: int):
         """``scene`` with the holds of the plan under execution at its step
-        (:meth:`Execution.holding`), once the execution has taken the design ``design`` and
-        advanced the states before it that place fewer blocks: a repair there may change the
-        holds of this state's step (one of the blocks placed since), not of its own or an
-        earlier one. So the plan is the one the replay, which executes each state before
-        checking the next, has then; the execution's look-ahead and repair of a state with
-        as many blocks placed (a cell's same poses at 10 Hz) hold nothing up."""
+        (:meth:`Execution.holding`), once the execution has reached the design ``design``
+        and advanced the states before it that place fewer blocks: a repair there may change
+        the holds of this state's step (one of the blocks placed since), not of its own or
+        an earlier one. So the plan is the one the replay, which executes each state before
+        checking the next, has then (but for a state of a design that a newer one replaced
+        before the execution took it: checked with the newer one's plan); the look-ahead
+        and repair of a state with as many blocks placed (a cell's same poses at 10 Hz)
+        hold nothing up."""
         placed = _free(scene)
         with self._exec_cond:
             while not self._closing and self._behind(design, placed):
@@ -891,10 +893,10 @@ class RbeChecks:
         return self._execution.holding(scene)
 
     def _behind(self, design: int, placed: int) -> bool:
-        """Whether the execution has yet to take the design ``design``, or to advance a
-        state before (waiting or under way) with fewer than ``placed`` free blocks (called
-        with ``_exec_cond``)."""
-        if "design" in self._exec_slot or self._exec_design != design:
+        """Whether the execution has yet to reach the design ``design`` (a newer one may
+        replace it in the slot: then that one), or to advance a state before (waiting or
+        under way) with fewer than ``placed`` free blocks (called with ``_exec_cond``)."""
+        if self._exec_design < design:
             return True
         waiting = self._exec_slot.get("state")
         states = [self._exec_running, (waiting[3], waiting[1]) if waiting else (None, None)]

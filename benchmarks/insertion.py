@@ -218,6 +218,7 @@ def interlock_suite(out: Path) -> None:
         "",
         machine_summary(),
         ""])
+    out.mkdir(parents=True, exist_ok=True)
     (out / "INTERLOCK.md").write_text(text)
     print(f"wrote {out / 'INTERLOCK.md'}")
 

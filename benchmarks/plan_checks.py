@@ -50,8 +50,8 @@ def plan_checks(scene, options: CheckOptions) -> tuple[planning.Plan, list[dict]
             found = function(assembly, *args, **kwargs)
             made.append({"kind": kind, "blocks": len(assembly.blocks),
                          "held": tuple(g.block for g in assembly.grips),
-                         "status": found.status.name if kind != "hold search" else
-                         ("STABLE" if found else "not stable"),
+                         "status": ("STABLE" if found else "not stable")
+                         if isinstance(found, bool) else found.status.name,
                          "placement steps": list(steps), "solves": solves[0], "cpu": time.process_time() - start})
             return found
         return wrapper

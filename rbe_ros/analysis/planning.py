@@ -663,16 +663,17 @@ class _Planner:
         go and the set does not stand, one more hold and the releases again, up to K + 1
         holds (beyond, the exact search decides). (A set is checked only when no release
         settles it: a step held by the previous holds and the new block that stands with
-        fewer needs no proof that it stands with all.)"""
+        fewer needs no proof that it stands with all; nor one of more than K, which the
+        step cannot use whether it stands or not.)"""
         if trial.stands(()):
             return ()
         held = [b for b in previous if b in trial.free] + [new]
         while True:
             fewer = release_unneeded(trial, held)
-            if len(fewer) < len(held) or trial.stands(held):
+            if len(fewer) < len(held) or len(held) > self.plan.max_held:
                 held = fewer
                 break
-            if len(held) > self.plan.max_held:
+            if trial.stands(held):
                 break
             more = trial.next_hold(held)
             if more is None:

@@ -7,7 +7,11 @@ this one run; each in a process of its own. The machine is shared: read the rati
 under load those of the processor time (the process's own, which waiting for a core does
 not count) beside those of the wall-clock time.
 
-    nice -n 10 python benchmarks/prestress_cost.py [--repeats R]
+    nice -n 10 python benchmarks/prestress_cost.py [--repeats R] [--also REV]
+
+``--also REV`` times a third tree (a git revision, from a worktree as 670975d) in the same
+alternation and adds its processor time's ratio to 670975d: a change's before and after in
+one run.
 """
 from __future__ import annotations
 
@@ -85,30 +89,38 @@ def timed(code: Path, path: Path, mu: float, repeats: int, accuracy: float) -> d
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--also", metavar="REV", help="a third tree timed in the same run")
     args = parser.parse_args(argv)
     print(machine_summary())
     print(f"load average {os.getloadavg()[0]:.1f}")
+    also = f" | processor time {args.also} | ratio" if args.also else ""
     print("| assembly | blocks | interfaces | before (670975d) | now | ratio | processor time"
-          " before | now | ratio | verdict before | verdict now |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+          f" before | now | ratio{also} | verdict before | verdict now |")
+    print("| --- " * (11 + 2 * bool(args.also)) + "|")
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        before = tmp / "before"
-        subprocess.run(["git", "worktree", "add", "--detach", "--force", str(before), BEFORE],
-                       cwd=ROOT, check=True, capture_output=True)
+        trees = {BEFORE: tmp / "before"} | ({args.also: tmp / "also"} if args.also else {})
+        for rev, where in trees.items():
+            subprocess.run(["git", "worktree", "add", "--detach", "--force", str(where), rev],
+                           cwd=ROOT, check=True, capture_output=True)
         try:
             for name, path, mu, accuracy in cases(tmp):
-                old = timed(before, path, mu, args.repeats, accuracy)
+                old = timed(trees[BEFORE], path, mu, args.repeats, accuracy)
+                third = timed(trees[args.also], path, mu, args.repeats, accuracy) \
+                    if args.also else None
                 new = timed(ROOT, path, mu, args.repeats, accuracy)
+                extra = (f" {1e3 * third['cpu']:.1f} ms | {third['cpu'] / old['cpu']:.2f}x |"
+                         if third else "")
                 print(f"| {name} | {new['blocks']} | {new['interfaces']} |"
                       f" {1e3 * old['time']:.1f} ms | {1e3 * new['time']:.1f} ms |"
                       f" {new['time'] / old['time']:.2f}x | {1e3 * old['cpu']:.1f} ms |"
-                      f" {1e3 * new['cpu']:.1f} ms | {new['cpu'] / old['cpu']:.2f}x |"
+                      f" {1e3 * new['cpu']:.1f} ms | {new['cpu'] / old['cpu']:.2f}x |{extra}"
                       f" {old['status']} | {new['status']} |",
                       flush=True)
         finally:
-            subprocess.run(["git", "worktree", "remove", "--force", str(before)], cwd=ROOT,
-                           check=False, capture_output=True)
+            for where in trees.values():
+                subprocess.run(["git", "worktree", "remove", "--force", str(where)], cwd=ROOT,
+                               check=False, capture_output=True)
     return 0
 
 

@@ -136,6 +136,39 @@ def test_a_diagonal_with_trailing_zeros_keeps_its_shape():
     assert csc.shape == (4, 4) and (csc != sp.diags(d).tocsc()).nnz == 0
 
 
+def test_the_constraint_rows_are_scipys_csc_of_their_coordinates(monkeypatch):
+    """The rows' CSC arrays, built in numpy, are scipy's conversion of their coordinates
+    (which would sum entries that two terms share: none may) for every kind of row: the
+    cones (second-order and pyramid), LP magnitudes, friction+, interface caps, the
+    frictionless step from rest."""
+    from rbe_ros.rbe import solver
+    from rbe_ros.rbe.prestress import inertia_metric
+    from rbe_ros.rbe.solver import solve
+    built = []
+    matrix = solver._Rows.matrix
+    monkeypatch.setattr(solver._Rows, "matrix", lambda rows: built.append(
+        (rows, matrix(rows))) or built[-1][1])
+    assembly = Assembly.from_scene(stacked_boxes(0.3))
+    model = build_model(assembly.blocks, assembly.interfaces, assembly.gravity)
+    caps = np.full(len(model.interfaces), 0.1 * model.force_scale)
+    for options, extra in ((SolveOptions(), {}), (SolveOptions(cone="pyramid8"), {}),
+                           (SolveOptions(objective="lp"), {}),
+                           (SolveOptions(friction="plus", cone="pyramid4"), {}),
+                           (SolveOptions(), {"friction_cap": caps}),
+                           (SolveOptions(cone="pyramid8"), {"friction_cap": caps}),
+                           (SolveOptions(), {"inertia": inertia_metric(model),
+                                             "frictionless": True})):
+        assert solve(model, options, **extra).solved
+    assert len(built) == 7
+    for rows, ours in built:
+        theirs = sp.csc_matrix((np.concatenate(rows.v), (np.concatenate(rows.r) - rows.first,
+                                                         np.concatenate(rows.c))),
+                               shape=ours.shape)
+        assert theirs.has_canonical_format and theirs.nnz == ours.nnz
+        for name in ("indptr", "indices", "data"):
+            np.testing.assert_array_equal(getattr(theirs, name), getattr(ours, name))
+
+
 def test_interfaces_count_for_friction_from_a_hundredth_of_the_mean_free_weight():
     """With a declared pose uncertainty, |V|/N counts on interfaces carrying at least 1 % of
     the mean free block's weight (m g of the unit boxes, from their density); all count on

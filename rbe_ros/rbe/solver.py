@@ -391,7 +391,8 @@ def _accept(model: EquilibriumModel, v: _Variables, x: np.ndarray, p, live_load,
             forces[k] = x[v.base[k]:v.base[k] + nv]
     z = x[v.hold]
     e = x[v.res]
-    residual = model.a_eq @ forces.ravel() + model.hold_columns @ z + p - (e if len(e) else 0.0)
+    residual = model.a_eq @ forces.ravel() + (model.hold_columns @ z if len(z) else 0.0) + p \
+        - (e if len(e) else 0.0)
     lam = float(x[v.lam]) if live_load is not None else math.nan
     if live_load is not None:
         residual = residual + lam * np.asarray(live_load)
@@ -492,11 +493,13 @@ def _capacities(model: EquilibriumModel, v: _Variables, rows: _Rows) -> list:
     return cones
 
 
-def _equilibrium_columns(model: EquilibriumModel, v: _Variables, column) -> sp.csc_matrix:
+def _equilibrium_columns(model: EquilibriumModel, v: _Variables, column) -> _Arrays:
     """The rows A_eq x (+ lambda column) of the zero cone in the column layout of ``v``: the
     columns of model.a_eq (stored by kind) without those of fn- unless v has them, empty
     columns for t, a dense column for the multiplier."""
-    a_eq, nv = sp.csc_matrix(model.a_eq), v.nv
+    a_eq, nv = model.a_eq, v.nv
+    if not sp.isspmatrix_csc(a_eq):
+        a_eq = sp.csc_matrix(a_eq)
     if not a_eq.has_canonical_format:
         a_eq = a_eq.copy()
         a_eq.sum_duplicates()
@@ -526,8 +529,9 @@ def _equilibrium_columns(model: EquilibriumModel, v: _Variables, column) -> sp.c
         extra.append([indices.size + len(values)])
         indices = np.concatenate((indices, np.arange(len(values))))
         data = np.concatenate((data, values))
-    indptr = np.concatenate([indptr] + extra)
-    return sp.csc_matrix((data, indices, indptr), shape=(a_eq.shape[0], v.count))
+    indptr = np.concatenate([np.asarray(indptr, dtype=np.int64)]
+                            + [np.asarray(x, dtype=np.int64) for x in extra])
+    return _Arrays(data, indices, indptr, (a_eq.shape[0], v.count))
 
 
 class _Variables:
@@ -622,11 +626,31 @@ class _Rows:
         self.b.append(b.ravel())
         self.count += 3 * len(rhs)
 
-    def matrix(self) -> sp.csc_matrix:
-        """The rows collected (numbered from 0), canonical CSC."""
-        return sp.csc_matrix((np.concatenate(self.v), (np.concatenate(self.r) - self.first,
-                                                       np.concatenate(self.c))),
-                             shape=(self.count - self.first, self.columns))
+    def matrix(self) -> _Arrays:
+        """The rows collected (numbered from 0), canonical CSC: sorted by column, then row
+        (scipy's conversion from coordinates, without its checks; no two terms of the rows
+        share an entry, which it would sum)."""
+        r = np.concatenate(self.r) - self.first
+        c = np.concatenate(self.c)
+        order = np.lexsort((r, c))
+        indptr = np.zeros(self.columns + 1, dtype=np.int64)
+        np.cumsum(np.bincount(c, minlength=self.columns), out=indptr[1:])
+        return _Arrays(np.concatenate(self.v)[order], r[order], indptr,
+                       (self.count - self.first, self.columns))
+
+
+class _Arrays(NamedTuple):
+    """A canonical CSC matrix as its arrays (what _Csc.stack reads): scipy's constructor
+    checks them at a cost comparable to a small problem's solve."""
+
+    data: np.ndarray
+    indices: np.ndarray
+    indptr: np.ndarray
+    shape: tuple[int, int]
+
+    @property
+    def nnz(self) -> int:
+        return int(self.indptr[-1])
 
 
 def _floats(x: np.ndarray) -> array:
@@ -679,7 +703,7 @@ def _with_inertia(p_diag: np.ndarray, v: _Variables, inertia: sp.spmatrix) -> _C
     """The objective's matrix: diag(p_diag) and ``inertia`` (upper triangular CSC) on the
     imbalance variables, which carry no diagonal entry of their own; as Clarabel reads it."""
     first, rows = int(v.res[0]), len(v.res)
-    upper = sp.csc_matrix(inertia)
+    upper = inertia if sp.isspmatrix_csc(inertia) else sp.csc_matrix(inertia)
     before, after = p_diag[:first], p_diag[first + rows:]
     nz_before, nz_after = np.flatnonzero(before), np.flatnonzero(after)
     counts = np.concatenate(((before != 0).astype(np.int64), np.diff(upper.indptr),

@@ -32,7 +32,8 @@ from rbe_ros.analysis.friction import minimum_friction
 from rbe_ros.analysis.incremental import StepChecker
 from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.analysis.pipeline import check_scene, check_sequence
-from rbe_ros.analysis.verdict import is_stable
+from rbe_ros.analysis.steps import gripped
+from rbe_ros.analysis.verdict import check, is_stable
 from rbe_ros.generators import _box, running_bond_wall, squeeze, two_blocks
 from rbe_ros.io.compas import load_compas_assembly, rotated_as_example
 from rbe_ros.io.inputs import load_design
@@ -428,6 +429,34 @@ def test_a_held_dome_block_beyond_its_capacity_is_hold_exceeded_with_the_wrench_
     for cap in (1.01 * needed, 1400.0):
         assert check_scene(scene, CheckOptions(hold_force_max=cap,
                                                hold_torque_max=200.0)).stable
+
+
+@pytest.mark.parametrize("slope, stands", [(0.45, True), (0.55, False), (1.2, False)])
+def test_a_block_under_a_held_block_on_an_incline_stands_as_under_a_fixed_one(slope, stands):
+    """A box F (1000 kg) on level ground under gravity tilted to the slope tan(theta), an
+    equal box H on it held still by a robot (unbounded grip) or fixed (a support), mu 0.5.
+    Set from rest F slides parallel to H's face: that contact gets no normal force, so F
+    stands exactly when tan(theta) <= mu, and the robot carries H's weight, -m g (closed
+    form, both ways). Before, the grip as a free block with the least wrench let H's weight
+    rest on F and its friction hold F, up to tan(theta) = mu (1 + 2 m_H / m_F) = 1.5."""
+    theta = math.atan(slope)
+    gravity = G * np.array([math.sin(theta), 0.0, -math.cos(theta)])
+    ground = _box("ground", (-1.5, -1.5, -0.2), (1.5, 1.5, 0), density=2000.0, support=True)
+    low = _box("F", (-0.5, -0.5, 0), (0.5, 0.5, 0.5), density=2000.0)
+    high = _box("H", (-0.5, -0.5, 0.5), (0.5, 0.5, 1.0), density=2000.0)
+    full = Assembly.from_scene(make_scene("under_held", [ground, low, high], gravity))
+    options = CheckOptions(solve=SolveOptions(mu=0.5))
+    ids = {"ground", "F", "H"}
+    held = check(gripped(full, ids, ("H",)), options)
+    fixed = check(full.subset(ids, ("H",)), options)
+    assert held.stable == fixed.stable == stands
+    if stands:
+        weight = 1000.0 * gravity
+        np.testing.assert_allclose(held.hold_wrenches[0].force, -weight, atol=1e-3 * G * 1000)
+        np.testing.assert_allclose(held.hold_wrenches[0].torque, 0.0, atol=1e-3 * G * 1000)
+    else:
+        assert held.status == fixed.status == Status.FRICTION_EXCEEDED
+        assert held.unstable_blocks == fixed.unstable_blocks == ("F",)
 
 
 def test_the_step_from_rest_accelerates_a_frictionless_block_down_an_incline_at_g_sin():

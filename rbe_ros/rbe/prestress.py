@@ -49,7 +49,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .cones import pyramid_facets
-from .model import EquilibriumModel
+from .model import EquilibriumModel, build_model
 from .solver import Kept, Solution, SolveOptions, Weights, solve
 
 #: Weight of the kinetic energy of the motion against the check's objective 1/2 |f|^2 (both
@@ -133,6 +133,8 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
         field = solution if solution is not None and solution.solved else \
             solve(model, options, load=load)
         return Placement(field if field.solved else None)
+    if any(_still_grip(g) for g in model.grips):
+        return _held_still(model, options, load)
     # the check's field is the least |f|^2 of the steps' problem (see _own_caps)
     least = options.objective == "qp" and options.friction == "net" and not model.grips
     options = replace(options, objective="qp", friction="net")
@@ -193,6 +195,66 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
             break       # converged, or friction raising its own caps ever faster: a squeeze
         caps, change_before = normal, change
     return _moved(model, motion, count)
+
+
+def _still_grip(grip) -> bool:
+    """Whether a grip keeps its block still: it can apply a force and a torque (a pin grip,
+    torque capacity 0, lets its block turn about the grip)."""
+    return grip.max_force != 0 and grip.max_torque != 0
+
+
+def _held_still(model: EquilibriumModel, options: SolveOptions, load) -> Placement:
+    """The test with the blocks of grips that keep them still (:func:`_still_grip`) as
+    supports, then each robot's wrench from the field that stands: what its block's weight
+    and contact forces leave (:func:`_with_wrenches`), checked against the capacities
+    (beyond them: ``beyond``, that field). A robot that holds its block still (position-
+    controlled) does not pre-load: its block presses a neighbour only where the motion the
+    loads start closes the contact, as a fixed block's does. As a free block whose wrench
+    costs (the least hold), the held block's own weight would rest on its neighbours and its
+    friction hold them, a squeeze by the robot: a box on a slope under an equal held box
+    stood up to tan 1.5 at mu 0.5, not 0.5 (tests/test_prestress.py); the 8 x 5 dome's
+    plan, step 18 (docs/METHOD.md, Holds)."""
+    still_ids = {g.block for g in model.grips if _still_grip(g)}
+    blocks = tuple(replace(b, support=True) if b.id in still_ids else b for b in model.blocks)
+    masses = np.array([model.blocks[j].mass for j in model.free])
+    gravity = model.dead_load.reshape(-1, 6)[:, :3].sum(axis=0) * model.force_scale \
+        / max(masses.sum(), 1e-300)
+    still = build_model(blocks, model.interfaces, gravity,
+                        tuple(g for g in model.grips if not _still_grip(g)))
+    load = model.dead_load if load is None else np.asarray(load, dtype=float)
+    keep = np.isin(model.free, still.free)
+    rows = load.reshape(-1, 6)[keep] * (model.force_scale / still.force_scale)
+    first = solve(still, options, load=rows.ravel())
+    found = placed(still, options, rows.ravel(), first if first.solved else None)
+    if not found.stands:
+        return replace(found, field=None, beyond=None)
+    field = _with_wrenches(model, found.field, load)
+    return Placement(field, steps=found.steps) if _held(model, field) else \
+        Placement(None, steps=found.steps, beyond=field)
+
+
+def _with_wrenches(model: EquilibriumModel, field: Solution, load: np.ndarray) -> Solution:
+    """``field`` (of the model with the still-held blocks as supports) as a field of
+    ``model``: each still-held block's grip takes what its weight and contact forces leave
+    (force F at the grip p, torque M about it: F = -R, M = -(M_c + (p - c) x F) for their
+    resultant R and moment M_c about the centroid c); the other grips keep their wrenches
+    in ``field``."""
+    row = {int(j): r for r, j in enumerate(model.free)}
+    rest = (model.a_eq @ field.forces.ravel() / model.force_scale + load).reshape(-1, 6)
+    others = iter(field.wrenches)
+    wrenches = np.zeros((len(model.grips), 6))
+    index = {b.id: j for j, b in enumerate(model.blocks)}
+    for k, g in enumerate(model.grips):
+        if not _still_grip(g):
+            wrenches[k] = next(others)
+            continue
+        j = index[g.block]
+        force = -rest[row[j], :3] * model.force_scale
+        moment = rest[row[j], 3:] * model.force_scale * model.length_scale
+        wrenches[k, :3] = force
+        wrenches[k, 3:] = -(moment + np.cross(np.asarray(g.point) - model.blocks[j].centroid,
+                                              force))
+    return replace(field, wrenches=wrenches, unbalanced=np.zeros(0))
 
 
 def _own_caps(model: EquilibriumModel, rigid: EquilibriumModel, options: SolveOptions, load,

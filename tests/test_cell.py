@@ -33,12 +33,12 @@ from rbe_ros.scene import box_block, make_scene
 G = 9.81
 TOOL = {"box": [0.1, 0.1, 0.15], "tcp": [0.0, 0.0, 0.15], "mass": 2.0}
 ARCH_CELL = {"robots": [
-    {"name": "r1", "base": [1.5, -1.5, 0.0], "reach": 3.0, "payload_force": 1500,
-     "payload_torque": 400, "tool": TOOL},
-    {"name": "r2", "base": [-1.5, -1.5, 0.0], "reach": 3.0, "payload_force": 1500,
-     "payload_torque": 400, "tool": TOOL},
-    {"name": "r3", "base": [0.0, 1.5, 0.0], "reach": 3.0, "payload_force": 1500,
-     "payload_torque": 400, "tool": TOOL}]}
+    {"name": "r1", "base": [1.5, -1.5, 0.0], "reach": 3.0, "payload_force": 3000,
+     "payload_torque": 1500, "tool": TOOL},
+    {"name": "r2", "base": [-1.5, -1.5, 0.0], "reach": 3.0, "payload_force": 3000,
+     "payload_torque": 1500, "tool": TOOL},
+    {"name": "r3", "base": [0.0, 1.5, 0.0], "reach": 3.0, "payload_force": 3000,
+     "payload_torque": 1500, "tool": TOOL}]}
 
 
 def write(tmp_path, name, data) -> str:
@@ -162,11 +162,12 @@ def test_the_arch_for_three_robots_timeline_rechecked(arch_plan, capsys):
     # the step summaries carry the hold wrenches: step 4 holds v02 and v05 (README table)
     step4 = result["steps"][4]
     forces = {w["block"]: np.linalg.norm(w["force"]) for w in step4["hold_wrenches"]}
-    assert set(forces) == {"v02", "v05"} and 150 < forces["v05"] < 250
+    # held still, v05 carries about its weight (1277 N), less what v06 under it takes
+    assert set(forces) == {"v02", "v05"} and 1150 < forces["v05"] < 1277
     # the export: capacities and grips kept in the planned scene, the timeline re-checked
     data = json.loads(out.read_text())
     assert data["timeline"] == timeline and data["cell"]["robots"][0]["name"] == "r1"
-    assert all(h["max_force"] == pytest.approx(1500 - 2 * G) and "grip" in h
+    assert all(h["max_force"] == pytest.approx(3000 - 2 * G) and "grip" in h
                for h in data["holds"])
     capsys.readouterr()
     assert main(["check", str(out), "--timeline", "--json", "--strict"]) == 0
@@ -358,15 +359,16 @@ def test_cell_fields_and_robot_count():
     assert cell.names == ("r1", "r2", "r3") and cell.robots[0].tool.mass == 2.0
     with pytest.raises(CellError, match="appears twice"):
         cell_from_dict({"robots": [ARCH_CELL["robots"][0]] * 2})
-    # two robots: one holds while one places; at step 4 the crown v03 held alone needs
-    # 1582 N, beyond r1's 1500 N payload less its tool's 19.6 N: the plan names both (its
-    # grip is the top face: carried by its front face, 0.5 m off its centre of mass, the
-    # crown's 1277 N would need 637 N m of r1's 400 N m)
+    # two robots of 1500 N: one holds while one places; at step 4 the crown v03, held
+    # still alone once v02 is released, carries its weight and v02's thrust, 1813 N, beyond
+    # r1's 1500 N payload less its tool's 19.6 N: the plan names both (a voussoir alone
+    # needs its weight and the tool's, 1297 N, within it)
+    robots = [dict(r, payload_force=1500) for r in ARCH_CELL["robots"][:2]]
     plan = plan_sequence(generators.semicircular_arch(7), 1,
-                         cell=cell_from_dict({"robots": ARCH_CELL["robots"][:2]}))
+                         cell=cell_from_dict({"robots": robots}))
     assert not plan.feasible and plan.failed_step == 4
     assert "(r1 holding v03 beyond its payload): hold exceeded" in plan.message
-    assert "needs |F| 1582 N (capacity 1480 N)" in plan.message
+    assert "needs |F| 1813 N (capacity 1480 N)" in plan.message
     assert max(busy_per_state([{"action": a.action, "robot": a.robot, "block": a.block}
                                for a in plan.timeline.actions])) <= 2
 
@@ -418,18 +420,18 @@ def test_markers_and_view_of_the_arch_plan(arch_plan, capsys):
 def test_plan_output_keeps_the_hold_capacities(tmp_path, capsys):
     """Without a cell, ``plan -o`` writes the capacities the plan was checked under into
     each hold, and ``check --sequence`` of the file checks with them (the arch's largest hold,
-    694 N at step 4, within 800 N)."""
+    a voussoir's weight, 1277 N, held still at steps 2 and 3, within 1400 N)."""
     scene_path = write(tmp_path, "arch.json", scene_to_dict(generators.semicircular_arch(7)))
     out = tmp_path / "planned.json"
-    assert main(["plan", scene_path, "--max-held", "2", "--hold-force-max", "800",
+    assert main(["plan", scene_path, "--max-held", "2", "--hold-force-max", "1400",
                  "--hold-torque-max", "300", "-o", str(out)]) == 0
     holds = json.loads(out.read_text())["holds"]
-    assert holds and all(h["max_force"] == 800 and h["max_torque"] == 300 for h in holds)
+    assert holds and all(h["max_force"] == 1400 and h["max_torque"] == 300 for h in holds)
     capsys.readouterr()
     assert main(["check", str(out), "--sequence", "--json", "--strict"]) == 0
     reports = json.loads(capsys.readouterr().out)["reports"]
     assert max(w["utilisation"] for r in reports for w in r["hold_wrenches"]) \
-        == pytest.approx(694 / 800, abs=0.01)
+        == pytest.approx(1276.9 / 1400, abs=0.01)
 
 
 def test_a_hand_over_releases_before_the_placement_and_is_checked():

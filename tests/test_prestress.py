@@ -37,7 +37,7 @@ from rbe_ros.analysis.verdict import check, is_stable
 from rbe_ros.generators import _box, running_bond_wall, squeeze, two_blocks
 from rbe_ros.io.compas import load_compas_assembly, rotated_as_example
 from rbe_ros.io.inputs import load_design
-from rbe_ros.rbe.model import build_model
+from rbe_ros.rbe.model import Grip, build_model
 from rbe_ros.rbe.prestress import accelerations, inertia_metric, placed
 from rbe_ros.rbe.result import Status
 from rbe_ros.rbe.solver import SolveOptions, solve
@@ -455,6 +455,21 @@ def test_a_block_under_a_held_block_on_an_incline_stands_as_under_a_fixed_one(sl
     else:
         assert held.status == fixed.status == Status.FRICTION_EXCEEDED
         assert held.unstable_blocks == fixed.unstable_blocks == ("F",)
+
+
+@pytest.mark.xfail(strict=True, reason="a pin grip keeps the least-hold path: its block's "
+                   "weight rests on F and its friction holds F (rbe/prestress.py, _still_grip)")
+def test_a_block_under_a_pinned_block_on_an_incline_slides_beyond_mu():
+    """As above with H pinned at its centroid (no torque): H cannot translate, F slides
+    parallel to H's face, so F slides for tan(theta) > mu (0.8 at mu 0.5)."""
+    theta = math.atan(0.8)
+    gravity = G * np.array([math.sin(theta), 0.0, -math.cos(theta)])
+    blocks = [_box("ground", (-1.5, -1.5, -0.2), (1.5, 1.5, 0), density=2000.0, support=True),
+              _box("F", (-0.5, -0.5, 0), (0.5, 0.5, 0.5), density=2000.0),
+              _box("H", (-0.5, -0.5, 0.5), (0.5, 0.5, 1.0), density=2000.0)]
+    full = Assembly.from_scene(make_scene("under_pinned", blocks, gravity))
+    pinned = full.subset({"ground", "F", "H"}, {"H"}, (Grip("H", max_torque=0.0),))
+    assert not check(pinned, CheckOptions(solve=SolveOptions(mu=0.5))).stable
 
 
 def test_the_step_from_rest_accelerates_a_frictionless_block_down_an_incline_at_g_sin():

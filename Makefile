@@ -85,6 +85,15 @@ lmgc90: setup
 bench-lmgc90: setup lmgc90
 	nice -n 10 $(PY) benchmarks/bench.py --only lmgc90
 
+# Our verdicts alone, re-checked by this tree on every case of the last runs' results (each
+# configuration, tilt capacities bisected again), on compas_cra's samples and on the squeeze
+# suite; every other method's answer and every time kept: docs/BENCHMARKS.md,
+# docs/lmgc90_verdicts.json and docs/bench/results.json after a change of the check, in
+# minutes rather than the hours of make bench and make bench-lmgc90 on a shared machine.
+.PHONY: bench-verdicts
+bench-verdicts: setup
+	nice -n 10 $(PY) benchmarks/bench.py --only ours
+
 # As-built noise suite: perturbed poses under the declared uncertainty, the design rule with
 # raised tolerances and today's defaults; docs/ASBUILT.md and docs/figures/asbuilt.png
 # (about 15 minutes; make asbuilt ASBUILT_ARGS=--quick: 10 samples, out/asbuilt-quick/).

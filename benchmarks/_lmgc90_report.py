@@ -2,7 +2,9 @@
 which method agrees with the non-smooth contact dynamics reference on which near-limit case."""
 from __future__ import annotations
 
+import json
 import statistics
+import sys
 
 from bench import DEFAULT, SQUEEZE, method_label
 
@@ -54,12 +56,24 @@ def _time_ratios(cases: list[dict], key: str = "time") -> list[float]:
 
 def merged_note(result: dict) -> list[str]:
     """Where the LMGC90 column comes from a run of its own (make bench-lmgc90)."""
-    info = result.get("lmgc90")
-    if not info or not info.get("merged"):
-        return []
-    return [f"The LMGC90 column comes from `make bench-lmgc90` ({info['date']}, load average"
-            f" {info['load_average_1min'][0]:.2f}), merged into this run's results; its time ratios"
-            " are against ours re-timed in that run.", ""]
+    info, rechecked = result.get("lmgc90"), result.get("ours_rechecked")
+    L = [] if not info or not info.get("merged") else [
+        f"The LMGC90 column comes from `make bench-lmgc90` ({info['date']}, load average"
+        f" {info['load_average_1min'][0]:.2f}), merged into this run's results; its time ratios"
+        " are against ours re-timed in that run.", ""]
+    if rechecked:
+        scope = rechecked.get("scope") or (
+            "every configuration's, tilt capacities included, and those on compas_cra's"
+            " samples, the squeeze suite and its variants")
+        L += [f"**rbe_ros's verdicts** ({scope}) are this"
+              f" tree's: re-checked by `make bench-verdicts` (`benchmarks/bench.py --only ours`)"
+              f" at commit {rechecked['commit']}, {rechecked['date']} (load average"
+              f" {rechecked['load_average_1min'][0]:.1f} at the start). Every other method's"
+              " answer and every time (ours included) are the runs' named above, made on the"
+              " code of their day: read the verdicts as today's, the times as then. Verdicts"
+              " of ours that changed from the stored run: "
+              + ("; ".join(rechecked["changed"]) or "none") + ".", ""]
+    return L
 
 
 def summary(result: dict) -> list[str]:
@@ -94,8 +108,10 @@ def summary(result: dict) -> list[str]:
 
 
 def _squeeze_misses(rows: list[dict]) -> tuple[list[str], list[str], list[dict]]:
-    """(unsafe STABLE, false alarms, decided rows) of ours against LMGC90 on the suite."""
-    decided = [r for r in rows if r["lmgc90"] in DECIDED]
+    """(unsafe STABLE, false alarms, decided rows) of ours against LMGC90 on the suite: a
+    scene whose verdict changes with LMGC90's numerics (``decides`` false,
+    benchmarks/lmgc90_sensitivity.py) is not decided."""
+    decided = [r for r in rows if r["lmgc90"] in DECIDED and r.get("decides", True)]
     unsafe = [r["name"] for r in decided if r["rbe_ros_stable"] and r["lmgc90"] == "falls"]
     alarms = [r["name"] for r in decided if not r["rbe_ros_stable"] and r["lmgc90"] == "stands"]
     return unsafe, alarms, decided
@@ -167,11 +183,54 @@ def section(result: dict) -> list[str]:
           " as its hull (not comparable; listed in results.json under `hulls`).",
           "- LMGC90 knows gravity along -z only: a tilted case is the whole scene turned the other way"
           " (as for compas_cra).",
+          "- LMGC90 reaches one solution of a contact problem that may have several (rigid"
+          " frictional contact is not unique: a block between two faces can slide, or be squeezed"
+          " by any normal force), and which one hangs on how its solver iterates: where its"
+          " verdict changes with the NLGS relaxation the scene is not decided"
+          " (benchmarks/lmgc90_sensitivity.py; the squeeze sections below).",
           "- The dome's tilted cases are not run (as for the physics engines: 140 blocks, a"
           " simulation per case).", ""]
     L += _samples(info)
     L += _squeeze(info)
+    L += _variants()
     return L
+
+
+def _variants() -> list[str]:
+    """The squeeze variants' table (scripts/squeeze_variants.py --table, LMGC90's committed
+    verdicts beside them, ours checked by this tree while the page is written)."""
+    folder = SQUEEZE / "variants"
+    if not (folder / "lmgc90_verdicts.json").exists():
+        return []
+    sys.path.insert(0, str(SQUEEZE.parents[2] / "scripts"))
+    import squeeze_variants
+    table = squeeze_variants.table(folder)
+    stored = json.loads((folder / "lmgc90_verdicts.json").read_text())
+    scenes = stored["scenes"]
+    decided = [k for k, r in scenes.items() if r["lmgc90"] in DECIDED]
+    same = sum(scenes[k].get("lmgc90_2T") == scenes[k]["lmgc90"] for k in decided)
+    off = [k for k in decided if scenes[k].get("closed_form") not in (None, scenes[k]["lmgc90"])]
+    cells = [[c.strip() for c in row.strip("|").split("|")] for row in table[2:]]
+    wrong = [(c[0], c[6].split()[-1]) for c in cells if c[6].startswith("✗")]
+    unsafe = [name for name, status in wrong if status == "STABLE"]
+    alarms = [name for name, status in wrong if status != "STABLE"]
+    return ["### The squeeze variants", "",
+            f"{len(scenes)} scenes made apart from the suite's generator the way a held-out suite"
+            " would differ (tests/data/squeeze/variants/, written by scripts/squeeze_variants.py:"
+            " other proportions, 0.4 m deep, mu near each limit, copies turned 90 deg about the"
+            " vertical, compas_cra's type-b turned 90 deg about y at 0.5-0.84, the suite's shelf"
+            " and inclines at other mu). LMGC90 as above (`python scripts/squeeze_variants.py"
+            f" --lmgc90`, {stored['date']}, compas_lmgc90"
+            f" {stored['versions'].get('compas_lmgc90', '?')}; lmgc90_verdicts.json beside them):"
+            f" it decides {len(decided)} of {len(scenes)}, the same at 1 s and 2 s on {same}, and"
+            f" differs from the closed form on {len(off)} ({', '.join(off) or 'none'}): where its"
+            " blocks jam (a block under a fixed bar parallel to its incline from about 0.93 tan"
+            " theta, the shelf beyond its tipping limit from mu 13; docs/METHOD.md's limits)."
+            " rbe_ros (this tree, checked while this page was written,"
+            " `scripts/squeeze_variants.py --table tests/data/squeeze/variants`):"
+            f" {len(unsafe)} unsafe STABLE{' (' + ', '.join(unsafe) + ')' if unsafe else ''},"
+            f" {len(alarms)} false alarms ({', '.join(alarms) or 'none'})."
+            " tests/test_squeeze_suite.py holds rbe_ros to these.", "", *table, ""]
 
 
 def _convexified(cases: list[dict]) -> str:
@@ -237,13 +296,17 @@ def _verdict_file(info: dict, key: str, rows: dict, fields: tuple[str, ...]) -> 
 
 
 def verdicts(result: dict) -> dict | None:
-    """docs/lmgc90_verdicts.json: LMGC90's verdict per compas_cra sample, with its set-up."""
+    """docs/lmgc90_verdicts.json: LMGC90's verdict per compas_cra sample, with its set-up
+    (``rbe_ros``: ours, from the run that last checked them)."""
     info = result.get("lmgc90")
     if not info or not info.get("samples"):
         return None
+    rechecked = result.get("ours_rechecked")
     return _verdict_file(info, "samples", info["samples"], (
         "file", "supports", "mu", "density", "densities", "rotation", "lmgc90", "stable",
-        "max_disp", "max_rot_deg", "simulated", "slabs", "hulls", "on_hulls", "rbe_ros"))
+        "max_disp", "max_rot_deg", "simulated", "slabs", "hulls", "on_hulls", "rbe_ros")) | (
+            {"rbe_ros_checked": {k: rechecked[k] for k in ("date", "commit")}} if rechecked
+            else {})
 
 
 def _squeeze(info: dict) -> list[str]:
@@ -263,7 +326,8 @@ def _squeeze(info: dict) -> list[str]:
          " mu on both sides of its limit (issue 29; tests/data/squeeze/, written by"
          " scripts/squeeze_suite.py, each scene's closed form and why in its manifest.json;"
          " LMGC90's verdicts in tests/data/squeeze/lmgc90_verdicts.json, which"
-         " tests/test_squeeze_suite.py holds rbe_ros to). LMGC90 decides"
+         " tests/test_squeeze_suite.py holds rbe_ros to). LMGC90 decides (the same verdict"
+         " under every setting of benchmarks/lmgc90_sensitivity.py)"
          f" {len(decided)} of {len(rows)}; it differs from the closed form on {len(off)} of"
          f" {len(closed)}{': ' + ', '.join(off) if off else ''}. rbe_ros (this run's default"
          f" check): {len(unsafe)} unsafe STABLE{' (' + ', '.join(unsafe) + ')' if unsafe else ''},"
@@ -278,7 +342,7 @@ def _squeeze(info: dict) -> list[str]:
     for r in rows:
         motion = (f"{r['max_disp']:.1e}, {r['max_rot_deg']:.2g}" if r.get("max_disp") is not None
                   else r.get("error") or "-")
-        mark = "" if r["lmgc90"] not in DECIDED else (
+        mark = "" if r["lmgc90"] not in DECIDED or not r.get("decides", True) else (
             "✓ " if r["rbe_ros_stable"] == (r["lmgc90"] == "stands") else "✗ ")
         L.append(f"| {r['name']} | {r['mu']:g} | {r['closed_form'] or '-'} | {r['lmgc90']} |"
                  f" {motion} | {', '.join(r.get('moved') or []) or '-'} | {mark}{r['rbe_ros']} |"
@@ -294,7 +358,7 @@ def squeeze_verdicts(result: dict) -> dict | None:
         return None
     return _verdict_file(info, "scenes", {r["name"]: r for r in info["squeeze"]}, (
         "mu", "closed_form", "lmgc90", "stable", "moved", "max_disp", "max_rot_deg",
-        "simulated", "time_process", "lmgc90_2T"))
+        "simulated", "time_process", "lmgc90_2T", "sensitivity", "decides"))
 
 
 def squeeze_target(out):

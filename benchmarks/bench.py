@@ -353,7 +353,6 @@ def lmgc90_samples(python: Path, samples_dir: Path) -> dict:
     A sample with a non-convex free block is not comparable: compas_lmgc90 takes one convex
     polyhedron per body, and such a block goes in as its hull (see rbe_ros.io.lmgc90.bodies), which
     overlaps its neighbours where the blocks interlock."""
-    from rbe_ros.io.compas import load_compas_assembly
     out = {}
     for name, spec in LMGC90_SAMPLES.items():
         path = samples_dir / spec["file"]
@@ -361,11 +360,7 @@ def lmgc90_samples(python: Path, samples_dir: Path) -> dict:
             out[name] = {"error": f"{path} not found"}
             continue
         supports, mu, densities = spec["supports"], spec["mu"], sample_densities(spec)
-        scene = load_compas_assembly(path, supports=supports, density=lmgc90.DENSITY)
-        scene = replace(scene, blocks=tuple(replace(b, density=densities.get(b.id, b.density))
-                                            for b in scene.blocks))
-        if spec.get("rotation"):
-            scene = rotated_as_example(scene, spec["rotation"]["axis"], spec["rotation"]["deg"])
+        scene = sample_scene(spec, samples_dir)
         ours = check_scene(scene, ours_options("qp", "soc", mu))
         res = lmgc90.check(scene, mu, python)
         word = _word(res)
@@ -382,12 +377,28 @@ def lmgc90_samples(python: Path, samples_dir: Path) -> dict:
     return out
 
 
+def sample_scene(spec: dict, samples_dir: Path) -> Scene:
+    """A compas_cra sample of :data:`LMGC90_SAMPLES` as LMGC90 and we check it: its example
+    script's supports and relative densities, turned as its example turns it."""
+    from rbe_ros.io.compas import load_compas_assembly
+    densities = sample_densities(spec)
+    scene = load_compas_assembly(samples_dir / spec["file"], supports=spec["supports"],
+                                 density=lmgc90.DENSITY)
+    scene = replace(scene, blocks=tuple(replace(b, density=densities.get(b.id, b.density))
+                                        for b in scene.blocks))
+    if spec.get("rotation"):
+        scene = rotated_as_example(scene, spec["rotation"]["axis"], spec["rotation"]["deg"])
+    return scene
+
+
 def lmgc90_squeeze(python: Path) -> list[dict]:
     """LMGC90's and our verdicts on the squeeze suite (:data:`SQUEEZE`, its manifest's mu per
     scene), our check timed in the same run (best of 3); LMGC90's verdict simulating twice as
     long beside it (``lmgc90_2T``: whether a verdict hangs on the duration)."""
     from rbe_ros.io.scene_json import load_scene
     rows = []
+    committed = SQUEEZE / "lmgc90_verdicts.json"
+    before = json.loads(committed.read_text())["scenes"] if committed.exists() else {}
     for entry in json.loads((SQUEEZE / "manifest.json").read_text())["scenes"]:
         scene = load_scene(SQUEEZE / entry["file"])
         ours, t = best_of(3, lambda: check_scene(scene, ours_options("qp", "soc", entry["mu"])))
@@ -398,6 +409,10 @@ def lmgc90_squeeze(python: Path) -> list[dict]:
             "time_ours": t} | {k: res.get(k) for k in ("stable", "moved", "max_disp", "max_rot_deg",
                                                        "simulated", "time", "time_process",
                                                        "error")})
+        # whether LMGC90 decides (benchmarks/lmgc90_sensitivity.py), kept while it still holds
+        kept = before.get(entry["name"], {})
+        if "decides" in kept and kept["mu"] == entry["mu"] and kept["lmgc90"] == rows[-1]["lmgc90"]:
+            rows[-1] |= {k: kept[k] for k in ("sensitivity", "decides")}
         print(f"[lmgc90] squeeze {entry['name']}: closed form {entry['closed_form']}, LMGC90"
               f" {rows[-1]['lmgc90']}, rbe_ros {ours.status.name}", flush=True)
     return rows
@@ -665,13 +680,17 @@ def main(argv=None) -> int:
     parser.add_argument("--no-lmgc90", action="store_true", help="leave LMGC90 out")
     parser.add_argument("--lmgc90-venv", type=Path, default=None,
                         help=f"LMGC90's scratch venv (default ${lmgc90.VENV_ENV} or .venv-lmgc90)")
-    parser.add_argument("--only", choices=["lmgc90"],
-                        help="run LMGC90 (and ours, for the time ratio) alone and merge it into the"
-                        " last full run's docs/bench/results.json (make bench-lmgc90)")
+    parser.add_argument("--only", choices=["lmgc90", "ours"],
+                        help="lmgc90: run LMGC90 (and ours, for the time ratio) alone and merge it"
+                        " into the last full run's docs/bench/results.json (make bench-lmgc90);"
+                        " ours: re-check our verdicts alone, every other answer and every time"
+                        " kept (make bench-verdicts)")
     args = parser.parse_args(argv)
     out = args.out or (ROOT / "out" / "bench-quick" if args.quick else ROOT / "docs")
     if args.only == "lmgc90":
         return only_lmgc90(args, out)
+    if args.only == "ours":
+        return only_ours(args, out)
     t0 = time.perf_counter()
     load0 = os.getloadavg()[0]
 
@@ -790,6 +809,75 @@ def only_lmgc90(args, out: Path) -> int:
     _bench_report.write(result, out)
     print(f"[bench] wrote {out / 'BENCHMARKS.md'} (LMGC90 merged) in {time.perf_counter() - t0:.0f} s")
     return 0
+
+
+#: Fields of our results that are times: kept from the run that measured them.
+TIMES = ("time", "time_bisection", "time_multiplier", "time_ours")
+
+
+def only_ours(args, out: Path) -> int:
+    """Our verdicts alone, re-checked by this tree on every case of the stored results (each
+    configuration, tilt capacities bisected again) and on LMGC90's compas_cra samples and
+    squeeze suite; every other method's answer and every time kept as measured (minutes,
+    against the hours of make bench and make bench-lmgc90 on a shared machine). What a
+    change of the check does to the tables; ``ours_rechecked`` in results.json says when."""
+    import _bench_report
+    t0, load0 = time.perf_counter(), os.getloadavg()[0]
+    stored = ROOT / "docs" / "bench" / "results.json"
+    result = json.loads(stored.read_text())
+    by_name = {c["name"]: c for c in result["cases"]}
+    changed = []
+    for case in near_limit_cases(result["quick"]) + arch_cases(result["quick"])[0] \
+            + paper_cases(result["quick"]):
+        record = by_name.get(case.name)
+        if record is None:
+            continue
+        run_ours(case, 1)
+        score(case)
+        for mid, new in case.results.items():
+            old = record["results"].get(mid, {})
+            if old.get("stable") != new["stable"] or old.get("capacity") != new.get("capacity"):
+                changed.append(f"{case.name} {mid}: {_said(old)} -> {_said(new)}")
+            record["results"][mid] = new | {k: old[k] for k in TIMES if k in old}
+        print(f"[ours] {case.name}: {_said(case.results[DEFAULT])}", flush=True)
+    info = result.get("lmgc90") or {}
+    samples_dir = cra_samples_dir(args.cra_venv)
+    for name, row in (info.get("samples") or {}).items():
+        if samples_dir is None or "error" in row and "lmgc90" not in row:
+            continue
+        spec = LMGC90_SAMPLES[name]
+        ours = check_scene(sample_scene(spec, samples_dir), ours_options("qp", "soc", spec["mu"]))
+        if row["rbe_ros"] != ours.status.name:
+            changed.append(f"sample {name}: {row['rbe_ros']} -> {ours.status.name}")
+        row.update(rbe_ros=ours.status.name, rbe_ros_stable=bool(ours.stable))
+        print(f"[ours] sample {name}: {ours.status.name}", flush=True)
+    from rbe_ros.io.scene_json import load_scene
+    files = {e["name"]: e["file"] for e in json.loads((SQUEEZE / "manifest.json").read_text())["scenes"]}
+    for row in info.get("squeeze") or []:
+        ours = check_scene(load_scene(SQUEEZE / files[row["name"]]),
+                           ours_options("qp", "soc", row["mu"]))
+        if row["rbe_ros"] != ours.status.name:
+            changed.append(f"squeeze {row['name']}: {row['rbe_ros']} -> {ours.status.name}")
+        row.update(rbe_ros=ours.status.name, rbe_ros_stable=bool(ours.stable))
+        print(f"[ours] squeeze {row['name']}: {ours.status.name}", flush=True)
+    commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"],
+                            capture_output=True, text=True).stdout.strip()
+    result["ours_rechecked"] = {
+        "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "commit": commit,
+        "load_average_1min": [load0, os.getloadavg()[0]],
+        "runtime_s": time.perf_counter() - t0, "changed": changed}
+    _bench_report.write(result, out)
+    print("[bench] verdicts changed:\n  " + "\n  ".join(changed or ["none"]))
+    print(f"[bench] wrote {out / 'BENCHMARKS.md'} (our verdicts re-checked) in"
+          f" {time.perf_counter() - t0:.0f} s")
+    return 0
+
+
+def _said(res: dict) -> str:
+    """A method's answer on a case in words: its tilt capacity, failed, stands or falls."""
+    if "capacity" in res:
+        return f"{res['capacity']:.2f} deg"
+    return "failed" if res.get("failed") else "stands" if res.get("stable") else "falls"
 
 
 def physics_versions(engines) -> dict:

@@ -8,6 +8,7 @@ the same quantities against the paper's values with tolerances.
 """
 from __future__ import annotations
 
+import os
 import sys
 import time
 from pathlib import Path
@@ -45,6 +46,7 @@ def figure(name: str, assembly: Assembly, report, title: str, view=(20.0, -60.0)
 
 
 def main() -> int:
+    load0 = os.getloadavg()[0]
     rows: list[tuple[str, str, str, str]] = []     # quantity, paper, ours, seconds
     figs: list[tuple[str, str]] = []
 
@@ -107,7 +109,7 @@ def main() -> int:
         figs.append((f"dome, {analysis}", figure(f"dome_{analysis}", virtual, report,
                                                  f"{analysis}: {report.message}", (35.0, -60.0))))
 
-    write(rows, figs)
+    write(rows, figs, load0)
     print((DOCS / "PAPER.md").read_text())
     return 0
 
@@ -120,7 +122,7 @@ def ring_spread(report) -> float:
     return max((max(v) - min(v)) / abs(sum(v) / len(v)) for v in rings.values())
 
 
-def write(rows, figs) -> None:
+def write(rows, figs, load0: float) -> None:
     lines = ["# The paper's examples, reproduced", "",
              "Kao et al. 2021, Sec. 3.1-3.3, with `rbe_ros` defaults (QP, friction-net, exact cone)",
              "unless stated. Made by `make paper` (`benchmarks/paper.py`); asserted with tolerances in",
@@ -138,7 +140,9 @@ def write(rows, figs) -> None:
               "- With the base strips shrunk to 10% towards the inner edge, the dome needs more",
               "  friction than 0.6 at the first course (FRICTION_EXCEEDED); kern-fitting and outer",
               "  base-fitting are admissible.", "",
-              "Machine: " + machine_summary(), ""]
+              f"Machine: {machine_summary()}; load average {load0:.1f} at the start, "
+              f"{os.getloadavg()[0]:.1f} at the end (times on a shared machine: compare them"
+              " within the table).", ""]
     for caption, path in figs:
         lines += [f"### {caption}", "", f"![{caption}]({path})", ""]
     (DOCS / "PAPER.md").write_text("\n".join(lines))

@@ -8,8 +8,9 @@ Section "lazy": the children of --prefer margin ranked lazily (this tree) agains
 one (the commit before, BEFORE, unpacked by git archive), each in its own process, in one run.
 Writes docs/PREFER_MARGIN.md; a section run alone replaces only its part of the file.
 
-Usage: .venv/bin/python benchmarks/prefer_margin.py [margin] [robust] [lazy]
-       (make bench-prefer: all three; the margin section takes most of an hour)
+Usage: .venv/bin/python benchmarks/prefer_margin.py [--quick] [margin] [robust] [lazy]
+       (make bench-prefer: all three; the margin section takes most of an hour, with --quick
+       without the 14 x 10 dome)
 """
 from __future__ import annotations
 
@@ -65,10 +66,12 @@ def row(name: str, prefer: str, scene, candidates: int = 8) -> tuple[str, float]
             w.margin_g if w is not None else float("nan"))
 
 
-def margin_section() -> str:
+def margin_section(quick: bool = False) -> str:
+    scenes = SCENES[:2] if quick else SCENES
     lines = ["# Planning for the largest margin", "",
-             "Made by `make bench-prefer` (benchmarks/prefer_margin.py); machine: "
-             f"{machine_summary()}.", "",
+             "Made by `make bench-prefer` (benchmarks/prefer_margin.py"
+             + (" margin --quick: without the 14 x 10 dome" if quick else "") + "); machine: "
+             f"{machine_summary()}; load average {os.getloadavg()[0]:.1f} at the start.", "",
              "`rbe-ros plan SCENE --max-held 2 --margin` (prefer holds, the default) against "
              "`--prefer margin`: the weakest step (its index, block and margin in g, the "
              "smallest horizontal acceleration that topples or slides it over 8 directions) "
@@ -76,15 +79,16 @@ def margin_section() -> str:
              "| scene | prefer | feasible | weakest step | weakest margin g | hold-steps | "
              "largest hold count | time s |", "|---|---|---|---|---|---|---|---|"]
     verdicts = []
-    for name, make, candidates in SCENES:
+    for name, make, candidates in scenes:
         scene = make()
         default, m0 = row(name, "holds", scene)
         better, m1 = row(name, "margin", scene, candidates)
         lines += [default, better]
         verdicts.append(f"{name}: {m1:.4f} g against {m0:.4f} g: "
                         + ("met" if m1 >= m0 - 1e-9 else "NOT met"))
-    return "\n".join([*lines, "", "The weakest step's margin of --prefer margin at least the "
-                      "default's:", "", *[f"- {v}" for v in verdicts], ""])
+    return "\n".join([*lines, "", f"Load average {os.getloadavg()[0]:.1f} at the end.", "",
+                      "The weakest step's margin of --prefer margin at least the default's:",
+                      "", *[f"- {v}" for v in verdicts], ""])
 
 
 def robust_section() -> str:
@@ -146,9 +150,7 @@ def lazy_section() -> str:
                  "margin and p_stable made only when it could still come first, "
                  "planning.py's _best_first) against scoring every feasible child, then "
                  f"sorting (before: commit {BEFORE}); each in its own process, in one run "
-                 f"(load average at its start {os.getloadavg()[0]:.1f}). The table above was "
-                 "made before the lazy ranking: its --prefer margin times are the before "
-                 "ones.", "",
+                 f"(load average at its start {os.getloadavg()[0]:.1f}).", "",
                  "| scene | before s | after s | after / before | same plan | states before "
                  "/ after | checks before / after |", "|---|---|---|---|---|---|---|"]
         for scene in LAZY_SCENES:
@@ -189,8 +191,9 @@ def main(argv: list[str]) -> int:
     if argv[:1] == ["--lazy-one"]:
         lazy_one(*argv[1:3])
         return 0
-    for name in argv or list(SECTIONS):
-        write(name, SECTIONS[name]())
+    quick = "--quick" in argv
+    for name in [a for a in argv if a != "--quick"] or list(SECTIONS):
+        write(name, margin_section(quick) if name == "margin" else SECTIONS[name]())
     return 0
 
 

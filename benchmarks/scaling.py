@@ -129,7 +129,9 @@ def main() -> int:
     print(f"two domes: {two_time:.2f} s", flush=True)
 
     lines = ["# Scaling and per-step cost", "",
-             "Made by `benchmarks/scaling.py` (`make scaling`); ratios measured in one run.",
+             "Made by `benchmarks/scaling.py` (`make scaling`"
+             + ("; --quick: two walls, one repeat" if args.quick else "")
+             + "); ratios measured in one run.",
              "Machine: " + machine_summary(), "",
              "## One check of a running-bond wall", "",
              "Check: validation, contacts, model, solve, results (`check_scene`). Message: the"

@@ -319,6 +319,9 @@ def build_parser() -> argparse.ArgumentParser:
     repair.add_argument("--lookahead-steps", type=int, default=0, metavar="N",
                         help="check and repair only the next N steps (a node's look-ahead "
                         "window; default 0: every remaining step)")
+    repair.add_argument("--workers", type=int, default=1, metavar="K",
+                        help="local worker processes that check the remaining steps whole, "
+                        "queued ahead (default 1: this process); the same verdicts")
     _solver_arguments(repair)
     repair.set_defaults(run=_run_repair)
 
@@ -719,12 +722,15 @@ def _run_repair(args) -> int:
     options = replace(options, solve=replace(options.solve, time_limit=math.inf))
     if args.min_margin < 0:
         raise ValueError(f"--min-margin must be >= 0, not {args.min_margin:g}")
+    if args.workers < 1:
+        raise ValueError("--workers must be at least 1")
     cell = plan_cell(args.scene)        # a plan for a cell: repaired within it
     timeline = None
     if cell is None:
         result = repair_plan(plan, built, options, max_held=args.max_held,
                              min_margin_g=args.min_margin, time_limit=limit,
-                             replan=not args.no_replan, lookahead_steps=args.lookahead_steps)
+                             replan=not args.no_replan, lookahead_steps=args.lookahead_steps,
+                             workers=args.workers if args.workers > 1 else 0)
     else:
         result, timeline = repair_cell(plan, built, options, CellPlan(cell, plan, options),
                                        min_margin_g=args.min_margin,

@@ -277,7 +277,7 @@ def finite_array(value, shape, what: str) -> np.ndarray:
         raise SceneError(f"{what} must have shape {'N' if shape[0] == -1 else shape[0]}"
                          f"{'x' + str(shape[1]) if len(shape) > 1 else ''}, got {list(arr.shape)}")
     if not np.all(np.isfinite(arr)):
-        raise SceneError(f"{what} contain NaN or infinity")
+        raise SceneError(f"{what} must be finite, got NaN or infinity")
     return arr
 
 

@@ -345,12 +345,15 @@ def run_lmgc90(out_dir: Path) -> dict:
                       " bench-lmgc90 runs it); docs/BENCHMARKS.md section 4 says how a verdict"
                       " is decided",
             "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "versions": versions,
-            "settings": lmgc90.settings(), "scenes": scenes}
+            "settings": lmgc90.settings(), "scenes": scenes} | (
+        {"decides": before["decides"]} if "decides" in before else {})
 
 
 def table(folder: Path) -> list[str]:
     """docs/BENCHMARKS.md's table of a squeeze folder (its manifest and LMGC90's verdicts):
-    closed form, LMGC90, its largest motion, and this tree's check (default options)."""
+    closed form, LMGC90, its largest motion, whether LMGC90 decides (the verdict the same
+    under every setting of benchmarks/lmgc90_sensitivity.py, else the settings that differ),
+    and this tree's check (default options; marked only where LMGC90 decides)."""
     from dataclasses import replace
 
     from rbe_ros.analysis.options import CheckOptions
@@ -359,15 +362,21 @@ def table(folder: Path) -> list[str]:
     from rbe_ros.rbe.solver import SolveOptions
     verdicts = json.loads((folder / "lmgc90_verdicts.json").read_text())["scenes"]
     lines = ["| scene | mu | closed form | LMGC90 | largest motion (x size, deg) | moved |"
-             " rbe_ros |", "|---|---|---|---|---|---|---|"]
+             " LMGC90 decides | rbe_ros |", "|---|---|---|---|---|---|---|---|"]
     for e in json.loads((folder / "manifest.json").read_text())["scenes"]:
         r = verdicts[e["name"]]
         report = check_scene(load_scene(folder / e["file"]),
                              replace(CheckOptions(), solve=SolveOptions(mu=e["mu"])))
-        mark = "✓" if report.stable == (r["lmgc90"] == "stands") else "✗"
+        runs = r.get("sensitivity") or {}
+        other = [f"{s} {v}" for s, v in runs.items() if v != r["lmgc90"]]
+        decides = "-" if not runs else (f"yes ({len(runs)})" if r["decides"] else
+                                        "no: " + ", ".join(other or ["creeps"]))
+        mark = "" if not r.get("decides", True) else (
+            "✓ " if report.stable == (r["lmgc90"] == "stands") else "✗ ")
         lines.append(f"| {e['name']} | {e['mu']:g} | {e['closed_form'] or '-'} | {r['lmgc90']} |"
                      f" {r['max_disp']:.1e}, {r['max_rot_deg']:.2g} |"
-                     f" {', '.join(r.get('moved') or []) or '-'} | {mark} {report.status.name} |")
+                     f" {', '.join(r.get('moved') or []) or '-'} | {decides} |"
+                     f" {mark}{report.status.name} |")
     return lines
 
 

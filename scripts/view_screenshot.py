@@ -1,8 +1,13 @@
 #!/usr/bin/env python3
-"""The README's screenshot of the HTML view (docs/view.png), made as the browser test sees
-the page: ``rbe-ros view`` of a bag, opened in headless Chromium at one step.
+"""The README's screenshots of the HTML view (docs/view.png), made as the browser test sees
+the page: ``rbe-ros view`` of a bag or a scene, opened in headless Chromium at one step.
 
 Usage: .venv/bin/python scripts/view_screenshot.py [--bag bags/wall_misplaced] [--step 12]
+The robot cell's (docs/figures/view_cell_dome10x8.png), from its plan:
+    rbe-ros plan tests/data/issue31/dome10x8.json --cell examples/cells/dome_3robots.yaml \
+        -o plan.json
+    .venv/bin/python scripts/view_screenshot.py --bag plan.json --step 41 \
+        -o docs/figures/view_cell_dome10x8.png
 """
 from __future__ import annotations
 
@@ -23,7 +28,8 @@ from rbe_ros.cli import main as rbe_ros  # noqa: E402
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--bag", default=str(ROOT / "bags" / "wall_misplaced"))
+    parser.add_argument("--bag", default=str(ROOT / "bags" / "wall_misplaced"),
+                        help="a bag, or a scene (checked step by step)")
     parser.add_argument("--step", type=int, default=12, help="row of the table to show")
     parser.add_argument("-o", "--output", default=str(ROOT / "docs" / "view.png"))
     args = parser.parse_args(argv)

@@ -91,8 +91,9 @@ def test_the_dome_for_two_robots_fails_naming_the_step(capsys):
     """The K = 2 plan (three robots) holds two blocks after steps 41 and 65; two robots must
     let one go before the next placement, and either hand-over state falls
     (FRICTION_EXCEEDED, a robot's grip on the other). The cell of two (payloads that carry
-    every block) fails within its default budget at step 34 needing two held blocks; no
-    payload would do
+    every block) fails within the default budget at step 31 needing two held blocks (the
+    stall bound: 100 checks at step 31 without a deeper partial plan, counted, so the same
+    step on any machine); no payload would do
     (test_two_robots_cannot_build_the_fifth_course_whatever_the_order_or_payload)."""
     scene = load_scene(DOME)
     plan = plan_sequence(scene, 2)
@@ -107,12 +108,17 @@ def test_the_dome_for_two_robots_fails_naming_the_step(capsys):
     assert main(["plan", str(DOME), "--cell", str(CELLS / "dome_2robots.yaml"),
                  "--json"]) == 1
     result = json.loads(capsys.readouterr().out)
-    assert not result["feasible"] and result["failed_step"] == 34
+    assert not result["feasible"] and result["failed_step"] == 31
     assert result["outcome"] == "budget_exhausted"
     message = result["message"]
-    assert "the best candidate, course4_slice01, needs 2 held blocks" in message
+    assert message.startswith("no plan found within the budget (the default's: no deeper "
+                              "partial plan in 100 checks, 34 states checked")
+    assert "the best candidate, course4_slice01, needs 2 held blocks (course4_slice00, " \
+        "course4_slice01)" in message
     assert message.endswith("(a cell of 2 robots: at most 1 hold while one places)")
-    assert max(busy_per_state(result["timeline"])) == 2
+    # the 31 blocks placed so far: one robot holds course4_slice00 (placed at step 30), none
+    # places beside it
+    assert max(busy_per_state(result["timeline"])) == 1
 
 
 def test_the_dome_with_ur10s_names_the_block_none_can_grip(capsys):

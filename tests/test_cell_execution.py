@@ -104,8 +104,7 @@ def test_a_hand_over_state_ahead_fails_as_the_planner_says(arch_plan):
     (_, ahead), (_, update) = out
     assert ahead["first_failing_step"] == 4 and ahead["current_step"] == 2
     assert [s["stable"] for s in ahead["lookahead"][:2]] == [True, True]
-    hook = CellCheck(two, Assembly.from_scene(plan), plan, CheckOptions(),
-                     {b.id: k for k, b in enumerate(plan.blocks)})
+    hook = CellCheck(two, Assembly.from_scene(plan), plan, CheckOptions())
     order = tuple(arch_plan.order)
     why = hook(order[:4], tuple(arch_plan.held[:4]), "v02", arch_plan.held[4])
     assert why.startswith("step 4: the hand-over state after r1 releases v01")

@@ -70,6 +70,21 @@ def test_supports_argument_replaces_the_flags():
     assert {b.density for b in load_compas_assembly(SAMPLE, density=1800).blocks} == {1800.0}
 
 
+def test_a_file_without_supports_says_how_to_name_them(tmp_path, capsys):
+    """compas_cra's samples flag no support (their scripts set them): the error names
+    --supports, not only "no support block"; supports naming every node leave nothing to
+    check (a vacuous STABLE before)."""
+    unflagged = tmp_path / "unflagged.json"
+    unflagged.write_text(SAMPLE.read_text().replace('"is_support": true', '"is_support": false'))
+    assert main(["check", str(unflagged)]) == 2
+    assert "no node is flagged is_support: name the supports by node key (rbe-ros: --supports" \
+        in capsys.readouterr().err
+    assert main(["check", str(unflagged), "--supports", "0"]) == 0
+    assert main(["check", str(unflagged), "--supports", "0,1"]) == 2
+    assert "the supports ['0', '1'] are every node of the assembly: no free block to check" \
+        in capsys.readouterr().err
+
+
 def test_compas1_key_names_are_understood(tmp_path):
     text = SAMPLE.read_text().replace('"data":', '"value":')
     text = text.replace('"default_node_attributes"', '"dna"').replace('"default_vertex_attributes"', '"dva"')

@@ -383,6 +383,8 @@ def test_table_approach_column_and_marker_arrow():
     assert "approach" in format_table(reports).splitlines()[0]
     tilted = replace(reports[3], insertion_direction=np.array([0.6, 0.0, -0.8]))
     assert approach_text(tilted) == "(0.6, 0, -0.8)"
+    off_axis = replace(reports[3], insertion_direction=np.array([-2.6e-7, -1.0, -2.9e-7]))
+    assert approach_text(off_axis) == "side -y"             # compas_cra's shelf-s1, as found
     assert approach_text(replace(reports[3], insertable=False,
                                  insertion_direction=np.zeros(3))) == "none"
     header = {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": "world"}

@@ -96,7 +96,7 @@ def _state(**change):
 
 
 @pytest.mark.parametrize("d, reason", [
-    (_state(blocks__1__pose__position__y=math.nan), "position contain NaN"),
+    (_state(blocks__1__pose__position__y=math.nan), "position must be finite, got NaN"),
     (_state(blocks__1__pose__orientation={"x": 0.0, "y": 0.0, "z": 0.0, "w": 0.0}), "unit norm"),
     (_state(blocks__2__id="a"), "duplicate block id 'a'"),
     (_state(sequence=["t", "ghost"]), "sequence names block 'ghost'"),

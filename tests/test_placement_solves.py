@@ -3,10 +3,11 @@ is checked against the test made the plain way, every solve built anew, on the s
 suite and the generators.
 
 The savings: the least forces of a step's motion re-solved by the motion's own Clarabel
-solver (only the load differs: solver.Kept); after a step whose motion was near rest, the
-RBE problem with the caps tried before the motion (it has a field exactly when the step
-leaves no motion). The oracle undoes both through the module's own names: no solver kept,
-the motion always first.
+solver, and the steps' problems under new caps by the solver of the step before (only the
+load and the caps differ: solver.Kept); after a step whose motion was near rest, the RBE
+problem with the caps tried before the motion (it has a field exactly when the step leaves
+no motion), and so in the own-caps rule by the kept solver of that problem. The oracle
+undoes them through the module's own names: no solver kept, the motion always first.
 """
 import json
 from dataclasses import replace
@@ -32,7 +33,7 @@ MANIFEST = json.loads((SUITE / "manifest.json").read_text())["scenes"]
 class _NoneKept(Kept):
     """A Kept that never keeps: every solve built anew."""
 
-    def solve(self, model, options, p):
+    def solve(self, model, options, p, cap=None):
         return None
 
 
@@ -100,3 +101,24 @@ def test_a_kept_solver_solves_the_least_forces_as_a_fresh_one():
     assert again.solved and fresh.solved
     assert np.abs(again.forces - fresh.forces).max() <= 1e-9 * model.force_scale
     assert np.abs(again.unbalanced - fresh.unbalanced).max() <= 1e-9 * model.force_scale
+
+
+@pytest.mark.parametrize("cone", ["soc", "pyramid8"])
+def test_a_kept_solver_solves_a_step_under_new_caps_as_a_fresh_one(cone):
+    """The arch's step under caps from its first step, then under half of them: by the
+    solver kept from the first (its caps' right-hand side updated) as by one made anew.
+    Half the caps change the answer (the check that the update reached the caps)."""
+    model = model_of(Assembly.from_scene(generators.semicircular_arch()), CheckOptions())
+    options = SolveOptions(mu=0.6, cone=cone)
+    metric = prestress.inertia_metric(model)
+    first = solve(model, options, inertia=metric, frictionless=True)
+    caps = 0.6 * prestress._sums(model, first.forces[0]) + 1e-3 * model.force_scale
+    kept = Kept()
+    before = solve(model, options, friction_cap=caps, inertia=metric, keep=kept)
+    assert kept.solver is not None
+    again = solve(model, options, friction_cap=caps / 2, inertia=metric, keep=kept)
+    fresh = solve(model, options, friction_cap=caps / 2, inertia=metric)
+    assert before.solved and again.solved and fresh.solved
+    assert np.abs(again.forces - fresh.forces).max() <= 1e-9 * model.force_scale
+    assert np.abs(again.unbalanced - fresh.unbalanced).max() <= 1e-9 * model.force_scale
+    assert np.abs(again.unbalanced - before.unbalanced).max() > 1e-3 * model.force_scale

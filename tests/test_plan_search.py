@@ -23,6 +23,7 @@ import trimesh
 
 from oracles import plane_blocks
 from rbe_ros import generators
+from rbe_ros.analysis import planning
 from rbe_ros.analysis.assembly import Assembly
 from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.analysis.planning import (BUDGET_EXHAUSTED, DEAD_END, NO_PLAN, PLANNED,
@@ -224,11 +225,30 @@ def test_progress_counts_candidate_checks():
     assert all(p.estimate >= 0 or p.bound == "unknown" for p in seen)
 
 
+def test_a_stuck_search_ends_within_the_default_budget(monkeypatch):
+    """The default budget ends a search stuck at a step (a candidate refused there, nothing
+    deeper since) after planning.STALL candidate checks: 0 here, so the 7-voussoir arch
+    without holds (no plan: every order searched, above) ends at the check after its first
+    refusal, naming the refused candidate; an explicit budget has no such bound."""
+    monkeypatch.setattr(planning, "STALL", 0)
+    monkeypatch.setattr(planning, "STALL_STEPS", 0)
+    arch = generators.semicircular_arch(7)
+    stuck = plan_sequence(arch, 0)
+    assert stuck.outcome == BUDGET_EXHAUSTED and not stuck.feasible
+    assert stuck.message.startswith("no plan found within the budget (the default's: no "
+                                    "deeper partial plan in 0 checks, ")
+    assert f"no block can be placed at step {stuck.failed_step} with at most 0 held; the " \
+        "best candidate" in stuck.message
+    assert plan_sequence(arch, 0, search_budget=1000).outcome == NO_PLAN
+
+
 @pytest.mark.long
 def test_the_capped_dome_ends_within_a_minute_naming_the_wrench():
     """The 10 x 8 dome (issue 31's, tests/data/issue31) with robots of 1200 N / 200 N m:
-    the plan ends within 60 s, a plan within them or a failure that names the block, the
-    wrench it needs (the check of that step with unbounded robots) and the capacity."""
+    the plan ends within 60 s by default (the default budget's stall bound: stuck at step
+    40, where every candidate is refused), a plan within them or a failure that names the
+    block, the robot on it, the wrench it needs (the check of that step with unbounded
+    robots) and the capacity."""
     dome = load_scene(DATA / "issue31" / "dome10x8.json")
     options = replace(CheckOptions(), hold_force_max=1200.0, hold_torque_max=200.0)
     plan = plan_sequence(dome, 2, options)
@@ -238,7 +258,8 @@ def test_the_capped_dome_ends_within_a_minute_naming_the_wrench():
         assert f["block"] and f["force_max"] == 1200.0 and f["torque_max"] == 200.0
         assert f["wrenches"] and all(w["force"] > 0 for w in f["wrenches"])
         assert f["block"] in plan.message and "1200 N" in plan.message
-        assert f"|F| {f['wrenches'][0]['force']:.4g} N" in plan.message
+        assert f"the robot on {f['wrenches'][0]['block']} |F| {f['wrenches'][0]['force']:.4g} N" \
+            in plan.message
         # the wrench named is the plain check's of the step with unbounded robots, and the
         # step does not stand with the robots bounded
         full = Assembly.from_scene(dome)

@@ -118,6 +118,7 @@ def test_a_finished_assembly_that_does_not_stand_has_no_plan():
     plan = plan_sequence(stack, 3)
     assert not plan.feasible and plan.failed_step == 5 and plan.order == []
     assert "finished assembly does not stand" in plan.message
+    assert "(TENSION_REQUIRED: tension required: " in plan.message      # why, not only that
 
 
 def test_keep_sequence_fixes_the_prefix():

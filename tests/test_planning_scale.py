@@ -66,13 +66,10 @@ def test_every_candidate_verdict_is_the_full_checks(scene, max_held, shortcuts, 
     assert (whole.order, whole.held) == (plan.order, plan.held)
 
 
-def test_a_held_course_costs_one_whole_check_per_step(monkeypatch):
-    """On the 10 x 5 dome, whose fourth ring is built held at its first and its newest
-    block, each step of that ring is decided by at most four whole checks: the other sets
-    of holds fail by relaxations (the held blocks rigid) where RBE has no field, by whole
-    checks where it has one that blocks set in place without pre-load do not get
-    (rbe/prestress.py: 3 such sets at most, one before), and the set of the previous holds
-    and the new block is never checked, since a release of one of them stands."""
+@pytest.fixture(scope="module")
+def dome_plan():
+    """The 10 x 5 dome planned with two holds, and by step the sets of holds it tried, each
+    with the model that answered it first (the plan is the same as without the audit)."""
     trials = collections.defaultdict(list)
     result = planning._Trial.result
 
@@ -83,8 +80,26 @@ def test_a_held_course_costs_one_whole_check_per_step(monkeypatch):
             trials[len(self.order) - 1].append((frozenset(held), report.model.split()[0]))
         return assembly, report
 
-    monkeypatch.setattr(planning._Trial, "result", audited)
-    plan = plan_sequence(generators.dome(slices=10, courses=5), 2)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(planning._Trial, "result", audited)
+        plan = plan_sequence(generators.dome(slices=10, courses=5), 2)
+    return plan, trials
+
+
+@pytest.fixture(scope="module")
+def small_plan():
+    """The 8 x 4 dome planned with two holds in one process."""
+    return plan_sequence(generators.dome(slices=8, courses=4), 2)
+
+
+def test_a_held_course_costs_one_whole_check_per_step(dome_plan):
+    """On the 10 x 5 dome, whose fourth ring is built held at its first and its newest
+    block, each step of that ring is decided by at most four whole checks: the other sets
+    of holds fail by relaxations (the held blocks rigid) where RBE has no field, by whole
+    checks where it has one that blocks set in place without pre-load do not get
+    (rbe/prestress.py: 3 such sets at most, one before), and the set of the previous holds
+    and the new block is never checked, since a release of one of them stands."""
+    plan, trials = dome_plan
     assert plan.feasible, plan.message
     course = [k for k in range(1, len(plan.order))
               if len(plan.held[k]) == 2 == len(plan.held[k - 1])]   # the newest hold moved on
@@ -92,6 +107,21 @@ def test_a_held_course_costs_one_whole_check_per_step(monkeypatch):
     for k in course:
         assert 1 <= [model for _, model in trials[k]].count("full") <= 4, (k, trials[k])
         assert frozenset(plan.held[k - 1]) | {plan.order[k]} not in dict(trials[k])
+
+
+def test_sequence_checks_of_a_planned_scene_have_the_full_verdicts(dome_plan):
+    """The planned scene checked as a sequence (held blocks with the robots' grips) has the
+    full re-solve's verdicts at every step, those after a release included."""
+    plan, _ = dome_plan
+    options = CheckOptions(holds=HoldSearch(enabled=False))
+    local = check_sequence(plan.scene, options)
+    full = check_sequence(plan.scene, replace(options, full_solve=True))
+    assert [r.stable for r in local] == [r.stable for r in full] == [True] * len(full)
+    # a step just after a release (nothing held now) starts from kept forces of a step
+    # whose held blocks had the robots' wrenches: those blocks are new, not kept
+    released = [k for k in range(1, len(plan.held)) if plan.held[k - 1] and not plan.held[k]]
+    assert released and all(local[k].stable for k in released)
+    assert {r.model for r in full} == {"full"}
 
 
 def _scene_file(tmp_path, scene) -> str:
@@ -111,7 +141,7 @@ def test_progress_lines_on_stderr(tmp_path, capsys):
     assert all(" s, about " in line and line.endswith(" s left") for line in lines)
 
 
-def test_should_stop_returns_the_partial_plan_so_far():
+def test_should_stop_returns_the_partial_plan_so_far(small_plan):
     dome = generators.dome(slices=8, courses=4)
     seen, streamed = [], []
     plan = plan_sequence(dome, 2, progress=seen.append, should_stop=lambda: len(seen) >= 5,
@@ -124,8 +154,7 @@ def test_should_stop_returns_the_partial_plan_so_far():
     assert all(r.stable for r in plan.reports) and len(plan.reports) == 5
     assert all(r.interfaces == () for r in plan.reports)     # the plan keeps no interfaces
     assert any(r.interfaces for r in streamed)               # the stream has them
-    full = plan_sequence(dome, 2)
-    assert full.order[:5] == plan.order and full.held[:5] == plan.held
+    assert small_plan.order[:5] == plan.order and small_plan.held[:5] == plan.held
 
 
 def test_time_limit_gives_the_best_partial_plan(tmp_path, capsys):
@@ -181,37 +210,22 @@ def test_sigint_leaves_a_readable_partial_plan(tmp_path, workers):
     assert all(s["stable"] for s in plan["steps"])
 
 
-def test_sequence_checks_of_a_planned_scene_have_the_full_verdicts():
-    """The planned scene checked as a sequence (held blocks with the robots' grips) has the
-    full re-solve's verdicts at every step, those after a release included."""
-    plan = plan_sequence(generators.dome(slices=10, courses=5), 2)
-    options = CheckOptions(holds=HoldSearch(enabled=False))
-    local = check_sequence(plan.scene, options)
-    full = check_sequence(plan.scene, replace(options, full_solve=True))
-    assert [r.stable for r in local] == [r.stable for r in full] == [True] * len(full)
-    # a step just after a release (nothing held now) starts from kept forces of a step
-    # whose held blocks had the robots' wrenches: those blocks are new, not kept
-    released = [k for k in range(1, len(plan.held)) if plan.held[k - 1] and not plan.held[k]]
-    assert released and all(local[k].stable for k in released)
-    assert {r.model for r in full} == {"full"}
-
-
-def test_two_workers_give_the_one_process_plan():
+def test_two_workers_give_the_one_process_plan(small_plan):
     """The look-ahead's full checks on two spawned workers are used by (blocks, holds), never
     by arrival: the same order and holds as one process, and some were used."""
-    dome = generators.dome(slices=8, courses=5)
-    alone = plan_sequence(dome, 2)
-    pooled = plan_sequence(dome, 2, look_ahead=functools.partial(CheckPool, workers=2))
+    alone = small_plan
+    pooled = plan_sequence(generators.dome(slices=8, courses=4), 2,
+                           look_ahead=functools.partial(CheckPool, workers=2))
     assert (pooled.order, pooled.held) == (alone.order, alone.held)
     assert pooled.feasible and pooled.max_held == 2
     assert pooled.models["full"] > alone.models["full"]      # look-ahead checks were used
 
 
-def test_ray_gives_the_one_process_plan():
+def test_ray_gives_the_one_process_plan(small_plan):
     """The same look-ahead as Ray tasks on a local 2-CPU instance (make ray): the same plan."""
     ray = pytest.importorskip("ray")
     dome = generators.dome(slices=8, courses=4)
-    alone = plan_sequence(dome, 2)
+    alone = small_plan
     try:
         on_ray = plan_sequence(dome, 2, look_ahead=ray_checks(None, 2, num_cpus=2))
     finally:

@@ -32,7 +32,7 @@ from hypothesis import assume, event, example, given
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from rbe_ros.analysis.options import CheckOptions
+from rbe_ros.analysis.options import CheckOptions, HoldSearch
 from rbe_ros.analysis.pipeline import check_scene
 from rbe_ros.rbe.cones import CONES, FRICTION_MODELS, cone_capacity
 from rbe_ros.rbe.result import Status
@@ -45,6 +45,11 @@ from oracles import stacks as stack_oracle
 MU = 0.6
 G = 9.81
 GROUND = 20.0          # the support slab's width (m)
+#: The walls' and the symmetry tests' check: their properties are of the verdict and the
+#: forces, which the hold search does not change (it only names blocks to hold, which
+#: tests/test_holds.py checks against brute force); on a tilted wall that slides it was
+#: nine tenths of the check. The stacks' test keeps it on.
+VERDICT = CheckOptions(holds=HoldSearch(enabled=False))
 
 
 @dataclass(frozen=True)
@@ -243,7 +248,7 @@ def test_stack_verdict_is_the_closed_form_one_and_explained(spec, solve):
 @given(walls(tilt=True))
 def test_walls_are_in_equilibrium_and_within_the_cones(spec):
     scene = spec.scene()
-    report = check_scene(scene)
+    report = check_scene(scene, VERDICT)
     assert_admissible(scene, report)
     if math.hypot(*spec.gravity[:2]) == 0.0:
         assert report.status == Status.STABLE, report.message
@@ -285,7 +290,8 @@ def test_verdict_invariant_under_rigid_motion(spec, quat, shift):
                      orientation=(rot * Rotation.from_quat(b.orientation)).as_quat())
              for b in scene.blocks]
     other = make_scene("moved", moved, rot.apply(scene.gravity))
-    assert_same(signature(check_scene(scene)), signature(check_scene(other)), free_weight(scene))
+    assert_same(signature(check_scene(scene, VERDICT)), signature(check_scene(other, VERDICT)),
+                free_weight(scene))
 
 
 @given(st.one_of(stacks(), walls()), st.data())
@@ -297,8 +303,8 @@ def test_verdict_invariant_under_renaming_and_reordering(spec, data):
     new = {b.id: f"{names[k]}{k}" for k, b in enumerate(scene.blocks)}
     other = make_scene("renamed", [replace(scene.blocks[k], id=new[scene.blocks[k].id])
                                    for k in order], scene.gravity)
-    assert_same(signature(check_scene(scene), new.get), signature(check_scene(other)),
-                free_weight(scene))
+    assert_same(signature(check_scene(scene, VERDICT), new.get),
+                signature(check_scene(other, VERDICT)), free_weight(scene))
 
 
 @st.composite
@@ -340,7 +346,7 @@ def mirrored(draw) -> tuple[Spec, dict]:
 def test_mirror_symmetric_scene_gets_mirror_symmetric_qp_forces(case):
     spec, mirror = case
     scene = spec.scene()
-    report = check_scene(scene)
+    report = check_scene(scene, VERDICT)
     assume(report.interfaces)               # INFEASIBLE (a floating part) has no forces
     tol = 1e-5 * free_weight(scene)
     by_pair = {frozenset((r.block_a, r.block_b)): r for r in report.interfaces}

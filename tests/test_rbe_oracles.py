@@ -20,6 +20,7 @@ from rbe_ros.rbe.model import build_model
 from rbe_ros.rbe.resultants import interface_results
 from rbe_ros.rbe.result import Status
 from rbe_ros.rbe.solver import LoadMultipliers, Solution, SolveOptions, _Csc
+from rbe_ros.generators import squeeze
 from rbe_ros.scene import box_block, make_block, make_scene
 
 from helpers import DENSITY, checked, inclined_block, stacked_boxes
@@ -174,6 +175,33 @@ def test_the_friction_message_names_the_cone_or_the_threshold():
                             " s25_slope|s25_box: |V|/N = 0.466 there, more than the threshold"
                             " 0.4")
     assert over.worst_friction_ratio == pytest.approx(math.tan(math.radians(25)), rel=1e-6)
+
+
+def test_a_sliding_message_quotes_only_a_ratio_beyond_the_cone():
+    """The pressed shelf: a board under a fixed block, against a wall, nothing below it.
+    With unlimited friction its field carries the weight by shear on the wall (|V|/N there
+    within mu 0.6: W / N) and balances the wall's push by shear on the block above, which
+    gravity pulls the board away from (no normal force). The board slides down the wall;
+    the message does not quote the wall's ratio as "more than the cone allows"."""
+    scene = squeeze("shelf-pressed", overhang=0.5)
+    report = check_scene(scene, CheckOptions(SolveOptions(mu=0.6)))
+    assert report.status == Status.FRICTION_EXCEEDED and report.unstable_blocks == ("board",)
+    assert report.message == ("friction exceeded: block board would slide at interface"
+                              " wall|board: standing needs more friction than the soc cone"
+                              " allows with mu 0.6")
+
+
+def test_a_pair_meeting_at_two_interfaces_is_named_once():
+    """compas_cra's snake: block 3 slides across two interfaces with block 2 (faces in two
+    planes); the message read "at interface 2|3 (and 2|3)"."""
+    from types import SimpleNamespace as NS
+    model = NS(blocks=[NS(id=str(k)) for k in range(5)],
+               interfaces=[NS(a=2, b=3), NS(a=2, b=3), NS(a=1, b=3), NS(a=0, b=4), NS(a=1, b=4),
+                           NS(a=3, b=4)])
+    assert verdict._motion(model, NS(moving=[3], sliding=[0, 1])) == \
+        "block 3 would slide at interface 2|3"
+    assert verdict._motion(model, NS(moving=[3, 4], sliding=[0, 1, 2, 3, 4, 5])) == \
+        "blocks 3, 4 would slide at interface 2|3 (and 1|3, 0|4 and 2 more)"
 
 
 def test_sliding_on_a_pyramid_cone_is_judged_against_its_capacity():

@@ -50,3 +50,26 @@ def test_lmgc90_second_opinion_disagrees_where_ours_is_wrong(capsys):
     line = capsys.readouterr().out.strip().splitlines()[-1]
     assert line.startswith("second opinion (LMGC90, 1 s from rest): stands (")
     assert line.endswith("agrees with rbe_ros (STABLE)")
+
+
+@pytest.mark.long
+def test_a_verdict_that_flips_with_lmgc90s_relaxation_is_recorded_as_undecided():
+    """benchmarks/lmgc90_sensitivity.py's evidence, rerun: the 30 deg block under a fixed bar
+    at mu 0.55 (0.95 tan 30 deg) stands as make bench-lmgc90 runs LMGC90 (NLGS relaxation
+    0.1) and slides with plain Gauss-Seidel (relaxation 1, in a patched copy of the
+    extension): two solutions of the same contact problem, so the committed verdict file
+    says LMGC90 does not decide it. The time step halved keeps the verdict."""
+    from rbe_ros.io.scene_json import load_scene
+    from rbe_ros.scene import gravity_down
+    name = "v_incline_pressed30_mu0.55"
+    folder = SUITE / "variants"
+    record = json.loads((folder / "lmgc90_verdicts.json").read_text())["scenes"][name]
+    scene = gravity_down(load_scene(folder / f"{name}.json"))
+    python = lmgc90.installed_python()
+    runs = {setting: lmgc90.check(scene, record["mu"], python, numerics=numerics)
+            for setting, numerics in (("base", {}), ("dt/2", {"dt": lmgc90.DT / 2}),
+                                      ("relax1", {"nlgs": {"relax": 1.0}}))}
+    assert {s: r["stable"] for s, r in runs.items()} == {
+        "base": True, "dt/2": True, "relax1": False}
+    assert runs["relax1"]["moved"] == ["block"]
+    assert record["decides"] is False and record["sensitivity"]["relax1"] == "falls"

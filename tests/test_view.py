@@ -50,6 +50,10 @@ def check_rows(data: dict, runs: list[tuple[dict, list[dict]]]) -> None:
         forces = sum(len(line["x"]) // 3 for line in row["lines"]
                      if line["name"].startswith("forces"))
         assert forces == sum(len(i["polygon"]) for i in report["interfaces"])
+    # every colour of a line or arrow drawn is in the legend, and nothing else
+    drawn = {c["colour"] for s in rows for c in (*s["lines"], *s["robot_arrows"],
+                                                  *([s["arrow"]] if s["arrow"] else []))}
+    assert {e["colour"] for e in data["line_legend"]} == drawn
 
 
 @pytest.mark.parametrize("bag", BAGS, ids=[b.name for b in BAGS])

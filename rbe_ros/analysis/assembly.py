@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -33,6 +34,16 @@ class Assembly:
                             for found in detect_contacts(list(blocks), contact))
         Interface.compute_kerns(interfaces)
         return cls(blocks, interfaces, np.asarray(scene.gravity, dtype=float), near)
+
+    @cached_property
+    def index(self) -> dict[str, int]:
+        """Each block's position in ``blocks`` by its id (the one lookup of a block by id:
+        grips, the robots' actions and the planner's ranks use it)."""
+        return {b.id: k for k, b in enumerate(self.blocks)}
+
+    def block(self, block_id: str) -> PosedBlock:
+        """The block ``block_id`` (KeyError when there is none)."""
+        return self.blocks[self.index[block_id]]
 
     def subset(self, ids, held=(), grips=()) -> "Assembly":
         """The assembly of the blocks named in ``ids``, with the interfaces among them; the

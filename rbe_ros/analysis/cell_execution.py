@@ -55,8 +55,7 @@ class CellPlan:
         self.base = make_scene(design.name, design.blocks, design.gravity, (),
                                [h for h in design.holds if h.block in supports])
         self.assembly = Assembly.from_scene(self.base, options.contact)
-        self.steps = CellSteps(cell, self.assembly,
-                               {b.id: k for k, b in enumerate(self.assembly.blocks)})
+        self.steps = CellSteps(cell, self.assembly)
         self._actions: dict[tuple, tuple[list[Action], str, int]] = {}
 
     def actions(self, plan: Scene) -> tuple[list[Action], str, int]:

@@ -1,5 +1,5 @@
-"""Where the batches of a Monte Carlo study, and the planner's full checks of the steps
-ahead, run: a local process pool or a Ray cluster.
+"""Where the batches of a Monte Carlo study, the planner's full checks of the steps ahead,
+and a repair's checks of the remaining steps run: a local process pool or a Ray cluster.
 
 Both map :func:`rbe_ros.analysis.robust.run_batch` over the batches and yield the results in
 batch order; since every sample is seeded by its index, the numbers are the executor's
@@ -18,6 +18,7 @@ from contextlib import contextmanager
 
 from .assembly import Assembly
 from .options import CheckOptions
+from .pipeline import Placed, _completed, slim
 from .robust import RobustJob, SampleResult, run_batch
 from .steps import gripped
 from .verdict import check
@@ -69,7 +70,8 @@ class ProcessPool:
         self.close()
 
 
-#: The assembly and options of a planner's worker process (set once, by _plan_worker).
+#: The assembly and options of a planner's or repair's worker process (set once, by
+#: _plan_worker).
 _PLAN: dict = {}
 
 
@@ -78,6 +80,16 @@ def _plan_worker(assembly: Assembly, options: CheckOptions) -> None:
     # plan, which needs its workers' pending results, not their KeyboardInterrupt
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _PLAN.update(assembly=assembly, options=options)
+
+
+def _planner_processes(assembly: Assembly, options: CheckOptions,
+                       workers: int) -> ProcessPoolExecutor:
+    """``workers`` spawned processes, each given the assembly and options once."""
+    if workers < 1:
+        raise ValueError(f"workers must be at least 1, not {workers}")
+    return ProcessPoolExecutor(max_workers=workers, initializer=_plan_worker,
+                               initargs=(assembly, options),
+                               mp_context=multiprocessing.get_context("spawn"))
 
 
 def _check_step(present: tuple[str, ...], held: tuple[str, ...], assembly=None, options=None):
@@ -94,12 +106,7 @@ class CheckPool:
     ``workers`` spawned processes, each given the assembly once."""
 
     def __init__(self, assembly: Assembly, options: CheckOptions, workers: int):
-        if workers < 1:
-            raise ValueError(f"workers must be at least 1, not {workers}")
-        self.workers = workers
-        self.pool = ProcessPoolExecutor(max_workers=workers, initializer=_plan_worker,
-                                        initargs=(assembly, options),
-                                        mp_context=multiprocessing.get_context("spawn"))
+        self.workers, self.pool = workers, _planner_processes(assembly, options, workers)
 
     def submit(self, present, held):
         with _one_thread_env():                 # workers are spawned on submission
@@ -107,6 +114,33 @@ class CheckPool:
 
     def close(self) -> None:
         self.pool.shutdown(cancel_futures=True)
+
+
+def _whole_step(present, held, grips, block, approach, tolerance: bool):
+    """The whole check of one step of the worker's assembly, completed as
+    :class:`rbe_ros.analysis.lookahead.StepRunner` completes it (slim)."""
+    assembly, options = _PLAN["assembly"], _PLAN["options"]
+    state = assembly.subset(present, held, grips)
+    return slim(_completed(check(state, options), state, held, options,
+                           Placed(assembly, present, block, approach), tolerance=tolerance))
+
+
+class StepPool:
+    """Whole-step checks of a look-ahead or repair (:class:`rbe_ros.analysis.lookahead.
+    StepRunner`) on ``workers`` spawned processes, each given the assembly (every block at
+    its as-built or design pose) once: ``submit(...)`` takes :func:`_whole_step`'s
+    arguments and returns a future of the step's slim report."""
+
+    def __init__(self, assembly: Assembly, options: CheckOptions, workers: int):
+        self.workers, self.pool = workers, _planner_processes(assembly, options, workers)
+
+    def submit(self, *args):
+        with _one_thread_env():                 # workers are spawned on submission
+            return self.pool.submit(_whole_step, *args)
+
+    def close(self) -> None:
+        # a check under way finishes in its worker, which then exits: nothing waits for it
+        self.pool.shutdown(wait=False, cancel_futures=True)
 
 
 class _RayFuture:

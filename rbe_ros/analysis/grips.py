@@ -147,7 +147,6 @@ class GripChooser:
 
     def __init__(self, assembly: Assembly, cell: Cell):
         self.assembly, self.cell = assembly, cell
-        self.index = {b.id: k for k, b in enumerate(assembly.blocks)}
         self._touching: dict[int, list[tuple[np.ndarray, np.ndarray, str]]] = {}
         for it in assembly.interfaces:
             centre = it.points.mean(axis=0)
@@ -167,7 +166,7 @@ class GripChooser:
     def near(self, block: str) -> frozenset[str]:
         """The other blocks a gripper at ``block`` could touch (bounding boxes apart by less
         than a gripper box's diagonal)."""
-        box = self._boxes[self.index[block]]
+        box = self._boxes[self.assembly.index[block]]
         gap = np.maximum(0.0, np.maximum(self._boxes[:, 0] - box[1], box[0] - self._boxes[:, 1]))
         close = np.linalg.norm(gap, axis=1) <= self._reach
         return frozenset(b.id for b, c in zip(self.assembly.blocks, close)
@@ -182,7 +181,7 @@ class GripChooser:
         return found
 
     def _all_faces(self, block: str) -> list[tuple[GripFrame, frozenset[str]]]:
-        k = self.index[block]
+        k = self.assembly.index[block]
         b = self.assembly.blocks[k]
         touching = self._touching.get(k, [])
         up = -self.assembly.gravity / (np.linalg.norm(self.assembly.gravity) or 1.0)
@@ -215,7 +214,7 @@ class GripChooser:
         # a non-convex block; kept there), shrunk by the standoff
         return tuple(sorted(b for b in others if any(
             fcl.collide(box, piece, request, fcl.CollisionResult())
-            for piece, _ in present_pieces(self.assembly.blocks[self.index[b]], STANDOFF))))
+            for piece, _ in present_pieces(self.assembly.block(b), STANDOFF))))
 
     def in_the_way(self, block: str, robot: Robot, grip: GripFrame) -> bool:
         """Whether placing ``block`` lands on the face ``robot`` grips at ``grip`` or hits
@@ -259,8 +258,7 @@ class GripChooser:
                 why.append(f"face {g.face}: {robot.name}'s gripper hits {', '.join(hit[:3])}")
                 continue
             if carry:
-                w = carry_wrench(robot, g, self.assembly.blocks[self.index[block]],
-                                 self.assembly.gravity)
+                w = carry_wrench(robot, g, self.assembly.block(block), self.assembly.gravity)
                 if w.utilisation > 1.0:
                     why.append(f"face {g.face}: carrying it needs {wrench_need(w, robot)}")
                     continue

@@ -87,13 +87,15 @@ class StabilityOracle:
         self.options = options
         self.graph = ContactGraph(assembly)
         self.ids = self.graph.ids
-        self.index = {bid: k for k, bid in enumerate(self.ids)}
+        self.index = assembly.index
         self.support = self.graph.support
         self.height = np.array([-(b.centroid @ assembly.gravity) for b in assembly.blocks]) \
             if assembly.blocks else np.zeros(0)
         self.checks = 0
         self._shared = {} if cache is None else cache   # (free ids, touched ids) -> verdict
         self._cache: dict[tuple[frozenset, frozenset], Report] = {}
+        #: the HOLD_EXCEEDED reports met, by the blocks held (ids): what a robot would need
+        self.exceeded: dict[frozenset, Report] = {}
 
     def components(self, held) -> list[tuple[frozenset, frozenset]]:
         """(free blocks, supports and held blocks they touch) of each component, by index."""
@@ -166,7 +168,10 @@ class StabilityOracle:
             whole = self.assembly.subset(self.ids, names | {g.block for g in grips}, grips)
             report = check(whole, options)
             self._shared[key] = report if report.status == Status.HOLD_EXCEEDED else None
-        return self._shared[key]
+        found = self._shared[key]
+        if found is not None:
+            self.exceeded[frozenset(names)] = found
+        return found
 
     def _count(self) -> None:
         self.checks += 1
@@ -266,16 +271,26 @@ def _greedy(oracle: StabilityOracle, preferred, width: int, largest: int | None 
             for k in _order(oracle, comp, report, preferred):
                 if k not in candidates:
                     candidates.append(k)
-        best, best_score = None, None
-        for rank, k in enumerate(candidates[:max(width, 1)]):
-            after = oracle.failing(held + [k], explain=True)
-            score = (sum(len(c) for c, _ in after), sum(r.max_tension for _, r in after), rank)
-            if best_score is None or score < best_score:
-                best, best_score = k, score
+        best = _best_hold(oracle, held, candidates[:max(width, 1)])
         if best is None:        # a robot over its capacity that no other hold can relieve
             break
         held.append(best)
     return frozenset(release_unneeded(oracle, held))
+
+
+def _best_hold(oracle: StabilityOracle, held: list[int], candidates: list[int]) -> int | None:
+    """The candidate whose hold leaves the fewest free blocks in failing components, then
+    the least tension, then the first. The tension needs each failing component's
+    explanation (a check with up to two more solves): only candidates tied on the fewest
+    blocks are explained, and none when they leave nothing failing (the first then wins)."""
+    sizes = [sum(len(c) for c, _ in oracle.failing(held + [k], explain=False))
+             for k in candidates]
+    fewest = min(sizes, default=None)
+    tied = [k for k, size in zip(candidates, sizes) if size == fewest]
+    if len(tied) <= 1 or fewest == 0:
+        return tied[0] if tied else None
+    return min(tied, key=lambda k: sum(r.max_tension
+                                      for _, r in oracle.failing(held + [k], explain=True)))
 
 
 def release_unneeded(oracle: StabilityOracle, held: list[int]) -> list[int]:

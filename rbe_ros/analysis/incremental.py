@@ -10,7 +10,9 @@ without the full problem:
   that state needs no friction (beyond the noise floor, or mu is infinite): the placement
   test (rbe/prestress.py) does not compose over regions, since the kept friction on R's
   boundary is friction the whole, set in place from rest, must build up again; a state
-  that needs friction goes on to the relaxation and the full problems.
+  that needs friction goes on to the relaxation and the full problems. So friction is
+  tested first: kept outside R (then R is not even solved), then in R's field, and only
+  a state without it meets the placement test (passed at its first step, without a solve).
 * relaxation (necessary): solve R with every neighbour outside it made rigid (a support).
   Infeasible: the whole assembly is infeasible too, so it does not stand (model "relaxed N").
 
@@ -35,13 +37,13 @@ from dataclasses import replace
 import numpy as np
 
 from ..geometry.polygon import cross
-from ..rbe.model import build_model
-from ..rbe.prestress import keeps_no_caps
+from ..rbe.model import build_model, free_weight
+from ..rbe.prestress import no_caps_bound, placed
 from ..rbe.result import InterfaceResult, Report, Status
 from .assembly import Assembly
 from .graph import ContactGraph
 from .options import CheckOptions
-from .verdict import check, infeasible_report, stable_forces
+from .verdict import admissible_forces, check, infeasible_report
 
 #: Local regions larger than this share of the free blocks joined to the new ones (their
 #: component) go to the component's full problem: every failed local attempt costs two
@@ -161,26 +163,48 @@ class StepChecker:
                 report = self._relaxed(assembly, graph, region)
                 if report is not None:
                     return report
+        no_caps = self._no_caps(assembly)
         if len(first) > len(new):
-            report = (self._restricted(assembly, graph, first)
+            report = (self._restricted(assembly, graph, first, no_caps)
                       or self._relaxed(assembly, graph, first))
             if report is not None:
                 return report
         region = set(new) | graph.free_neighbours(new) | graph.path_to_support(new)
         limit = MAX_LOCAL_SHARE * len(component)
         while len(region) <= limit and not component <= region:
-            report = (self._restricted(assembly, graph, region)
+            report = (self._restricted(assembly, graph, region, no_caps)
                       or self._relaxed(assembly, graph, region))
             if report is not None:
                 return report
             region = region | graph.free_neighbours(region)
         return None
 
-    def _restricted(self, assembly: Assembly, graph: ContactGraph,
-                    region: set[int]) -> Report | None:
-        """Stable report if R alone, loaded by the kept forces on its boundary, stands."""
+    def _no_caps(self, assembly: Assembly) -> tuple[dict[tuple, float], set[tuple]] | None:
+        """For a finite mu, per interface key of ``assembly`` the friction up to which a
+        field keeps the placement test's first caps (none: prestress.no_caps_bound), and the
+        keys of the kept interfaces that carry more: a region that keeps one of them settles
+        nothing. Made once per step for all its regions. None for an infinite mu (nothing
+        can slide)."""
+        if not math.isfinite(self.options.deciding.mu):
+            return None
+        free = [k for k, b in enumerate(assembly.blocks) if not b.support]
+        bound = no_caps_bound(assembly.blocks, assembly.interfaces, free,
+                              free_weight(assembly.blocks, free, assembly.gravity))
+        limits = {_key(assembly, it): limit for it, limit in zip(assembly.interfaces, bound)}
+        return limits, {key for key, limit in limits.items()
+                        if key in self._results
+                        and np.linalg.norm(self._results[key].shear) > limit}
+
+    def _restricted(self, assembly: Assembly, graph: ContactGraph, region: set[int],
+                    no_caps: tuple[dict[tuple, float], set[tuple]] | None) -> Report | None:
+        """Stable report if R alone, loaded by the kept forces on its boundary, stands with
+        no friction beyond the floor anywhere (``no_caps``: see :meth:`_no_caps`; None: mu
+        is infinite). Friction is tested first, kept then solved, so that a region whose
+        field needs it costs no placement test, or no solve at all."""
         ids = {assembly.blocks[k].id for k in region | graph.support_neighbours(region)}
         local = assembly.subset(ids)
+        if no_caps is not None and not no_caps[1] <= {_key(local, it) for it in local.interfaces}:
+            return None                       # kept friction outside R: kept in the whole
         index = {b.id: k for k, b in enumerate(local.blocks)}
         wrenches: dict[int, np.ndarray] = {}
         for it in assembly.interfaces:
@@ -196,18 +220,21 @@ class StepChecker:
             wrench[:3] += forces.sum(axis=0)
             wrench[3:] += cross(kept.polygon - assembly.blocks[j].centroid, forces).sum(axis=0)
         model = build_model(local.blocks, local.interfaces, local.gravity)
-        found = stable_forces(model, self.options, model.dead_load + model.wrench_load(wrenches))
+        load = model.dead_load + model.wrench_load(wrenches)
+        found = admissible_forces(model, self.options, load)
         if found is None:
             return None
         solution, results = found
-        report = self._kept_elsewhere(assembly, local, results, len(region),
-                                      max(float(solution.forces[1].max(initial=0.0)), 0.0),
-                                      f"{_blocks(len(region))} around the new one re-solved")
-        if report is None or not math.isfinite(self.options.deciding.mu):
-            return report
-        whole = build_model(assembly.blocks, assembly.interfaces, assembly.gravity)
-        shears = [float(np.linalg.norm(r.shear)) for r in report.interfaces]
-        return report if keeps_no_caps(whole, shears) else None
+        if no_caps is not None and any(np.linalg.norm(r.shear) > no_caps[0][_key(local, it)]
+                                       for it, r in zip(local.interfaces, results)):
+            return None
+        # stable_forces' placement test, after the friction that makes it needless (a
+        # field without friction passes at its first step, without a solve)
+        if not placed(model, self.options.deciding, load, solution).stands:
+            return None
+        return self._kept_elsewhere(assembly, local, results, len(region),
+                                    max(float(solution.forces[1].max(initial=0.0)), 0.0),
+                                    f"{_blocks(len(region))} around the new one re-solved")
 
     def _component(self, assembly: Assembly, graph: ContactGraph,
                    component: set[int]) -> Report | None:

@@ -40,7 +40,7 @@ class _Index:
     @classmethod
     def of(cls, assembly: Assembly) -> "_Index":
         its = assembly.interfaces
-        return cls({blk.id: k for k, blk in enumerate(assembly.blocks)},
+        return cls(assembly.index,
                    np.array([blk.aabb for blk in assembly.blocks]).reshape(-1, 2, 3),
                    np.array([it.a for it in its], dtype=int),
                    np.array([it.b for it in its], dtype=int),

@@ -8,6 +8,9 @@ SE(3) error from a few fixed seeds, so the answer is the same on every machine.
 """
 from __future__ import annotations
 
+import os
+import sys
+from contextlib import contextmanager
 from functools import lru_cache
 
 import numpy as np
@@ -24,10 +27,28 @@ SEEDS = ((0.0,) * 6, (0.0, -1.0, 1.0, -1.0, -1.0, 0.0), (1.5, -1.5, 1.5, 0.0, 1.
          (-1.5, -1.5, -1.5, 0.0, -1.5, 0.0), (3.0, -0.5, 2.0, -1.5, 1.0, 1.0))
 
 
+@contextmanager
+def _parser_quiet():
+    """The process's stderr (fd 2) closed to urdfdom, which prints its parse errors there
+    from C++ before pinocchio raises: a bad URDF is then the CellError's one line."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 2)
+            yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
 @lru_cache(maxsize=16)
 def _load(path: str, tip: str):
+    if not os.path.isfile(path):
+        raise CellError(f"cell: 'urdf' {path} does not load: no such file")
     try:
-        model = pin.buildModelFromUrdf(path)
+        with _parser_quiet():
+            model = pin.buildModelFromUrdf(path)
     except (ValueError, RuntimeError) as exc:
         first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise CellError(f"cell: 'urdf' {path} does not load: {first}") from None

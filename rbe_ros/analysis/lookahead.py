@@ -12,14 +12,19 @@ insertable: a deviated block may be in its way), or when its margin is below
 :class:`StepRunner` checks steps of plans over one as-built geometry: contacts are detected
 once, each step through the incremental checker (:class:`StepChecker`), and each state
 (blocks present, blocks held) is checked once, whichever plan it belongs to: a repair's
-candidates share most of their states with the plan (:mod:`rbe_ros.analysis.repair`).
+candidates share most of their states with the plan (:mod:`rbe_ros.analysis.repair`). With
+workers, each state is checked whole in a worker process (:class:`StepPool`), the states
+asked for first, then those queued ahead (:meth:`StepRunner.prefetch`): the verdicts are
+those of the whole steps, as the incremental checker's are.
 """
 from __future__ import annotations
 
+import collections
 import copy
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
+from concurrent.futures import FIRST_COMPLETED, wait
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -28,6 +33,7 @@ from ..rbe.result import NOT_COMPUTED, Report, Status
 from ..scene import Hold, Scene, SceneError, make_scene
 from .asbuilt import declared
 from .assembly import Assembly
+from .executors import StepPool
 from .incremental import StepChecker
 from .margin import DEFAULT_DIRECTIONS
 from .options import CheckOptions
@@ -168,11 +174,13 @@ class StepRunner:
     ``options``: the check's (the scene's declared pose uncertainty applied); a margin is
     computed when they ask for one or ``min_margin_g`` > 0. The as-built state (supports and
     the placed blocks) is validated as a check validates a scene; blocks not placed are at
-    design and may overlap a deviated one: their step is then not insertable."""
+    design and may overlap a deviated one: their step is then not insertable. ``workers``
+    >= 1: states checked whole on that many processes (:meth:`close` them), not by
+    ``checker``."""
 
     def __init__(self, scene: Scene, options: CheckOptions, placed: int,
                  min_margin_g: float = 0.0,
-                 should_stop: Callable[[], bool] | None = None):
+                 should_stop: Callable[[], bool] | None = None, workers: int = 0):
         options = declared(options, scene)
         if min_margin_g > 0 and not options.margin_directions:
             options = replace(options, margin_directions=DEFAULT_DIRECTIONS)
@@ -189,6 +197,56 @@ class StepRunner:
         #: further checks of each step ahead (a cell's: :mod:`rbe_ros.analysis.
         #: cell_execution`): ``extra(plan, step)`` -> the step, failing or not
         self.extra: Callable[[Scene, StepAhead], StepAhead] | None = None
+        self.pool = StepPool(self.full, options, workers) if workers else None
+        self._pending: dict[tuple, object] = {}        # state -> its future, running
+        self._queue: collections.deque = collections.deque()    # (state, task) to run next
+
+    def close(self) -> None:
+        """Stop the workers (a check under way is dropped)."""
+        if self.pool is not None:
+            self.pool.close()
+
+    def _task(self, plan: Scene, k: int) -> tuple[tuple, tuple]:
+        """(state, the arguments of its whole check in a worker) of step ``k``."""
+        step = sequence_step(plan, k)
+        return (step.present, step.held), (step.present, step.held, step.grips, step.block,
+                                           plan.approach_of(step.block), k < self.placed)
+
+    def prefetch(self, plan: Scene, steps: Iterable[int], first: bool = False) -> None:
+        """Queue the states of ``steps`` of ``plan`` for the workers (no workers: nothing),
+        after those queued already or, ``first``, before them."""
+        if self.pool is None:
+            return
+        tasks = [t for t in (self._task(plan, k) for k in steps)
+                 if t[0] not in self.memo and t[0] not in self._pending]
+        if first:
+            self._queue.extendleft(reversed(tasks))
+        else:
+            self._queue.extend(tasks)
+        self._top_up()
+
+    def _top_up(self) -> None:
+        while self._queue and len(self._pending) < self.pool.workers:
+            key, task = self._queue.popleft()
+            if key not in self.memo and key not in self._pending:
+                self._pending[key] = self.pool.submit(*task)
+
+    def _pooled(self, key: tuple, task: tuple, k: int, block: str) -> Report:
+        """The report of state ``key`` from the workers (submitted now unless it is under
+        way), the others that finish meanwhile kept."""
+        if key not in self._pending:
+            self._pending[key] = self.pool.submit(*task)
+        while key not in self.memo:
+            if self.should_stop is not None and self.should_stop():
+                raise TimeoutError(f"stopped at {where(k, block)}")
+            wait(list(self._pending.values()), timeout=0.5, return_when=FIRST_COMPLETED)
+            for state, future in list(self._pending.items()):
+                if future.done():
+                    self.memo[state] = future.result()
+                    del self._pending[state]
+                    self.checks += 1
+            self._top_up()
+        return self.memo[key]
 
     def report(self, plan: Scene, k: int, checker: StepChecker) -> Report:
         """The report of step ``k`` of ``plan`` (a scene over these blocks: sequence and
@@ -196,6 +254,8 @@ class StepRunner:
         step = sequence_step(plan, k)
         key = (step.present, step.held)
         found = self.memo.get(key)
+        if found is None and self.pool is not None:
+            found = self._pooled(key, self._task(plan, k)[1], k, step.block)
         if found is None:
             if self.should_stop is not None and self.should_stop():
                 raise TimeoutError(f"stopped before {where(k, step.block)}")

@@ -36,7 +36,12 @@ remaining blocks can be placed depends on that set only, since any blocks may be
 step (K holds plus one placing robot): a state reached again by another order is skipped
 unchecked. Each state checked (a partial plan and the block it places) counts against the
 budget (``search_budget``; by default the first descent is free and :func:`backup_budget`
-states follow its first dead end); ``time_limit`` and ``should_stop`` end it too.
+states follow its first dead end, and a search stuck at a step, a candidate refused there,
+that makes no deeper partial plan in :data:`STALL` candidate checks, or :data:`STALL_STEPS`
+times the most it took to go a step deeper, ends: the default goes on while the search gets
+deeper and answers in bounded time when a step no candidate can take stops it; counted in
+checks, not seconds, so that where it ends does not depend on the machine or its load);
+``time_limit`` and ``should_stop`` end it too.
 
 The outcome (:attr:`Plan.outcome`): ``planned``; ``no_plan`` when the search is exhausted
 and every refusal is a proof (a candidate that the insertion check refuses, or whose exact
@@ -97,7 +102,7 @@ from typing import Protocol
 import numpy as np
 
 from ..cell import Cell
-from ..rbe.result import Report
+from ..rbe.result import Report, Status
 from ..scene import Hold, Scene, SceneError, make_scene
 from .asbuilt import declared
 from .assembly import Assembly
@@ -118,6 +123,12 @@ STOPPED = "stopped after"
 #: checked times blocks to place: a state's checks grow with the blocks), at least
 #: MIN_BACKUP states.
 BACKUP_BLOCK_STATES, MIN_BACKUP = 2000, 10
+#: The default budget also ends a search stuck at a step (a candidate of its deepest
+#: partial plan refused, or a dead end backed out of) that made no deeper partial plan in
+#: this many candidate checks (each hold search's included), or STALL_STEPS times the most
+#: it took to go one step deeper before, whichever is more (checks, not seconds: the same
+#: input ends at the same step on any machine; a search that gets deeper goes on).
+STALL, STALL_STEPS = 100, 3
 #: s between two progress heartbeats while the search checks candidates.
 HEARTBEAT = 1.0
 #: The last steps of the first descent whose mean time estimates the time left.
@@ -148,7 +159,8 @@ class PlanOptions:
     full_candidates: bool = False
     time_limit: float = math.inf  # s: then the deepest partial plan is returned
     #: states the search may check (a state: a partial plan and the block it places, checked
-    #: for its holds); 0: the first descent, then :func:`backup_budget` states more
+    #: for its holds); 0: the first descent, then :func:`backup_budget` states more, and no
+    #: more than :data:`STALL` candidate checks without a deeper partial plan
     search_budget: int = 0
     #: which feasible candidate a partial plan keeps: "holds" (fewest hold-steps) or
     #: "margin" (the largest weakest margin so far, then fewest hold-steps)
@@ -202,8 +214,8 @@ class PlanProgress:
     held: tuple[str, ...]        # blocks held at that step
     elapsed: float               # s since the search started
     #: s left: from the mean time per block of the last steps while the search goes down
-    #: without stalling; else what the budget (states left at the mean time per state so far) or
-    #: the time limit leaves, whichever is less; -1: unknown
+    #: without stalling; else what the budget (states left at the mean time per state so far,
+    #: or the default's stall bound) or the time limit leaves, whichever is less; -1: unknown
     estimate: float
     checks: int = 0              # candidate checks so far (each hold search's included)
     states: int = 0              # states checked of ``budget``
@@ -294,6 +306,9 @@ class TrialResult:
     proven: bool = True
     refusal: str = ""       # why the cell's robots cannot do a step that stands
     margin: Margin | None = None    # when the trial made it (min_margin, --margin)
+    #: refused: a set of at most K holds it stands with only beyond a robot's capacity, and
+    #: that HOLD_EXCEEDED report (the wrenches needed), as :meth:`_Trial.exceeded` picks it
+    exceeded: tuple[tuple[str, ...], Report] | None = None
 
 
 @dataclass
@@ -307,6 +322,9 @@ class _Failure:
     proven: bool = True
     dead: int = 0           # candidates whose state the search found dead before
     cell: dict[str, str] = field(default_factory=dict)     # block -> why the robots cannot
+    #: block -> the set of at most K holds it stands with only beyond a robot's capacity,
+    #: and that HOLD_EXCEEDED report (:meth:`_Trial.exceeded`)
+    exceeded: dict[str, tuple[tuple[str, ...], Report]] = field(default_factory=dict)
 
     def refused(self, block: str, found: TrialResult) -> None:
         if self.best is None or len(found.held) < len(self.best[1]):
@@ -314,6 +332,24 @@ class _Failure:
         self.proven = self.proven and found.proven
         if found.refusal:
             self.cell[block] = found.refusal
+        if found.exceeded is not None:
+            self.exceeded[block] = found.exceeded
+
+    @property
+    def capacity(self) -> tuple[str, tuple[str, ...], Report] | None:
+        """The refused candidate a robot's capacity refused: the best one (fewest holds) if
+        it is, else the one that comes closest (:func:`_exceeding`); (block, holds, its
+        HOLD_EXCEEDED report), None when no capacity refused any."""
+        if self.best is not None and self.best[0] in self.exceeded:
+            return (self.best[0], *self.exceeded[self.best[0]])
+        return min(((b, *e) for b, e in self.exceeded.items()),
+                   key=lambda f: _exceeding(*f[1:]), default=None)
+
+
+def _exceeding(held: tuple[str, ...], report: Report) -> tuple:
+    """How close a HOLD_EXCEEDED set of holds comes: fewest holds, then the least use of a
+    capacity, then the blocks."""
+    return len(held), max((w.utilisation for w in report.hold_wrenches), default=0.0), held
 
 
 @dataclass
@@ -351,6 +387,7 @@ class _Trial:
         self.free = {b for b in self.present if b in planner.free_set}
         self.reports: dict[frozenset, tuple[Assembly, Report]] = {}
         self.margins: dict[frozenset, Margin] = {}
+        self.oracle: StabilityOracle | None = None     # the exact hold search's, if it ran
 
     def result(self, held) -> tuple[Assembly, Report]:
         key = frozenset(held)
@@ -390,6 +427,18 @@ class _Trial:
                                               or DEFAULT_DIRECTIONS)
         return self.margins[key]
 
+    def exceeded(self, most: int) -> tuple[tuple[str, ...], Report] | None:
+        """Of the sets of at most ``most`` holds this trial checked (its own and its hold
+        search's), the one it stands with only beyond a robot's capacity (HOLD_EXCEEDED)
+        that comes closest (:func:`_exceeding`), with its report: what the robots would
+        need, found without another check. None: no capacity was what failed."""
+        met = [(k, r) for k, (_, r) in self.reports.items() if r.status == Status.HOLD_EXCEEDED]
+        if self.oracle is not None:
+            met += list(self.oracle.exceeded.items())
+        position = self.planner.position.__getitem__
+        return min(((tuple(sorted(k, key=position)), r) for k, r in met if len(k) <= most),
+                   key=lambda f: _exceeding(*f), default=None)
+
     def next_hold(self, held) -> str | None:
         """The block to hold next when ``held`` is not enough: the highest the failed check
         names as moving, else the highest free one (None: nothing left to hold)."""
@@ -416,7 +465,7 @@ class _Planner:
                                [h for h in scene.holds if h.block in supports])
         self.full = Assembly.from_scene(self.base, options.contact)
         self.ids = [b.id for b in self.full.blocks]
-        self.position = {bid: k for k, bid in enumerate(self.ids)}
+        self.position = self.full.index
         self.free = [b.id for b in self.full.blocks if not b.support]
         self.free_set = set(self.free)
         up = -np.asarray(self.full.gravity, dtype=float)
@@ -441,7 +490,7 @@ class _Planner:
         self.samples = StepSamples(scene, options, plan.robust) if plan.robust else None
         self.insertions: dict = {}              # order -> insertion of its last block
         # a cell's robots: who grips what, and the hand-over states (analysis/timeline.py)
-        self.cell_check = (CellCheck(cell, self.full, self.base, options, self.position)
+        self.cell_check = (CellCheck(cell, self.full, self.base, options)
                            if cell is not None else None)
         self.checks = 0
         self.models: collections.Counter = collections.Counter()
@@ -454,6 +503,12 @@ class _Planner:
         self.descent = 0.0                      # s to the last step of the first descent
         self.backed = (0.0, 0)                  # (s, states) at the first dead end
         self.recent: collections.deque = collections.deque(maxlen=RECENT)   # s of steps
+        # the default budget's stall bound: the checks when the search last went deeper (and
+        # when, for the progress estimate), and the most it took to go one step deeper
+        self.deeper = self.slowest = 0
+        self.deeper_at = self.start
+        self.stalled = False
+        self.failure = _Failure()               # why no block followed the deepest so far
 
     def poll(self) -> None:
         """Raise _Stopped when the time limit ran out or the caller asks to stop; a
@@ -462,8 +517,28 @@ class _Planner:
         if not self.stopping and (now - self.start > self.plan.time_limit
                 or (self.should_stop is not None and self.should_stop())):
             raise _Stopped
+        if not self.stopping and self.stuck and self.checks - self.deeper > self.stall:
+            self.stalled = True
+            raise _Budget
         if now - self.beat >= HEARTBEAT:
             self._progress(False)
+
+    @property
+    def stuck(self) -> bool:
+        """Whether the default budget's stall bound applies: a candidate of the deepest
+        partial plan refused, or a dead end backed out of."""
+        return not self.plan.search_budget and bool(self.backups or self.failure.best)
+
+    @property
+    def stall(self) -> int:
+        """Checks without a deeper partial plan after which the default budget ends the
+        search."""
+        return max(STALL, STALL_STEPS * self.slowest)
+
+    def went_deeper(self) -> None:
+        """The search made a partial plan deeper than any before (the stall bound restarts)."""
+        self.slowest = max(self.slowest, self.checks - self.deeper)
+        self.deeper, self.deeper_at = self.checks, time.perf_counter()
 
     def checked(self) -> None:
         """A check of a hold search (StabilityOracle.on_check): counted, then a poll."""
@@ -539,7 +614,8 @@ class _Planner:
         block = trial.order[-1]
         held, proven = self._holds(trial, partial.held[-1] if partial.held else ())
         if len(held) > self.plan.max_held or not trial.stands(held):
-            return TrialResult(held, False, proven=proven)
+            return TrialResult(held, False, proven=proven,
+                               exceeded=trial.exceeded(self.plan.max_held))
         why = (self.cell_check(partial.order, partial.held, block, held)
                if self.cell_check is not None else "")
         if why:
@@ -571,7 +647,8 @@ class _Planner:
         if len(held) <= k and trial.stands(held):
             return held, False
         self.poll()
-        oracle = StabilityOracle(trial.assembly, trial.options, self.cache, self.checked)
+        oracle = trial.oracle = StabilityOracle(trial.assembly, trial.options, self.cache,
+                                                self.checked)
         result = minimal_holds(trial.assembly, trial.options, prefer=(*previous, block),
                                oracle=oracle, largest=k)
         if result.stands:
@@ -614,18 +691,33 @@ class _Planner:
         held, _ = self._holds(trial, partial.held[-1] if partial.held else ())
         if len(held) > self.plan.max_held or not trial.stands(held):
             return "", {}
-        wrenches = trial.result(held)[1].hold_wrenches
+        shown, need = self._wrenches(held, trial.result(held)[1])
+        bounded = _Trial(self, partial, block).result(held)[1]
+        return (f"; with {', '.join(held)} held (fewest with unbounded robots) it needs "
+                f"{shown}; with the robots bounded: {bounded.status.name}, "
+                f"{bounded.message}"), need
+
+    def _exceeded(self, block: str, held: tuple[str, ...], report: Report) -> tuple[str, dict]:
+        """What the robots would need at the step placing ``block`` with ``held``, which the
+        search found standing only beyond a capacity (``report``, HOLD_EXCEEDED): a message
+        tail and the wrenches (those of the report: the least with those holds)."""
+        shown, need = self._wrenches(held, report)
+        return (f"; {block} stands with {', '.join(held)} held only beyond the robots' "
+                f"capacity: it needs {shown} ({report.message})"), {"block": block, **need}
+
+    def _wrenches(self, held, report: Report) -> tuple[str, dict]:
+        """The hold wrenches of ``report`` (each held block's robot) against the options'
+        capacities, in words and as the failure's details."""
+        force_max, torque_max = self.options.hold_force_max, self.options.hold_torque_max
         need = {"held": list(held), "force_max": force_max, "torque_max": torque_max,
                 "wrenches": [{"block": w.block, "force": float(np.linalg.norm(w.force)),
-                              "torque": float(np.linalg.norm(w.torque))} for w in wrenches]}
+                              "torque": float(np.linalg.norm(w.torque))}
+                             for w in report.hold_wrenches]}
         shown = ", ".join(f"the robot on {w['block']} |F| {w['force']:.4g} N, |M| "
                           f"{w['torque']:.4g} N m" for w in need["wrenches"])
         caps = " and ".join(f"{value:.4g} {unit}" for value, unit in
                             ((force_max, "N"), (torque_max, "N m")) if value is not None)
-        bounded = _Trial(self, partial, block).result(held)[1]
-        return (f"; with {', '.join(held)} held (fewest with unbounded robots) it needs "
-                f"{shown}, against a capacity of {caps} per robot; with the robots bounded: "
-                f"{bounded.status.name}, {bounded.message}"), need
+        return f"{shown}, against a capacity of {caps} per robot", need
 
     def step_report(self, order, held, report: Report, assembly: Assembly) -> Report:
         """The report of the step placing ``order[-1]`` with ``held``: the accepted trial's
@@ -790,9 +882,9 @@ class _Planner:
         final = self.full.subset(self.present(self.free, n + 1))
         self.final = check(final, self.options)
         if not self.final.stable:
-            return Plan(False, [], [], "the finished assembly does not stand without holds "
-                        "(rbe-ros check names why): no build order can end stable",
-                        failed_step=n, outcome=NO_PLAN)
+            return Plan(False, [], [], "the finished assembly does not stand without holds"
+                        f" ({self.final.status.name}: {self.final.message}): no build order"
+                        " can end stable", failed_step=n, outcome=NO_PLAN)
         margin = report_margin(self.final, final, self.options.deciding,
                                self.options.margin_directions or DEFAULT_DIRECTIONS) \
             if self.margins else None
@@ -834,6 +926,7 @@ class _Planner:
                 failure = _Failure()
                 if len(child.order) > len(self.deepest.order):
                     self.deepest, self.failure = child, failure
+                    self.went_deeper()
                 self._pushed(child)
                 if len(child.order) == self.n:
                     return self._finish(child, True, -1, f"every step stands with at most "
@@ -847,8 +940,7 @@ class _Planner:
         except _Stopped:
             return self._stopped()
         except _Budget:
-            return self._failed(BUDGET_EXHAUSTED, f"no plan found within the budget "
-                                f"({self.budget} states checked; --search-budget N)")
+            return self._failed(BUDGET_EXHAUSTED, self._over_budget())
         if proven:
             return self._failed(NO_PLAN, f"no plan with at most {self.plan.max_held} held "
                                 "exists (every order searched)")
@@ -874,18 +966,26 @@ class _Planner:
             except _Stopped:
                 return self._stopped()
             except _Budget:
-                return self._failed(BUDGET_EXHAUSTED, f"no plan found within the budget "
-                                    f"({self.budget} states checked; --search-budget N)")
+                return self._failed(BUDGET_EXHAUSTED, self._over_budget())
             if not children:
                 return self._failed(DEAD_END, f"no plan found by a beam of {self.plan.beam} "
                                     "(it does not back up: --beam 1 does)")
             beam = sorted(children.values(), key=lambda p: (p.score, p.order))[:self.plan.beam]
             self.deepest = beam[0]
+            self.went_deeper()
             self._pushed(beam[0])
         best = beam[0]
         return self._finish(best, True, -1, f"every step stands with at most "
                             f"{max((len(h) for h in best.held), default=0)} held blocks "
                             f"(limit {self.plan.max_held})", PLANNED)
+
+    def _over_budget(self) -> str:
+        """How the budget ended the search (its states, or the default's stall bound)."""
+        if self.stalled:
+            return (f"no plan found within the budget (the default's: no deeper partial plan "
+                    f"in {self.stall} checks, {self.states} states checked; --search-budget N "
+                    "checks N states)")
+        return f"no plan found within the budget ({self.budget} states checked; --search-budget N)"
 
     def _pushed(self, partial: _Partial) -> None:
         """The search went down to ``partial``: its look-ahead, progress."""
@@ -945,6 +1045,12 @@ class _Planner:
                               / (self.states - since), "budget"))
         if math.isfinite(self.plan.time_limit):
             found.append((max(self.plan.time_limit - elapsed, 0.0), "time limit"))
+        done = self.checks - self.deeper
+        if self.stuck and done and not any(b == "steps" for _, b in found):
+            # the default budget's stall bound (unless it gets deeper first): the checks left
+            # at the mean time per check since the search last went deeper
+            found.append((max(self.stall - done, 0) * (self.start + elapsed - self.deeper_at)
+                          / done, "budget"))
         return min(found, default=(-1.0, "unknown"))
 
     def _stopped(self) -> Plan:
@@ -968,6 +1074,7 @@ class _Planner:
         the capacity)."""
         partial, failure = self.deepest, self.failure
         k = len(partial.order)
+        self.stopping = True        # the failure's note is made whatever the bounds
         why, details = self._why(partial, failure)
         message = (f"{head}: the deepest partial plan places {k} of {self.n} blocks "
                    f"({self.states} states checked, {self.backups} dead ends backed out of); "
@@ -986,13 +1093,17 @@ class _Planner:
                 why = (f"; the best candidate, {block}, held {', '.join(held) or 'nothing'}: "
                        f"{failure.cell[block]}")
                 note, need = "", {}
+            elif failure.capacity is not None and (self.options.hold_force_max is not None
+                                                   or self.options.hold_torque_max is not None):
+                # a robot's capacity refused it: the search's own check names the need
+                note, need = self._exceeded(*failure.capacity)
             else:
                 try:
                     note, need = self._need(partial, block)
                 except _Stopped:
                     note, need = "", {}
             why += note
-            details = {"block": block, "held": list(held), **need}
+            details = {"block": block, "held": list(held), **need}   # need's block wins
         elif failure.dead:
             why = (f"; {failure.dead} candidate{'' if failure.dead == 1 else 's'} lead to "
                    "partial plans found dead before")
@@ -1121,7 +1232,8 @@ def plan_sequence(scene: Scene, max_held: int = 2, options: CheckOptions = Check
     while candidates are checked; ``should_stop`` is polled between checks, and when it
     returns True (or ``time_limit`` s have passed) the deepest partial plan is returned (not
     feasible, "stopped after K of N blocks"). ``search_budget``: the states the search may
-    check (0: the first descent, then :func:`backup_budget` states). :attr:`Plan.outcome`
+    check (0: the first descent, then :func:`backup_budget` states, ending a search stuck
+    at a step for :data:`STALL` checks). :attr:`Plan.outcome`
     says how the search ended.
     ``on_report`` receives each step's full report as the plan makes it (those of steps
     the search backed up over, and a beam's, after the search). ``look_ahead(assembly,

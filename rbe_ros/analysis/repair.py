@@ -69,7 +69,7 @@ class _Stop(Exception):
 def repair_plan(plan: Scene, built: Scene, options: CheckOptions = CheckOptions(), *,
                 max_held: int | None = None, min_margin_g: float = 0.0,
                 time_limit: float = math.inf, replan: bool = True,
-                lookahead_steps: int = 0) -> Repair:
+                lookahead_steps: int = 0, workers: int = 0) -> Repair:
     """Repair the rest of ``plan`` from the as-built scene ``built`` (the design's supports
     and the measured blocks, a prefix of the plan's order; :func:`rbe_ros.io.poses.
     scene_at_poses`), see the module docstring. ``max_held``: K (None: the plan's largest
@@ -78,6 +78,10 @@ def repair_plan(plan: Scene, built: Scene, options: CheckOptions = CheckOptions(
     False: hold and swap only. ``lookahead_steps`` > 0: only that many steps past the
     as-built state are checked and repaired (a node's look-ahead window: the steps beyond
     are the plan's, checked as the build reaches them); 0: every remaining step.
+    ``workers`` >= 1: the states checked whole on that many processes, the plan's remaining
+    states queued ahead of the scan and a failing step's hold candidates before them: the
+    same verdicts, and the same repair for any number of workers (without, a failing
+    step's incremental report may rank its hold candidates otherwise).
 
     Raises SceneError for bad input (as :func:`rbe_ros.analysis.lookahead.look_ahead`)."""
     start = time.perf_counter()
@@ -92,19 +96,23 @@ def repair_plan(plan: Scene, built: Scene, options: CheckOptions = CheckOptions(
     def out_of_time() -> bool:
         return time.perf_counter() - start > time_limit
 
-    runner = StepRunner(scene, options, placed, min_margin_g, out_of_time)
     if lookahead_steps < 0:
         raise SceneError(f"lookahead_steps must be >= 0, not {lookahead_steps}")
+    runner = StepRunner(scene, options, placed, min_margin_g, out_of_time, workers)
     fixer = _Fixer(runner, scene, placed, k_max, order, held, lookahead_steps)
     try:
-        result = fixer.run()
-    except TimeoutError as exc:
-        result = fixer.failed(f"stopped after {time_limit:g} s: {exc}")
-    if result.kind == "replan" and replan:
-        result = fixer.replan(options, min_margin_g, max(time_limit - (time.perf_counter()
-                                                                       - start), 1e-3))
-    elif result.kind == "replan":
-        result = fixer.failed(f"{fixer.reason}; no hold or swap saves the rest ({fixer.why})")
+        try:
+            result = fixer.run()
+        except TimeoutError as exc:
+            result = fixer.failed(f"stopped after {time_limit:g} s: {exc}")
+        if result.kind == "replan" and replan:
+            result = fixer.replan(options, min_margin_g, max(time_limit - (time.perf_counter()
+                                                                           - start), 1e-3))
+        elif result.kind == "replan":
+            result = fixer.failed(f"{fixer.reason}; no hold or swap saves the rest "
+                                  f"({fixer.why})")
+    finally:
+        runner.close()
     result.checks, result.time = runner.checks, time.perf_counter() - start
     return result
 
@@ -129,6 +137,7 @@ class _Fixer:
         runner = self.runner
         checker = runner.checker
         current = self.plan()
+        runner.prefetch(current, range(max(self.placed - 1, 0), self.stop()))
         if self.placed:
             state = runner.ahead(current, self.placed - 1, checker)
             if not state.stable:
@@ -155,6 +164,7 @@ class _Fixer:
             self.kinds.append(fixed[2])
             current = self.plan()
             self.held = held_by_step(current)       # a release step when one is needed now
+            runner.prefetch(current, range(k, self.stop()), first=True)
             checker = before
         return self.result(steps)
 
@@ -178,17 +188,18 @@ class _Fixer:
         kept = [b for b in (self.held[k - 1] if k else ()) if b not in now]
         report: Report = step.report
         ranked = [*kept, *report.suggested_holds, *report.unstable_blocks, step.block]
-        tried = 0
+        tried = []
         for b in dict.fromkeys(ranked):
-            if not b or b not in present or b in now:
-                continue
-            held = list(self.held)
-            held[k] = tuple(sorted((*now, b), key=self.order.index))
+            if b and b in present and b not in now and len(tried) < HOLD_CANDIDATES:
+                held = list(self.held)
+                held[k] = tuple(sorted((*now, b), key=self.order.index))
+                tried.append(held)
+        # the candidates' states differ from the plan's at step k only: all checked at once
+        for held in reversed(tried):      # each before the queue: the first ends first
+            self.runner.prefetch(with_plan(self.scene, self.order, held), (k,), first=True)
+        for held in tried:
             if self._passes(self.order, held, k, before):
                 return self.order, held, "hold"
-            tried += 1
-            if tried >= HOLD_CANDIDATES:
-                break
         return None
 
     def _swap(self, step: StepAhead, before) -> tuple | None:
@@ -263,6 +274,7 @@ class _Fixer:
         plan = self.plan()
         self.held = held_by_step(plan)
         self.window = 0                 # a new remainder: every step of it checked
+        runner.prefetch(plan, range(self.placed, len(self.held)), first=True)
         steps = runner.scan(plan, self.placed, len(self.held), checker)
         if steps and not steps[-1].passes:
             s = steps[-1]

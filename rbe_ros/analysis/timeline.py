@@ -29,8 +29,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ..cell import Cell, Robot
-from ..rbe.result import Report
+from ..cell import Cell, CellError, Robot
+from ..rbe.result import HoldWrench, Report, Status
 from ..scene import Scene
 from .assembly import Assembly
 from .insertion import approach_length
@@ -115,10 +115,9 @@ class CellSteps:
     """The robots' actions step by step (no checks): which robot places, holds and releases
     what, for a cell and the finished assembly's grips."""
 
-    def __init__(self, cell: Cell, assembly: Assembly, position: dict[str, int]):
+    def __init__(self, cell: Cell, assembly: Assembly):
         self.cell, self.chooser = cell, GripChooser(assembly, cell)
-        self.position = position
-        self.centroid = {b.id: b.centroid for b in assembly.blocks}
+        self.assembly = assembly
 
     def _take(self, block: str, busy: dict[str, Busy], present, carry: bool = False
               ) -> tuple[Robot, GripFrame] | str:
@@ -126,8 +125,9 @@ class CellSteps:
         (``carry``: and carry it to its pose within its payload), or why none can."""
         taken = {h.robot for h in busy.values()}
         why = []
+        centroid = self.assembly.block(block).centroid
         robots = sorted(self.cell.robots, key=lambda r: float(np.linalg.norm(
-            np.asarray(r.base) - self.centroid[block])))
+            np.asarray(r.base) - centroid)))
         for r in robots:
             if r.name in taken:
                 held = next(b for b, h in busy.items() if h.robot == r.name)
@@ -165,7 +165,7 @@ class CellSteps:
                 act(RELEASE, h.robot, d, True, h.grip)
 
         if block is not None:
-            for c in sorted(keep - set(busy) - {block}, key=self.position.__getitem__):
+            for c in sorted(keep - set(busy) - {block}, key=self.assembly.index.__getitem__):
                 robot, grip = taken(c)
                 busy[c] = Busy(robot.name, grip)
                 act(HOLD, robot.name, c, True, grip)
@@ -219,9 +219,8 @@ class CellCheck:
     (holds let go before the block is placed) does not stand. The robots' state after each
     partial plan is kept by its order."""
 
-    def __init__(self, cell: Cell, assembly: Assembly, scene: Scene, options: CheckOptions,
-                 position: dict[str, int]):
-        self.steps = CellSteps(cell, assembly, position)
+    def __init__(self, cell: Cell, assembly: Assembly, scene: Scene, options: CheckOptions):
+        self.steps = CellSteps(cell, assembly)
         self.states = StateChecks(cell, assembly, scene, options)
         self.after: dict[tuple[str, ...], dict[str, Busy]] = {(): {}}
 
@@ -268,11 +267,36 @@ def state_fell(a: Action, report: Report, block: str) -> str:
     where = (f"the hand-over state after {a.robot} releases {a.block} ({block} not yet "
              f"placed)" if a.before and a.action == RELEASE
              else f"the state after {a.action}({a.robot}, {a.block})")
-    holders = dict(a.busy)
-    over = [f"{holders[w.block].robot} holding {w.block}" for w in report.hold_wrenches
-            if w.utilisation > 1.0 and w.block in holders]
-    who = f" ({', '.join(over)} beyond its payload)" if over else ""
-    return f"{where} is {report.status.name}{who}: {report.message}"
+    return f"{where} is {report.status.name}{beyond_payload(report, dict(a.busy))}: " \
+        f"{report.message}"
+
+
+def beyond_payload(report: Report, busy: dict[str, Busy]) -> str:
+    """The robots of ``busy`` whose hold in ``report`` is beyond their payload, in words
+    (" (r1 holding b beyond its payload)"; "" when none is)."""
+    over = [f"{busy[w.block].robot} holding {w.block}" for w in report.hold_wrenches
+            if w.utilisation > 1.0 and w.block in busy]
+    return f" ({', '.join(over)} beyond its payload)" if over else ""
+
+
+def carried(report: Report, robot: Robot, grip: GripFrame, assembly: Assembly) -> Report:
+    """``report`` (the state after ``robot`` places ``grip.block``), or HOLD_EXCEEDED when
+    what the robot carried to the pose, the block's whole weight and its gripper's
+    (:func:`rbe_ros.analysis.grips.carry_wrench`), is beyond its payload: the report names
+    the robot, the block, the wrench (the torque in the tool frame) and the payload."""
+    w = carry_wrench(robot, grip, assembly.block(grip.block), assembly.gravity)
+    if w.utilisation <= 1.0:
+        return report
+    torque = ", ".join(f"{x:.4g}" for x in w.torque_tool)
+    return replace(report, status=Status.HOLD_EXCEEDED, unstable_blocks=(grip.block,),
+                   hold_wrenches=(HoldWrench(grip.block, w.force_world, w.torque_world,
+                                             grip.point, w.utilisation),),
+                   message=f"hold exceeded: {robot.name} carrying block {grip.block} to its "
+                           f"pose needs |F| {np.linalg.norm(w.force_robot):.4g} N (payload "
+                           f"{robot.payload_force:g} N) and |M| "
+                           f"{np.linalg.norm(w.torque_robot):.4g} N m (payload "
+                           f"{robot.payload_torque:g} N m), torque ({torque}) N m in the "
+                           "tool frame, its gripper's weight included")
 
 
 def plan_actions(steps: CellSteps, scene: Scene, order, held
@@ -329,8 +353,7 @@ def with_report(a: Action, report: Report, cell: Cell, assembly: Assembly) -> Ac
     busy_now = dict(a.busy)
     gravity = assembly.gravity
     if a.action == PLACE:
-        block = next(b for b in assembly.blocks if b.id == a.block)
-        wrench = carry_wrench(cell.robot(a.robot), a.grip, block, gravity)
+        wrench = carry_wrench(cell.robot(a.robot), a.grip, assembly.block(a.block), gravity)
     elif a.block in busy_now and report.hold_wrenches:
         hw = next((w for w in report.hold_wrenches if w.block == a.block), None)
         if hw is not None:
@@ -347,10 +370,9 @@ def build_timeline(cell: Cell, assembly: Assembly, scene: Scene, order, held,
     wrenches from the checks. ``assembly``: the finished assembly (the grips' faces);
     ``scene``: the planned scene's supports; ``approach``: each step's insertion direction;
     ``states``: the checks the planner's :class:`CellCheck` made (reused)."""
-    position = {b.id: k for k, b in enumerate(assembly.blocks)}
     states = states or StateChecks(cell, assembly, scene, options)
     order = tuple(order)
-    actions, error, _ = plan_actions(CellSteps(cell, assembly, position), scene, order, held)
+    actions, error, _ = plan_actions(CellSteps(cell, assembly), scene, order, held)
     timeline = Timeline(cell)
     for a in actions:
         a = check_action(a, order, states, approach)
@@ -397,13 +419,17 @@ def recheck_timeline(cell: Cell, scene: Scene, actions, options: CheckOptions,
     ``action``, ``robot``, ``block``, ``step`` and ``grip``, a :class:`GripFrame`), the
     states made from the actions alone: the blocks placed so far (and the supports present
     at the action's step), the blocks a robot holds (from its place or hold until its
-    release) gripped where the action says, within that robot's payload."""
+    release) gripped where the action says, within that robot's payload; a place also
+    within the placing robot's payload as it carries the block (:func:`carried`). A payload
+    exceeded is HOLD_EXCEEDED naming the robot."""
     assembly = assembly or Assembly.from_scene(scene, options.contact)
     states = StateChecks(cell, assembly, scene, options)
     placed: list[str] = []
     busy: dict[str, Busy] = {}
     out = []
-    for a in actions:
+    for i, a in enumerate(actions):
+        if a.block not in assembly.index:
+            raise CellError(f"timeline[{i}]: block {a.block!r} is not in the scene")
         if a.action == PLACE:
             placed.append(a.block)
         if a.action in (PLACE, HOLD):
@@ -411,11 +437,16 @@ def recheck_timeline(cell: Cell, scene: Scene, actions, options: CheckOptions,
         else:
             busy.pop(a.block, None)
         present = supports_present(scene, a.step) + tuple(placed)
-        out.append(states(present, tuple(busy.items())))
+        report = states(present, tuple(busy.items()))
+        if report.status == Status.HOLD_EXCEEDED:
+            report = replace(report, message=f"{report.message}{beyond_payload(report, busy)}")
+        if a.action == PLACE:
+            report = carried(report, cell.robot(a.robot), a.grip, assembly)
+        out.append(report)
     return out
 
 
 __all__ = ["Action", "Busy", "CellCheck", "CellSteps", "HOLD", "PLACE", "RELEASE",
-           "StateChecks", "Timeline", "action_present", "build_timeline", "busy_robots",
-           "check_action", "fell", "plan_actions", "recheck_timeline", "scene_with_grips",
-           "state_fell", "with_report"]
+           "StateChecks", "Timeline", "action_present", "beyond_payload", "build_timeline",
+           "busy_robots", "carried", "check_action", "fell", "plan_actions", "recheck_timeline",
+           "scene_with_grips", "state_fell", "with_report"]

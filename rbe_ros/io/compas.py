@@ -182,6 +182,13 @@ def compas_scene(doc: dict, stem: str, supports=None, density: float | None = No
     if wanted is not None and not wanted <= keys:
         raise SceneError(f"{stem}: support nodes {sorted(wanted - keys, key=_key_order)} are"
                          f" not in the assembly")
+    if wanted is not None and wanted == keys:
+        raise SceneError(f"{stem}: the supports {sorted(wanted, key=_key_order)} are every node"
+                         f" of the assembly: no free block to check")
+    if wanted is None and not any(attr.get("is_support") for _, attr in nodes):
+        raise SceneError(f"{stem}: no node is flagged is_support: name the supports by node key"
+                         f" (rbe-ros: --supports KEY[,KEY...]; compas_cra's samples set theirs"
+                         f" in their scripts)")
     blocks: list[Block] = []
     warnings: list[str] = []
     for key, attr in nodes:

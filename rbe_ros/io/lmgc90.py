@@ -178,14 +178,17 @@ def bodies(scene: Scene) -> tuple[list[dict], dict]:
 
 
 def check(scene: Scene, mu: float, python: Path, T: float = T,
-          timeout: float = TIMEOUT) -> dict:
+          timeout: float = TIMEOUT, numerics: dict | None = None) -> dict:
     """One LMGC90 verdict of ``scene`` (gravity along -z) with friction ``mu``: the driver's
     answer (``stable``, ``moved``: the free blocks beyond the thresholds, ``max_disp``, ...)
     plus ``time_process`` (wall time of the whole process) and what was made convex;
-    ``failed`` with the error when the process died or ran out of ``timeout`` s."""
+    ``failed`` with the error when the process died or ran out of ``timeout`` s.
+    ``numerics`` overrides the request (``dt`` and the driver's optional keys: a
+    sensitivity run, benchmarks/lmgc90_sensitivity.py)."""
     body_list, convexified = bodies(scene)
     request = {"bodies": body_list, "mu": float(mu), "dt": DT, "theta": THETA, "T": float(T),
-               "check_every": CHECK_EVERY, "disp_tol": DISP_TOL, "rot_tol_deg": ROT_TOL_DEG}
+               "check_every": CHECK_EVERY, "disp_tol": DISP_TOL, "rot_tol_deg": ROT_TOL_DEG
+               } | (numerics or {})
     start = time.perf_counter()
     try:
         # -I: isolated, above all without the driver's folder on sys.path (rbe_ros/io has a

@@ -370,6 +370,14 @@ def hold_markers(report: Report, header: Mapping, length: float) -> list[dict]:
 ROBOT, GRIPPER = (0.3, 0.3, 0.35, 1.0), (0.2, 0.6, 0.9, 0.6)
 PUSH, PULL = (1.0, 0.5, 0.0, 1.0), (0.6, 0.2, 0.9, 1.0)
 
+#: What the colour of each line and arrow means (the HTML view's legend). An interface
+#: outline in tension has the tension colour.
+LINE_LEGEND = (("compression", COMPRESSION), ("tension", TENSION),
+               ("interface", INTERFACE_COLOURS[0]), ("friction exceeded", INTERFACE_COLOURS[1]),
+               ("kern", KERN), ("insertion", APPROACH), ("hold force", HOLD_COLOURS[0]),
+               ("hold beyond capacity", HOLD_COLOURS[1]), ("robot base", ROBOT),
+               ("gripper", GRIPPER), ("robot pushes", PUSH), ("robot pulls", PULL))
+
 
 def wrench_text(action: Mapping) -> str:
     """Hover text of a timeline action (a RobotAction dict): robot, block, force, torque."""
@@ -478,7 +486,7 @@ def run_markers(state: Mapping, reports: Sequence[Mapping],
             for role, report, r in zip(roles, parsed, reports)]
 
 
-__all__ = ["BLOCK_MARKER_LIMIT", "MARKER_TOPIC", "MARKER_TYPE", "Meshes", "ROLES",
+__all__ = ["BLOCK_MARKER_LIMIT", "LINE_LEGEND", "MARKER_TOPIC", "MARKER_TYPE", "Meshes", "ROLES",
            "ROLE_COLOURS", "cell_markers", "fault_roles", "gripper_box", "line_markers",
            "pushes", "report_markers", "run_markers", "run_roles", "scene_meshes",
            "state_meshes", "step_markers", "step_roles", "text_of", "wrench_text"]

@@ -24,8 +24,9 @@ from scipy.spatial.transform import Rotation
 from ..analysis.options import CheckOptions
 from ..cell import Cell
 from ..rbe.result import Status
-from .markers import (ARROW, CUBE, CYLINDER, ROLE_COLOURS, ROLES, approach_markers,
-                      cell_markers, hold_markers, line_markers, run_roles, wrench_text)
+from .markers import (ARROW, CUBE, CYLINDER, LINE_LEGEND, ROLE_COLOURS, ROLES,
+                      TEXT_VIEW_FACING, approach_markers, cell_markers, hold_markers,
+                      line_markers, run_roles, wrench_text)
 from .messages import report_from_dict
 from .replay import Run, options_to_json, replay_run
 from .table import approach_text, largest_hold_force
@@ -94,11 +95,13 @@ def _arrow(meshes, report, d: dict) -> dict | None:
 _BOX_EDGES = [(a, b) for a in range(8) for b in range(a + 1, 8) if bin(a ^ b).count("1") == 1]
 
 
-def _robot_lines(run: ViewRun, step: int, size: float) -> tuple[list[dict], list[dict]]:
-    """(lines, arrows) of the robots at ``step`` of a cell's plan (the state after each of
-    its actions, :func:`rbe_ros.io.markers.cell_markers`): robot bases, gripper boxes, the
-    robots' forces with their hover text (robot, block, force, torque)."""
-    lines, arrows, seen = [], [], set()
+def _robot_lines(run: ViewRun, step: int, size: float
+                 ) -> tuple[list[dict], list[dict], list[dict]]:
+    """(lines, arrows, labels) of the robots at ``step`` of a cell's plan (the state after
+    each of its actions, :func:`rbe_ros.io.markers.cell_markers`): robot bases, gripper
+    boxes, the robots' forces with their hover text (robot, block, force, torque), the
+    robots' names above their bases."""
+    lines, arrows, labels, seen = [], [], [], set()
     for index, action in enumerate(run.timeline):
         if action["step"] != step:
             continue
@@ -116,20 +119,26 @@ def _robot_lines(run: ViewRun, step: int, size: float) -> tuple[list[dict], list
                 corners = centre + rot.apply([[(-1) ** (1 - (c >> i & 1)) * half[i]
                                                for i in range(3)] for c in range(8)])
                 points = [corners[i] for edge in _BOX_EDGES for i in edge]
-                name = f"gripper of {action['robot']}"
+                name, width = f"gripper of {action['robot']}", 6
             elif m["type"] == CYLINDER:
                 points = [centre - [0, 0, 0.25], centre + [0, 0, 0.25]]
                 name = f"base of {run.cell.robots[m['id']].name}"
+                width = 16                  # a post as thick as the base, seen from afar
             elif m["type"] == ARROW:
                 tail, tip = np.asarray(m["points"], dtype=float)
                 arrows.append({"tail": tail.tolist(), "tip": tip.tolist(), "colour": colour,
                                "name": wrench_text(action)})
                 continue
+            elif m["type"] == TEXT_VIEW_FACING and m["ns"] == "robot_names":
+                labels.append({"text": m["text"], **{k: round(float(v), DECIMALS)
+                                                     for k, v in zip("xyz", centre)}})
+                continue
             else:
                 continue
             x, y, z = _segments(np.asarray(points, dtype=float))
-            lines.append({"name": name, "colour": colour, "width": 6, "x": x, "y": y, "z": z})
-    return lines, arrows
+            lines.append({"name": name, "colour": colour, "width": width, "x": x, "y": y,
+                          "z": z})
+    return lines, arrows, labels
 
 
 def robot_table(run: ViewRun) -> dict:
@@ -157,8 +166,8 @@ def view_data(runs: Sequence[ViewRun], options: CheckOptions, title: str) -> dic
         size = (float(np.ptp(meshes.triangles.reshape(-1, 3), axis=0).max())
                 if len(meshes.triangles) else 1.0)
         for d, report, role in zip(run.reports, reports, roles):
-            lines, robot_arrows = ((_robot_lines(run, report.step_index, size))
-                                   if run.timeline else ([], []))
+            lines, robot_arrows, labels = (_robot_lines(run, report.step_index, size)
+                                           if run.timeline else ([], [], []))
             for m in (line_markers(report, d["header"])
                       + hold_markers(report, d["header"], 0.3 * size)):
                 x, y, z = _segments(m["points"])
@@ -174,12 +183,16 @@ def view_data(runs: Sequence[ViewRun], options: CheckOptions, title: str) -> dic
                 "max_hold": largest_hold_force(report) if report.hold_wrenches else None,
                 "message": report.message,
                 "approach": approach_text(report), "arrow": _arrow(meshes, report, d),
-                "robot_arrows": robot_arrows,
+                "robot_arrows": robot_arrows, "labels": labels,
                 "roles": {bid: ROLES.index(role) for bid, role in role.items()},
                 "lines": lines})
+    drawn = {c["colour"] for s in steps for c in (*s["lines"], *s["robot_arrows"],
+                                                  *([s["arrow"]] if s["arrow"] else []))}
     return {"title": title, "runs": out_runs, "steps": steps,
             "roles": [{"name": n, "colour": _rgba(ROLE_COLOURS[n][:3] + (1.0,)),
                        "opacity": ROLE_COLOURS[n][3]} for n in ROLES],
+            "line_legend": [{"name": n, "colour": _rgba(c)} for n, c in LINE_LEGEND
+                            if _rgba(c) in drawn],
             "options": json.loads(options_to_json(options)),
             "statuses": {s.name: s.value for s in Status},
             "robot_tables": [dict(robot_table(run), label=run.label) for run in runs
@@ -220,6 +233,7 @@ tr.bad td.verdict { color: #b00; font-weight: bold; }
 tr { cursor: pointer; }
 .legend span { display: inline-block; width: 0.9em; height: 0.9em; margin: 0 0.3em 0 0.8em;
   vertical-align: middle; border: 1px solid #888; }
+.legend span.line { width: 1.4em; height: 0.3em; border: none; }
 </style>
 <script>@PLOTLY@</script>
 </head><body>
@@ -293,6 +307,14 @@ function arrowTrace(a, name) {
            colorscale: [[0, a.colour], [1, a.colour]], hoverinfo: "name"}];
 }
 
+function labelTraces(step) {
+  if (!step.labels.length) return [];
+  return [{type: "scatter3d", mode: "text", name: "robots", hoverinfo: "none",
+           x: step.labels.map(l => l.x), y: step.labels.map(l => l.y),
+           z: step.labels.map(l => l.z), text: step.labels.map(l => l.text),
+           textfont: {size: 16, color: "#333"}, showlegend: false}];
+}
+
 function arrowTraces(step) {
   const out = step.arrow ? arrowTrace(step.arrow, "insertion") : [];
   for (const a of step.robot_arrows) out.push(...arrowTrace(a, a.name));
@@ -312,7 +334,8 @@ function show(index) {
                   scene: {aspectmode: "data", xaxis: {title: "x [m]"}, yaxis: {title: "y [m]"},
                           zaxis: {title: "z [m]"}, camera: {eye: {x: 1.4, y: -1.6, z: 0.9}}}};
   // data-drawn: the step on screen, once plotly has drawn it (the browser test waits for it)
-  return Plotly.react(plot, meshTraces(step).concat(lineTraces(step), arrowTraces(step)), layout,
+  return Plotly.react(plot, meshTraces(step).concat(lineTraces(step), arrowTraces(step),
+                                                    labelTraces(step)), layout,
                       {displaylogo: false, responsive: true})
     .then(() => { document.body.dataset.drawn = index; });
 }
@@ -368,6 +391,14 @@ function build() {
     const box = document.createElement("span");
     box.style.background = r.colour;
     legend.appendChild(box);
+    legend.appendChild(document.createTextNode(r.name));
+  });
+  // the colours of the lines and arrows drawn on the page, as short thick lines
+  DATA.line_legend.forEach(r => {
+    const line = document.createElement("span");
+    line.className = "line";
+    line.style.background = r.colour;
+    legend.appendChild(line);
     legend.appendChild(document.createTextNode(r.name));
   });
   slider.max = DATA.steps.length - 1;

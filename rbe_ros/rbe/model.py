@@ -96,6 +96,13 @@ def _weights(blocks, free, acceleration, force_scale) -> np.ndarray:
     return p.ravel()
 
 
+def free_weight(blocks, free, gravity) -> float:
+    """W, the weight (N) of the blocks ``free`` (indices) under ``gravity``: the model's unit
+    of force (1 when they weigh nothing)."""
+    weight = float(sum(blocks[j].mass for j in free)) * float(np.linalg.norm(gravity))
+    return weight if weight > 0 else 1.0
+
+
 def build_model(blocks, interfaces, gravity, grips=()) -> EquilibriumModel:
     """Assemble the scaled equilibrium matrix of the free blocks (vectorised over vertices);
     the blocks of ``grips`` (capacities resolved, not None) are free blocks with a wrench,
@@ -119,8 +126,7 @@ def build_model(blocks, interfaces, gravity, grips=()) -> EquilibriumModel:
     else:
         points = n = u = v = np.zeros((0, 3))
 
-    weight = float(sum(blocks[j].mass for j in free)) * float(np.linalg.norm(gravity))
-    force_scale = weight if weight > 0 else 1.0
+    force_scale = free_weight(blocks, free, gravity)
     centroids = np.array([b.centroid for b in blocks]) if blocks else np.zeros((0, 3))
     extent = np.ptp(centroids, axis=0).max() if len(blocks) > 1 else 0.0
     length_scale = float(max(extent, max((b.size for b in blocks), default=1.0)))

@@ -45,6 +45,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
+import clarabel
 import numpy as np
 import scipy.sparse as sp
 
@@ -93,6 +94,13 @@ SHARE_TOL = 1e-7
 #: A vertex whose friction is within this share of mu fn binds its cone (an interior-point
 #: solution comes no closer to a cone it sits on than about 1e-4).
 CONE_SLACK = 1e-2
+#: Clarabel's tolerances (gap and feasibility) on the least normal forces' programs: with
+#: its default (1e-8) a partial dome's least is up to 1e-6 W off the optimum, with this one
+#: within 1e-10 W of HiGHS' at the same tolerances, for a step or two more.
+LEAST_TOL = 1e-10
+#: Clarabel's iterations on one of them, then HiGHS: a partial dome's take 31-33; those it
+#: does not solve (a shelf's, with caps at the solver's tolerance) it fails after some 170.
+LEAST_MAX_ITER = 50
 #: The settled caps' least hold: the check's objective scaled by this against the robots'
 #: wrenches, so that solver.HOLD_WEIGHT's bound on how far the wrench is from the least,
 #: O(g / w), is this much tighter (docs/METHOD.md, Holds: the dome state of issue 31).
@@ -146,14 +154,17 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
                                        for g in model.grips))
     load = model.dead_load if load is None else np.asarray(load, dtype=float)
     caps = np.zeros(len(model.interfaces))
-    floor = _noise_floor(model)
+    floor = _noise_floor(model.blocks, model.interfaces, model.free, model.force_scale)
     motion, change_before, tried = None, math.inf, 2 * NEAR_STILL
+    # the solvers kept for the steps' problems, which differ only in load and caps: the
+    # motion's with and without friction, and the RBE problem within the caps
+    motions, within = {True: Kept(), False: Kept()}, Kept()
     for count in range(1, MAX_STEPS + 1):
         bound = caps * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
         if solution is not None and solution.solved and _within(
                 model, solution, bound if caps.any() else bound + floor, options.cone):
             own = _own_caps(model, rigid, options, load, caps, floor, metric,
-                            solution if least else None)
+                            solution if least else None, motions[False], within)
             if own is None:
                 return (Placement(solution, steps=count - 1) if _held(model, solution)
                         else Placement(None, steps=count - 1, beyond=solution))
@@ -164,21 +175,21 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
         # left), without the motion's solve; tried first (again only once the motion has
         # halved since: caps that creep leave a motion near rest step after step)
         early = motion is not None and _unbalance(model, motion) <= tried / 2
-        settled = _settled(model, rigid, options, load, caps, floor) if early else None
+        settled = _settled(model, rigid, options, load, caps, floor, within) if early else None
         if early and settled is None:
             tried = _unbalance(model, motion)
         if settled is None:
             frictionless = not caps.any()       # the first step: no variables of friction
-            kept = Kept()                       # the motion's solver, for its least forces
+            kept = motions[frictionless]        # the motion's solver, for its least forces
             motion = solve(rigid, options, load=load, friction_cap=bound, inertia=metric,
                            frictionless=frictionless, keep=kept)
             if not motion.solved:
                 break
             if not early and _still(model, motion):
-                settled = _settled(model, rigid, options, load, caps, floor)
+                settled = _settled(model, rigid, options, load, caps, floor, within)
         if settled is not None:     # no motion left: stands, unless it rubs on caps it lacks
             own = _own_caps(model, rigid, options, load, caps, floor, metric,
-                            None if model.grips else settled.field)
+                            None if model.grips else settled.field, motions[False], within)
             if own is None:
                 return replace(settled, steps=count)
             caps, motion = own
@@ -258,7 +269,8 @@ def _with_wrenches(model: EquilibriumModel, field: Solution, load: np.ndarray) -
 
 
 def _own_caps(model: EquilibriumModel, rigid: EquilibriumModel, options: SolveOptions, load,
-              caps: np.ndarray, floor: np.ndarray, metric, field: Solution | None):
+              caps: np.ndarray, floor: np.ndarray, metric, field: Solution | None,
+              motion: Kept, within: Kept):
     """None when the blocks, still under ``caps``, get their friction from normal forces
     the loads make; else lower caps for the next step and the motion they leave. The caps
     came from a step's motion, the frictionless one above all, and a normal force there can
@@ -270,7 +282,9 @@ def _own_caps(model: EquilibriumModel, rigid: EquilibriumModel, options: SolveOp
     it, or the least normal forces of its motion there (those the loads press there: type-b
     turned about y, whose load's moment presses the upper face) give at least the caps, or
     those become the caps. ``field``: the least field within the caps and the cones, if
-    known (skips the solves when no cone binds it)."""
+    known (skips the solves when no cone binds it). ``motion``, ``within``: the solvers
+    kept for the step's motion and the RBE problem within caps (that problem, when one was
+    kept, is tried first: the step leaves no motion exactly when it has a field)."""
     if not caps.any():          # friction within the noise floor: nothing leans on caps
         return None
     if field is not None and not _at_cone(model, field, options):
@@ -287,7 +301,9 @@ def _own_caps(model: EquilibriumModel, rigid: EquilibriumModel, options: SolveOp
     if not rubbing.any():
         return None
     without = np.where(rubbing, 0.0, caps) * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
-    step = solve(rigid, options, load=load, friction_cap=without, inertia=metric)
+    if within.solve(rigid, options, load, without / model.force_scale) is not None:
+        return None             # by the kept solver only: a fresh one costs the motion's
+    step = solve(rigid, options, load=load, friction_cap=without, inertia=metric, keep=motion)
     if not step.solved:
         return np.where(rubbing, 0.0, caps), None
     if _still(model, step):
@@ -316,9 +332,13 @@ def _least_normals(model: EquilibriumModel, options: SolveOptions, load, caps: n
     least normal resultant of the forces that leave the net wrenches of ``load`` (a step's
     motion taken out of it): the normal force the motion makes there, not a share of one
     that friction elsewhere could make as well (the least |f|^2 splits a force between
-    them). A linear program each (HiGHS), in cones relaxed to their circumscribed octagon
-    (the soc) and caps likewise: the least is never above the exact one. None when a grip
-    or a failed program leaves it open."""
+    them). A linear program each, in cones relaxed to their circumscribed octagon (the soc)
+    and caps likewise: the least is never above the exact one. Solved by Clarabel, one
+    solver whose cost alone changes from one interface to the next, its least the lower of
+    its primal and dual objectives (HiGHS' simplex took 7 times the time on a partial dome);
+    by HiGHS where Clarabel does not solve it (a cap of the solver's tolerance makes the
+    program nearly infeasible for an interior point: type-b turned about y). None when a
+    grip or a failed program leaves it open."""
     if model.grips:
         return None
     from scipy.optimize import linprog
@@ -339,32 +359,63 @@ def _least_normals(model: EquilibriumModel, options: SolveOptions, load, caps: n
         bounds_up += [np.tile(h * caps[capped] / model.force_scale, len(angles))]
     a = model.a_eq
     equal = sp.hstack([a[:, :nv], a[:, 2 * nv:4 * nv]]).tocsc()
-    bounds = [(0, None)] * nv + [(None, None)] * (2 * nv)
+    upper = sp.vstack(rows).tocsc() if rows else None
+    up, rhs = np.concatenate(bounds_up), -np.asarray(load, dtype=float)
+    # Clarabel's rows: the equilibrium, then G x <= g: the rows above and -fn <= 0
+    signs = sp.hstack([-sp.identity(nv), sp.csr_matrix((nv, 2 * nv))])
+    matrix = sp.vstack([equal] + ([upper] if rows else []) + [signs]).tocsc()
+    cones = [clarabel.ZeroConeT(equal.shape[0]), clarabel.NonnegativeConeT(len(up) + nv)]
+    settings = clarabel.DefaultSettings()
+    settings.verbose = False
+    settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = LEAST_TOL
+    settings.max_iter = LEAST_MAX_ITER
+    solver = None
     out = np.zeros(len(model.interfaces))
     for k in interfaces:
         cost = np.concatenate([(model.vertex_interface == k).astype(float), np.zeros(2 * nv)])
-        res = linprog(cost, A_ub=sp.vstack(rows).tocsc() if rows else None,
-                      b_ub=np.concatenate(bounds_up) if rows else None, A_eq=equal,
-                      b_eq=-np.asarray(load, dtype=float), bounds=bounds, method="highs")
-        if res.status != 0:
-            return None
-        out[k] = max(res.fun, 0.0) * model.force_scale
+        if solver is None:
+            solver = clarabel.DefaultSolver(sp.csc_matrix((3 * nv, 3 * nv)), cost, matrix,
+                                            np.concatenate([rhs, up, np.zeros(nv)]), cones,
+                                            settings)
+        else:
+            solver.update(q=cost)
+        result = solver.solve()
+        if str(result.status) == "Solved" and _satisfies(matrix, rhs, up, np.array(result.x)):
+            least = min(result.obj_val, result.obj_val_dual)
+        else:
+            res = linprog(cost, A_ub=upper, b_ub=up if rows else None, A_eq=equal, b_eq=rhs,
+                          bounds=[(0, None)] * nv + [(None, None)] * (2 * nv), method="highs")
+            if res.status != 0:
+                return None
+            least = res.fun
+        out[k] = max(least, 0.0) * model.force_scale
     return out
 
 
+def _satisfies(matrix, rhs: np.ndarray, up: np.ndarray, x: np.ndarray) -> bool:
+    """Whether ``x`` meets _least_normals' equalities and inequalities to SHARE_TOL W
+    absolutely: Clarabel's tolerances are relative to x, and on a program with no field
+    near the caps it has called "solved" a least normal force of 1.8e5 W (a variant of the
+    squeeze suite's 50 deg pressed incline, at mu 1.0217; HiGHS: infeasible)."""
+    residual = matrix @ x - np.concatenate([rhs, up, np.zeros(len(x) // 3)])
+    n = len(rhs)
+    return bool(np.abs(residual[:n]).max(initial=0.0) <= SHARE_TOL
+                and residual[n:].max(initial=0.0) <= SHARE_TOL)
+
+
 def _settled(model: EquilibriumModel, rigid: EquilibriumModel, options: SolveOptions, load,
-             caps: np.ndarray, floor: np.ndarray) -> Placement | None:
+             caps: np.ndarray, floor: np.ndarray, within: Kept) -> Placement | None:
     """The field that stands once a step leaves no motion: the least one within the caps
     (None if there is none). With grips, again with caps from its own normal forces until
     they settle: a robot's wrench is a load, and the normal forces it makes give friction
     (else a robot that holds its block still would carry all of it without friction).
     Of the fields within the settled caps, the robots' is the least wrench that any of them
     needs (_least_hold). Beyond the grips' capacities (``beyond``, that least wrench) unless
-    a field within the caps keeps them."""
+    a field within the caps keeps them. ``within``: the solver kept for the problem."""
     field = None
     for _ in range(MAX_STEPS):
         bound = caps * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
-        found = solve(rigid, options, load=load, friction_cap=bound)
+        found = solve(rigid, options, load=load, friction_cap=bound, keep=within)
         if not found.solved:
             break
         field = found
@@ -415,27 +466,28 @@ def _within(model: EquilibriumModel, solution: Solution, bound: np.ndarray, cone
     return bool(np.all(friction <= bound))
 
 
-def keeps_no_caps(model: EquilibriumModel, shears: np.ndarray) -> bool:
-    """Whether a field of ``model`` whose interfaces carry friction resultants ``shears``
-    (|V| per interface) needs no friction beyond the noise floor: the test's first caps
-    (none), so it stands with that field at its first step, wherever the field came from.
-    A field that needs friction proves nothing unless the test runs on the whole model: a
-    region loaded by kept forces, friction included, gets the friction that the whole,
-    set in place from rest, would have to build up again (thin domes' open courses)."""
-    bound = _noise_floor(model) + SHARE_TOL * model.force_scale
-    return bool(np.all(np.asarray(shears, dtype=float) <= bound))
+def no_caps_bound(blocks, interfaces, free, force_scale: float) -> np.ndarray:
+    """Per interface the friction resultant (N) up to which a field keeps the test's first
+    caps (none), so that it stands with that field at its first step, wherever the field
+    came from: the noise floor and the solver's tolerance. ``free``: the indices of the free
+    blocks, weighing ``force_scale`` (W) in all. A field that needs more proves nothing
+    unless the test runs on the whole model: a region loaded by kept forces, friction
+    included, gets the friction that the whole, set in place from rest, would have to
+    build up again (thin domes' open courses)."""
+    return _noise_floor(blocks, interfaces, free, force_scale) + SHARE_TOL * force_scale
 
 
-def _noise_floor(model: EquilibriumModel) -> np.ndarray:
+def _noise_floor(blocks, interfaces, free, force_scale: float) -> np.ndarray:
     """Per interface NOISE_SHARE of the weight of its lighter free block (of the free
-    weight W when it joins no free block's weight): a normal resultant below it is the
-    interior-point solver's offset from the cone's apex, not a force of the motion."""
-    weight = np.full(len(model.blocks), np.inf)
-    weight[model.free] = [model.blocks[j].mass for j in model.free]
-    weight *= model.force_scale / max(sum(model.blocks[j].mass for j in model.free), 1e-300)
-    pairs = np.array([(it.a, it.b) for it in model.interfaces], dtype=int).reshape(-1, 2)
+    weight W, ``force_scale``, when it joins no free block's weight): a normal resultant
+    below it is the interior-point solver's offset from the cone's apex, not a force of the
+    motion. ``free``: the indices of the free blocks."""
+    weight = np.full(len(blocks), np.inf)
+    weight[free] = [blocks[j].mass for j in free]
+    weight *= force_scale / max(sum(blocks[j].mass for j in free), 1e-300)
+    pairs = np.array([(it.a, it.b) for it in interfaces], dtype=int).reshape(-1, 2)
     lighter = np.minimum(weight[pairs[:, 0]], weight[pairs[:, 1]])
-    return NOISE_SHARE * np.where(np.isfinite(lighter), lighter, model.force_scale)
+    return NOISE_SHARE * np.where(np.isfinite(lighter), lighter, force_scale)
 
 
 def _above_noise(normal: np.ndarray, floor: np.ndarray) -> np.ndarray:

@@ -188,33 +188,46 @@ def _spent_since(start: float) -> float:
 
 
 class Kept:
-    """The Clarabel solver of a solve() (``keep``), for the same problem under another load:
-    only the equilibrium rows' right-hand side -p differs, so Clarabel's data update keeps
-    its equilibration, KKT ordering and symbolic factorisation, and none of the problem's
-    arrays is built again (the placement test's least forces of a motion, whose problem is
-    the motion's with p - e)."""
+    """The Clarabel solver of a solve() (``keep``), for the same problem under another load
+    or other friction caps: only the right-hand side b differs (-p on the equilibrium rows,
+    the caps on theirs), so Clarabel's data update keeps its equilibration (made from the
+    problem's matrices, not b: a kept solve is a fresh one's to rounding,
+    tests/test_placement_solves.py), KKT ordering and symbolic factorisation, and
+    none of the problem's arrays is built again (the placement test's least forces of a
+    motion, whose problem is the motion's with p - e; its steps under new caps)."""
 
     def __init__(self):
         self.solver = self.v = None
         self.size = 0               # of the KKT system
+        self.capped = None          # the interfaces capped, and where b holds their caps
+        self.cap_rows = self.cap_factors = None
 
-    def solve(self, model: EquilibriumModel, options: SolveOptions, p: np.ndarray
-              ) -> Solution | None:
-        """The solution under ``p`` (scaled), or None if there is no solver kept or its
-        first attempt is not accepted (solve() then makes the problem anew)."""
-        if self.solver is None:
+    def solve(self, model: EquilibriumModel, options: SolveOptions, p: np.ndarray,
+              cap: np.ndarray | None = None) -> Solution | None:
+        """The solution under ``p`` and ``cap`` (both scaled), or None if there is no solver
+        kept, its caps are not on the same interfaces, or its first attempt is not accepted
+        (solve() then makes the problem anew)."""
+        if self.solver is None or not np.array_equal(_capped(cap), self.capped):
             return None
         start = time.perf_counter()
         b = np.asarray(p, dtype=float)
-        rows = np.arange(len(b))
+        caps = np.zeros(0) if cap is None else \
+            np.tile(cap[self.capped], len(self.cap_rows) // max(len(self.capped), 1))
+        rows = np.concatenate((np.arange(len(b)), self.cap_rows))
+        values = np.concatenate((-b, self.cap_factors * caps))
         settings = _settings(options, _attempts(False)[0], 0.0, self.size)
-        self.solver.update(b=(rows, -b), settings=settings)
+        self.solver.update(b=(rows, values), settings=settings)
         result = self.solver.solve()
         status = str(result.status)
         accepted = _accept(model, self.v, np.array(result.x), b, None, status) \
             if status in _SOLVED else None
         elapsed = _spent_since(start)
         return None if accepted is None else replace(accepted, time=elapsed)
+
+
+def _capped(cap: np.ndarray | None) -> np.ndarray:
+    """The interfaces that ``cap`` bounds (finite)."""
+    return np.array([], dtype=int) if cap is None else np.flatnonzero(np.isfinite(cap))
 
 
 def solve(model: EquilibriumModel, options: SolveOptions = SolveOptions(), *,
@@ -237,8 +250,11 @@ def solve(model: EquilibriumModel, options: SolveOptions = SolveOptions(), *,
     checkpoint()
     nv = model.num_vertices
     p = model.dead_load if load is None else load
+    cap = None if friction_cap is None else np.asarray(friction_cap, float) / model.force_scale
+    if frictionless:            # fn >= 0 rows, no cones (as with no friction limit)
+        options, cap = replace(options, mu=math.inf), None
     if keep is not None and live_load is None:
-        again = keep.solve(model, options, p)
+        again = keep.solve(model, options, p, cap)
         if again is not None:
             return again
     multiplier = live_load is not None
@@ -247,12 +263,10 @@ def solve(model: EquilibriumModel, options: SolveOptions = SolveOptions(), *,
     # cost with the same net force and cone, so it is left out (and with it the 1e6 penalty
     # weight, which only slows the solver down).
     tension = options.allow_tension and not multiplier and options.friction == "plus"
-    if frictionless:            # fn >= 0 rows, no cones (as with no friction limit)
-        options, friction_cap = replace(options, mu=math.inf), None
     v = _Variables(nv, tension, lp, multiplier, model.hold_columns.shape[1],
                    0 if inertia is None else model.a_eq.shape[0], not frictionless)
-    cap = None if friction_cap is None else np.asarray(friction_cap, float) / model.force_scale
-    a, b, cones = _constraints(model, options, v, p, live_load, (1.0, MAX_MULTIPLIER), cap)
+    a, b, cones, at_caps = _constraints(model, options, v, p, live_load, (1.0, MAX_MULTIPLIER),
+                                        cap)
     p_diag, q = _objective(options, v, lp, multiplier)
     p_matrix = _Csc.diagonal(p_diag) if inertia is None else _with_inertia(p_diag, v, inertia)
     if lp and nv:
@@ -282,6 +296,8 @@ def solve(model: EquilibriumModel, options: SolveOptions = SolveOptions(), *,
                 if keep is not None and not k and not multiplier and not tension and \
                         keep.solver is None and solver.is_data_update_allowed():
                     keep.solver, keep.v, keep.size = solver, v, a.shape[0] + v.count
+                    keep.capped = _capped(cap)
+                    keep.cap_rows, keep.cap_factors = at_caps
                 break
     elapsed = _spent_since(start)
     if accepted is not None:
@@ -327,7 +343,7 @@ class LoadMultipliers:
         self.model, self.options = model, options
         nv, self._neq = model.num_vertices, model.a_eq.shape[0]
         self._v = _Variables(nv, False, False, True, model.hold_columns.shape[1])
-        self._a, b, self._cones = _constraints(model, options, self._v, np.zeros(self._neq),
+        self._a, b, self._cones, _ = _constraints(model, options, self._v, np.zeros(self._neq),
                                                model.dead_load, (-1.0, -1.0 / MAX_MULTIPLIER))
         self._b = np.array(b)
         self._q = -_objective(options, self._v, False, True)[1]
@@ -403,11 +419,13 @@ def _wrenches(model: EquilibriumModel, z: np.ndarray) -> np.ndarray:
 def _constraints(model: EquilibriumModel, options: SolveOptions, v: _Variables, p, column,
                  bound: tuple[float, float], cap: np.ndarray | None = None):
     """A, b and the cones of A x + s = b, s in K, in Clarabel's order: zero cone, nonnegative
-    cone, second-order cones. ``column`` (a load, or None) is the equilibrium column of the
-    multiplier variable, bounded by the row ``bound[0] * x <= bound[1]``. ``cap`` (scaled,
-    per interface; see solve) adds a cone on each capped interface's friction resultant. The
-    equilibrium rows are taken as columns of model.a_eq's CSC arrays and stacked on the other
-    rows, not rebuilt through coordinates (no sort)."""
+    cone, second-order cones; and where b holds the caps (rows, factor on the cap: the caps
+    of the capped interfaces in order, once per pyramid facet or once for the soc).
+    ``column`` (a load, or None) is the equilibrium column of the multiplier variable,
+    bounded by the row ``bound[0] * x <= bound[1]``. ``cap`` (scaled, per interface; see
+    solve) adds a cone on each capped interface's friction resultant. The equilibrium rows
+    are taken as columns of model.a_eq's CSC arrays and stacked on the other rows, not
+    rebuilt through coordinates (no sort)."""
     nv = v.nv
     neq = model.a_eq.shape[0]
     rows = _Rows(v.count, neq)
@@ -439,6 +457,7 @@ def _constraints(model: EquilibriumModel, options: SolveOptions, v: _Variables, 
             if lp:
                 rows.add_rows(tangential + [(v.t, -1.0)], 0.0)
             if len(capped):
+                rows.caps_at(rows.count + np.arange(len(capped)), h)
                 rows.add_sums(group, tangential, h * cap[capped])
     cones = [clarabel.ZeroConeT(neq)] + ([clarabel.NonnegativeConeT(rows.count - neq)]
                                          if rows.count > neq else [])
@@ -450,11 +469,14 @@ def _constraints(model: EquilibriumModel, options: SolveOptions, v: _Variables, 
                 rows.add_cones(head, fu, fv)
                 cones += [clarabel.SecondOrderConeT(3)] * nv
         if len(capped):
+            rows.caps_at(rows.count + 3 * np.arange(len(capped)), 1.0)
             rows.add_sum_cones(group, fu, fv, cap[capped])
             cones += [clarabel.SecondOrderConeT(3)] * len(capped)
     cones += _capacities(model, v, rows)
     a = _Csc.stack(_equilibrium_columns(model, v, column), rows.matrix())
-    return a, _floats(np.concatenate([-np.asarray(p, dtype=float)] + rows.b)), cones
+    return a, _floats(np.concatenate([-np.asarray(p, dtype=float)] + rows.b)), cones, \
+        (np.concatenate(rows.cap_rows or [np.zeros(0, dtype=int)]),
+         np.concatenate(rows.cap_factors or [np.zeros(0)]))
 
 
 def _capacities(model: EquilibriumModel, v: _Variables, rows: _Rows) -> list:
@@ -535,6 +557,7 @@ class _Rows:
         self.columns = columns
         self.first = self.count = first
         self.r, self.c, self.v, self.b = [], [], [], []
+        self.cap_rows, self.cap_factors = [], []     # where b holds caps (add_sums, _cones)
 
     def add_rows(self, terms, rhs: float) -> None:
         """One row per vertex: sum of coefficient * variable over ``terms`` (cols, coef)."""
@@ -579,6 +602,11 @@ class _Rows:
             self.v.append(np.full(int(on.sum()), coef))
         self.b.append(np.asarray(rhs, dtype=float))
         self.count += len(rhs)
+
+    def caps_at(self, rows: np.ndarray, factor: float) -> None:
+        """Record that b's ``rows`` hold the caps (in order) times ``factor``."""
+        self.cap_rows.append(rows)
+        self.cap_factors.append(np.full(len(rows), factor))
 
     def add_sum_cones(self, group, fu, fv, rhs) -> None:
         """Rows (rhs_k, -sum fu, -sum fv) of one 3-cone per group k (its vertices: group ==

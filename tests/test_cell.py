@@ -237,6 +237,43 @@ def test_a_held_block_robot_wrench_closed_form():
     assert wrench.utilisation == pytest.approx((m + tool_mass) * G / 1000.0, rel=1e-3)
 
 
+
+def test_check_timeline_rechecks_a_place_carry_against_the_payload(tmp_path, capsys):
+    """``check --timeline`` re-checks what a placing robot carries: a block resting on the
+    ground placed by its +x face, the robot's payload lowered in the export below the carry:
+    HOLD_EXCEEDED naming the robot, the block, the wrench and the payload, in closed form
+    (tool axes x up, z = -x): F = (m + m_t) g, M = (0, m g a / 2 - m_t g d, 0), d the tool
+    box's centre off the face (sz / 2 + 1 mm); the state after the place itself stands."""
+    a, m, tool_mass, depth = 0.4, 50.0, 3.0, 0.2
+    ground = box_block("ground", (2, 2, 0.1), (0, 0, -0.05), density=2000, support=True)
+    scene = make_scene("carry", [ground, box_block("b", (a, 0.3, 0.2), (0, 0, 0.1), mass=m)])
+    cell = {"robots": [{"name": "r", "base": [3.0, 0.0, 0.1], "reach": 4.0,
+                        "payload_force": 1000, "payload_torque": 200,
+                        "tool": {"box": [0.1, 0.1, depth], "tcp": [0, 0, depth],
+                                 "mass": tool_mass}}]}
+    out = tmp_path / "plan.json"
+    assert main(["plan", write(tmp_path, "s.json", scene_to_dict(scene)), "--cell",
+                 write(tmp_path, "c.json", cell), "-o", str(out), "--json"]) == 0
+    capsys.readouterr()
+    assert main(["check", str(out), "--timeline", "--json", "--strict"]) == 0
+    assert json.loads(capsys.readouterr().out)["stable"]
+    data = json.loads(out.read_text())
+    data["cell"]["robots"][0]["payload_force"] = 400.0
+    assert main(["check", write(tmp_path, "low.json", data), "--timeline", "--json",
+                 "--strict"]) == 1
+    rows = json.loads(capsys.readouterr().out)["timeline"]
+    assert [(r["action"], r["status"]) for r in rows] == [("place", "HOLD_EXCEEDED"),
+                                                          ("release", "STABLE")]
+    message = rows[0]["message"]
+    force = (m + tool_mass) * G
+    assert f"r carrying block b to its pose needs |F| {force:.4g} N (payload 400 N)" in message
+    torque = [float(x) for x in message.split("torque (")[1].split(")")[0].split(",")]
+    d = depth / 2 + 1e-3
+    # 4 significant digits in the message
+    assert torque == pytest.approx([0, m * G * a / 2 - tool_mass * G * d, 0], abs=0.01)
+    assert f"|M| {abs(torque[1]):.4g} N m (payload 200 N m)" in message
+
+
 def wall_cell(right_reach: float) -> dict:
     tool = {"box": [0.06, 0.06, 0.1], "tcp": [0, 0, 0.1], "mass": 1.0}
     return {"robots": [
@@ -326,18 +363,22 @@ BAD = [
     ("robots: [{name: r1, base: [0, 0, 1.1], reach: 2, payload_force: 9, payload_torque: 5}]",
      "'base' [0.0, 0.0, 1.1] is inside block v03"),
     ("robots: [{name: r1, base: [3, 0, 0], reach: 2, payload_force: 9, payload_torque: 5, "
-     "urdf: missing.urdf}]", "'urdf'"),
+     "urdf: missing.urdf}]", "'urdf' "),
+    ("robots: [{name: r1, base: [3, 0, 0], reach: 2, payload_force: 9, payload_torque: 5, "
+     "urdf: bad.urdf}]", "does not contain a valid URDF model"),
     ("robots: [{name: r1, base: [0, 0, 0]\n  reach: 2", "cell: YAML does not parse (line"),
 ]
 
 
 @pytest.mark.parametrize("text, expected", BAD)
-def test_bad_cell_files_one_line_exit_2(tmp_path, capsys, text, expected):
+def test_bad_cell_files_one_line_exit_2(tmp_path, capfd, text, expected):
+    """One line on the process's stderr (fd 2: the URDF parser's own C++ output too)."""
     scene_path = write(tmp_path, "arch.json", scene_to_dict(generators.semicircular_arch(7)))
     cell_path = write(tmp_path, "cell.yaml", text)
-    capsys.readouterr()
+    write(tmp_path, "bad.urdf", '<robot name="x"><link name=')
+    capfd.readouterr()
     assert main(["plan", scene_path, "--cell", cell_path]) == 2
-    err = capsys.readouterr().err.strip()
+    err = capfd.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "Traceback" not in err
     assert err.startswith("rbe-ros: error: cell") and expected in err
 
@@ -415,6 +456,10 @@ def test_markers_and_view_of_the_arch_plan(arch_plan, capsys):
     # place and hold of v02 are one state: one arrow
     assert [a["name"].split(":")[0] for a in step4["robot_arrows"]] == ["r3 place v02"]
     assert {ln["name"] for ln in step4["lines"]} >= {"base of r1", "gripper of r3"}
+    # each robot named above its base; the legend explains the robots' colours
+    assert sorted((lb["text"], lb["x"], lb["y"]) for lb in step4["labels"]) == [
+        (r.name, pytest.approx(r.base[0]), pytest.approx(r.base[1])) for r in cell.robots]
+    assert {"robot base", "gripper"} <= {e["name"] for e in view["line_legend"]}
 
 
 def test_plan_output_keeps_the_hold_capacities(tmp_path, capsys):
@@ -441,11 +486,10 @@ def test_a_hand_over_releases_before_the_placement_and_is_checked():
     a third robot there is no hand-over."""
     arch = generators.semicircular_arch(7)
     assembly = Assembly.from_scene(arch)
-    position = {b.id: k for k, b in enumerate(assembly.blocks)}
     order = ("v00", "v06", "v01", "v05")
     held = ((), (), ("v01",), ("v01", "v05"))
     two = cell_from_dict({"robots": ARCH_CELL["robots"][:2]})
-    steps = CellSteps(two, assembly, position)
+    steps = CellSteps(two, assembly)
     busy = {}
     supports = ("support_right", "support_left")
     for k, (block, now) in enumerate(zip(order, held)):
@@ -457,7 +501,7 @@ def test_a_hand_over_releases_before_the_placement_and_is_checked():
         ("hold", "r1", "v02", False)]
     assert [[b for b, _ in a.busy] for a in acts] == [["v05"], ["v05", "v02"],
                                                       ["v05", "v02"]]
-    hook = CellCheck(two, assembly, arch, CheckOptions(), position)
+    hook = CellCheck(two, assembly, arch, CheckOptions())
     why = hook(order, held, "v02", ("v02", "v05"))
     assert why.startswith("step 4: the hand-over state after r1 releases v01 (v02 not yet "
                           "placed) is ")
@@ -466,7 +510,7 @@ def test_a_hand_over_releases_before_the_placement_and_is_checked():
         ("support_right", "support_left", *order), (("v05", busy["v05"]),))
     assert not alone.stable and alone.status.name in why
     three = cell_from_dict(ARCH_CELL)
-    assert CellCheck(three, assembly, arch, CheckOptions(), position)(
+    assert CellCheck(three, assembly, arch, CheckOptions())(
         order, held, "v02", ("v02", "v05")) == ""
 
 
@@ -500,7 +544,7 @@ def test_a_top_grip_is_free_while_held_and_blocks_the_course_above(tmp_path, cap
     # with a second robot to place it: kept, the hold is in the way; dropped, it is let go
     # first (a hand-over state)
     two = cell_from_dict({"robots": [cell["robots"][0], {**cell["robots"][0], "name": "b"}]})
-    steps = CellSteps(two, assembly, {b.id: k for k, b in enumerate(assembly.blocks)})
+    steps = CellSteps(two, assembly)
     present = ("footing", *wall.sequence[:4])
     busy = {"course00_brick01": Busy("top", grip)}
     with pytest.raises(Exception, match="course01_brick01 would land on top's grip of "

@@ -457,6 +457,30 @@ def test_a_block_under_a_held_block_on_an_incline_stands_as_under_a_fixed_one(sl
         assert held.unstable_blocks == fixed.unstable_blocks == ("F",)
 
 
+def test_a_beam_on_a_held_post_rests_on_the_fixed_one_and_the_robot_carries_its_post():
+    """A slab B (0.2 m thick) over a fixed post P (x in [-1, 0]) and a held post H (x in
+    [0, 1], 1 m cubes, 19.62 kN, held still at its centroid), B's centroid above P's face:
+    it stands on P alone, so of the fields the test accepts (no friction needed: caps 0),
+    the least wrench carries H's weight alone, F = m_H g up, M = 0 (closed form). The
+    field of least forces spreads B's weight over both posts and loads the robot with
+    2.76 kN and 637 N m more. Capacities 1% above H's weight and 1 N m stand."""
+    blocks = [_box("ground", (-1.5, -1.5, -0.2), (1.5, 1.5, 0), density=2000.0, support=True),
+              _box("P", (-1.0, -0.5, 0), (0.0, 0.5, 1.0), density=2000.0, support=True),
+              _box("H", (0.0, -0.5, 0), (1.0, 0.5, 1.0), density=2000.0),
+              _box("B", (-1.0, -0.5, 1.0), (0.6, 0.5, 1.2), density=2000.0)]
+    full = Assembly.from_scene(make_scene("beam_on_posts", blocks))
+    step = gripped(full, {"ground", "P", "H", "B"}, ("H",))
+    options = CheckOptions(solve=SolveOptions(mu=0.5))
+    report = check(step, options)
+    assert report.stable
+    weight = 2000.0 * G
+    np.testing.assert_allclose(report.hold_wrenches[0].force, [0, 0, weight],
+                               atol=1e-6 * weight)
+    np.testing.assert_allclose(report.hold_wrenches[0].torque, 0.0, atol=1e-6 * weight)
+    assert check(step, replace(options, hold_force_max=1.01 * weight,
+                               hold_torque_max=1.0)).stable
+
+
 @pytest.mark.xfail(strict=True, reason="a pin grip keeps the least-hold path: its block's "
                    "weight rests on F and its friction holds F (rbe/prestress.py, _still_grip)")
 def test_a_block_under_a_pinned_block_on_an_incline_slides_beyond_mu():

@@ -121,6 +121,8 @@ class Placement:
     beyond: Solution | None = None
     #: the last step from rest (its net wrenches: the motion), when the blocks move
     motion: Solution | None = None
+    #: the friction caps (N per interface) within which ``field`` stands (None: no bound)
+    caps: np.ndarray | None = None
 
     @property
     def stands(self) -> bool:
@@ -161,12 +163,14 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
     motions, within = {True: Kept(), False: Kept()}, Kept()
     for count in range(1, MAX_STEPS + 1):
         bound = caps * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
+        kept = bound if caps.any() else bound + floor
         if solution is not None and solution.solved and _within(
-                model, solution, bound if caps.any() else bound + floor, options.cone):
+                model, solution, kept, options.cone):
             own = _own_caps(model, rigid, options, load, caps, floor, metric,
                             solution if least else None, motions[False], within)
             if own is None:
-                return (Placement(solution, steps=count - 1) if _held(model, solution)
+                return (Placement(solution, steps=count - 1, caps=kept)
+                        if _held(model, solution)
                         else Placement(None, steps=count - 1, beyond=solution))
             caps, motion = own
             bound = caps * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
@@ -239,9 +243,50 @@ def _held_still(model: EquilibriumModel, options: SolveOptions, load) -> Placeme
     found = placed(still, options, rows.ravel(), first if first.solved else None)
     if not found.stands:
         return replace(found, field=None, beyond=None)
-    field = _with_wrenches(model, found.field, load)
-    return Placement(field, steps=found.steps) if _held(model, field) else \
+    field = _least_still_hold(model, options, load, found, still_ids)
+    return Placement(field, steps=found.steps, caps=found.caps) if _held(model, field) else \
         Placement(None, steps=found.steps, beyond=field)
+
+
+def _least_still_hold(model: EquilibriumModel, options: SolveOptions, load, found: Placement,
+                      still_ids: set[str]) -> Solution:
+    """Of the fields the held-still test accepts, the one whose robots' wrenches are least
+    (the solver's hold term, the forces' objective scaled by LEAST_HOLD a tie-break), within
+    the capacities where one is. Accepted: the free blocks' forces within the settled caps
+    (``found.caps``), a still-held block pressing a free neighbour no more than in the field
+    that stands (``found.field``) and no support or other held block at all: it presses
+    only where the motion from rest closed a contact, and a robot cannot relieve itself by
+    resting its block on what it holds still (the squeeze of the least hold, _held_still).
+    The field that stands, its wrenches what it leaves (:func:`_with_wrenches`), is one of
+    them, so the least is never more; a load leaning on a held block and on the ground may
+    move to the ground as far as the ground's caps let it (tests/test_prestress.py)."""
+    field = _with_wrenches(model, found.field, load)
+    index = {b.id: j for j, b in enumerate(model.blocks)}
+    held = np.zeros(len(model.blocks), dtype=bool)
+    held[[index[b] for b in still_ids]] = True
+    bearing = held | ~np.isin(np.arange(len(model.blocks)), model.free)
+    pairs = np.array([(it.a, it.b) for it in model.interfaces], dtype=int).reshape(-1, 2)
+    pressed = np.where(bearing[pairs].all(axis=1), 0.0,
+                       _sums(model, found.field.forces[0] - found.field.forces[1]))
+    normal_cap = np.where(held[pairs].any(axis=1), pressed * (1.0 + CONE_TOL)
+                          + SHARE_TOL * model.force_scale, np.inf)
+    w = options.weights
+    least_options = replace(options, objective="qp", friction="net", weights=Weights(
+        w.compression * LEAST_HOLD, w.tension * LEAST_HOLD, w.friction * LEAST_HOLD))
+    rigid = replace(model, grips=tuple(replace(g, max_force=_unless_none(g.max_force),
+                                               max_torque=_unless_none(g.max_torque))
+                                       for g in model.grips))
+    least = solve(rigid, least_options, load=load, friction_cap=found.caps,
+                  normal_cap=normal_cap)
+    if not least.solved:
+        return field
+    if _held(model, least):
+        return least
+    # the least in the solver's measure (force and torque together) is beyond a capacity:
+    # another accepted field may be within them all
+    capped = solve(model, least_options, load=load, friction_cap=found.caps,
+                   normal_cap=normal_cap)
+    return capped if capped.solved else least
 
 
 def _with_wrenches(model: EquilibriumModel, field: Solution, load: np.ndarray) -> Solution:
@@ -429,9 +474,9 @@ def _settled(model: EquilibriumModel, rigid: EquilibriumModel, options: SolveOpt
     if model.grips:
         field = _least_hold(rigid, options, load, bound, field)
     if _held(model, field):
-        return Placement(field)
+        return Placement(field, caps=bound)
     capped = solve(model, options, load=load, friction_cap=bound)
-    return Placement(capped) if capped.solved else Placement(None, beyond=field)
+    return Placement(capped, caps=bound) if capped.solved else Placement(None, beyond=field)
 
 
 def _least_hold(rigid: EquilibriumModel, options: SolveOptions, load, bound: np.ndarray,

@@ -315,4 +315,5 @@ def validate_cell(cell: Cell, scene: Scene) -> None:
 
 
 __all__ = ["GripChooser", "GripFrame", "PRE_GRIP", "RobotWrench", "carry_wrench",
-           "hold_torque", "robot_grip", "robot_wrench", "tool_box_pose", "validate_cell", "wrench_need"]
+           "hold_torque", "robot_grip", "robot_wrench", "tool_box_pose", "validate_cell",
+           "wrench_need"]

@@ -220,9 +220,10 @@ def _still_grip(grip) -> bool:
 
 def _held_still(model: EquilibriumModel, options: SolveOptions, load) -> Placement:
     """The test with the blocks of grips that keep them still (:func:`_still_grip`) as
-    supports, then each robot's wrench from the field that stands: what its block's weight
-    and contact forces leave (:func:`_with_wrenches`), checked against the capacities
-    (beyond them: ``beyond``, that field). A robot that holds its block still (position-
+    supports, then each robot's wrench: what its block's weight and contact forces leave
+    (:func:`_with_wrenches`) in the field of least wrenches the test accepts
+    (:func:`_least_still_hold`), checked against the capacities (beyond them: ``beyond``,
+    that field). A robot that holds its block still (position-
     controlled) does not pre-load: its block presses a neighbour only where the motion the
     loads start closes the contact, as a fixed block's does. As a free block whose wrench
     costs (the least hold), the held block's own weight would rest on its neighbours and its

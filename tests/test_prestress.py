@@ -218,6 +218,19 @@ def test_friction_cap_bounds_the_interface_friction_resultant(cone):
     assert solve(model, options, friction_cap=np.array([math.inf])).solved
 
 
+@pytest.mark.parametrize("cone", ["soc", "pyramid4"])
+def test_normal_cap_bounds_the_interface_normal_resultant(cone):
+    """solve's normal_cap on the same block: the interface must carry W cos 20 normal to
+    the slope, so a cap 1 % above that is feasible (and met to the solver's accuracy) and
+    1 % below is not."""
+    model = _model(two_blocks(incline_deg=20.0))
+    needed = DENSITY * 0.5 * G * math.cos(math.radians(20.0))
+    options = SolveOptions(mu=2.0, cone=cone)
+    found = solve(model, options, normal_cap=np.array([needed * 1.01]))
+    assert found.solved and found.forces[0].sum() == pytest.approx(needed, rel=1e-6)
+    assert not solve(model, options, normal_cap=np.array([needed * 0.99])).solved
+
+
 
 
 @pytest.mark.parametrize("mu", [0.6, 0.84, 2.0])

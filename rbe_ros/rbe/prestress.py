@@ -51,6 +51,7 @@ import scipy.sparse as sp
 
 from .cones import pyramid_facets
 from .model import EquilibriumModel, build_model
+from .resultants import NEGLIGIBLE
 from .solver import Kept, Solution, SolveOptions, Weights, solve
 
 #: Weight of the kinetic energy of the motion against the check's objective 1/2 |f|^2 (both
@@ -244,13 +245,13 @@ def _held_still(model: EquilibriumModel, options: SolveOptions, load) -> Placeme
     found = placed(still, options, rows.ravel(), first if first.solved else None)
     if not found.stands:
         return replace(found, field=None, beyond=None)
-    field = _least_still_hold(model, options, load, found, still_ids)
+    field = _least_still_hold(model, options, load, found, still_ids, gravity)
     return Placement(field, steps=found.steps, caps=found.caps) if _held(model, field) else \
         Placement(None, steps=found.steps, beyond=field)
 
 
 def _least_still_hold(model: EquilibriumModel, options: SolveOptions, load, found: Placement,
-                      still_ids: set[str]) -> Solution:
+                      still_ids: set[str], gravity: np.ndarray) -> Solution:
     """Of the fields the held-still test accepts, the one whose robots' wrenches are least
     (the solver's hold term, the forces' objective scaled by LEAST_HOLD a tie-break), within
     the capacities where one is. Accepted: the free blocks' forces within the settled caps
@@ -258,9 +259,12 @@ def _least_still_hold(model: EquilibriumModel, options: SolveOptions, load, foun
     that stands (``found.field``) and no support or other held block at all: it presses
     only where the motion from rest closed a contact, and a robot cannot relieve itself by
     resting its block on what it holds still (the squeeze of the least hold, _held_still).
-    The field that stands, its wrenches what it leaves (:func:`_with_wrenches`), is one of
-    them, so the least is never more; a load leaning on a held block and on the ground may
-    move to the ground as far as the ground's caps let it (tests/test_prestress.py)."""
+    A held block's contact pressed below the noise floor in the field that stands carries
+    nothing (left out: the solver's rounding there would read as friction beyond the cone).
+    The field that stands, its wrenches what it leaves (:func:`_with_wrenches`), is kept
+    where that least is not within the cones to the report's tolerance; a load leaning on a
+    held block and on a support moves to the support as far as the support's caps let it
+    (tests/test_prestress.py)."""
     field = _with_wrenches(model, found.field, load)
     index = {b.id: j for j, b in enumerate(model.blocks)}
     held = np.zeros(len(model.blocks), dtype=bool)
@@ -269,25 +273,43 @@ def _least_still_hold(model: EquilibriumModel, options: SolveOptions, load, foun
     pairs = np.array([(it.a, it.b) for it in model.interfaces], dtype=int).reshape(-1, 2)
     pressed = np.where(bearing[pairs].all(axis=1), 0.0,
                        _sums(model, found.field.forces[0] - found.field.forces[1]))
-    normal_cap = np.where(held[pairs].any(axis=1), pressed * (1.0 + CONE_TOL)
-                          + SHARE_TOL * model.force_scale, np.inf)
+    touching = held[pairs].any(axis=1)
+    floor = _noise_floor(model.blocks, model.interfaces, model.free, model.force_scale)
+    kept = ~touching | (pressed > floor)
+    normal_cap = np.where(touching, pressed * (1.0 + CONE_TOL)
+                          + SHARE_TOL * model.force_scale, np.inf)[kept]
+    caps = None if found.caps is None else found.caps[kept]
+    least_model = build_model(model.blocks, tuple(it for it, k in zip(model.interfaces, kept)
+                                                  if k), gravity, model.grips)
     w = options.weights
     least_options = replace(options, objective="qp", friction="net", weights=Weights(
         w.compression * LEAST_HOLD, w.tension * LEAST_HOLD, w.friction * LEAST_HOLD))
-    rigid = replace(model, grips=tuple(replace(g, max_force=_unless_none(g.max_force),
-                                               max_torque=_unless_none(g.max_torque))
-                                       for g in model.grips))
-    least = solve(rigid, least_options, load=load, friction_cap=found.caps,
-                  normal_cap=normal_cap)
-    if not least.solved:
+    rigid = replace(least_model, grips=tuple(replace(g, max_force=_unless_none(g.max_force),
+                                                     max_torque=_unless_none(g.max_torque))
+                                             for g in model.grips))
+    least = solve(rigid, least_options, load=load, friction_cap=caps, normal_cap=normal_cap)
+    if least.solved and not _held(model, least):
+        # the least in the solver's measure (force and torque together) is beyond a
+        # capacity: another accepted field may be within them all
+        capped = solve(least_model, least_options, load=load, friction_cap=caps,
+                       normal_cap=normal_cap)
+        least = capped if capped.solved else least
+    if not least.solved or not _in_cones(least_model, least, options.mu):
         return field
-    if _held(model, least):
-        return least
-    # the least in the solver's measure (force and torque together) is beyond a capacity:
-    # another accepted field may be within them all
-    capped = solve(model, least_options, load=load, friction_cap=found.caps,
-                   normal_cap=normal_cap)
-    return capped if capped.solved else least
+    forces = np.zeros_like(field.forces)
+    forces[:, kept[model.vertex_interface]] = least.forces
+    return replace(least, forces=forces)
+
+
+def _in_cones(model: EquilibriumModel, field: Solution, mu: float) -> bool:
+    """Whether every interface's friction resultant in ``field`` is within mu times its
+    normal resultant to the report's tolerance (rbe/resultants.py: a resultant below
+    NEGLIGIBLE of W is none)."""
+    normal = _sums(model, field.forces[0] - field.forces[1])
+    shear = np.hypot(_sums(model, field.forces[2]), _sums(model, field.forces[3]))
+    zero = NEGLIGIBLE * model.force_scale
+    return bool(np.all(np.where(normal > zero, shear <= mu * normal * (1.0 + 1e-6),
+                                shear <= zero)))
 
 
 def _with_wrenches(model: EquilibriumModel, field: Solution, load: np.ndarray) -> Solution:

@@ -3,7 +3,8 @@
 whose every state between actions ``rbe-ros check --timeline`` re-checks stable, never more
 than three robots busy (counted from the actions), every grip on a face free of the other
 blocks and every gripper box clear of them (trimesh), every robot within its payload with
-its gripper's weight (a placing robot carrying its block whole); two robots cannot close the fifth course (one robot holds while the
+its gripper's weight (a placing robot carrying its block whole, a holding robot holding
+it still: its weight and what leans on it); two robots cannot close the fifth course (one robot holds while the
 other places, and course5_slice00 and _01 both need holding); UR10s name the first block
 none can grip. Long: each plan takes one to a few minutes."""
 from __future__ import annotations

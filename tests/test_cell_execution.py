@@ -30,8 +30,10 @@ from helpers import ONE_ROBOT, overhang_stack, stack_stands
 from test_cell import ARCH_CELL
 
 HEADER = {"frame_id": "cell", "stamp": {"sec": 1, "nanosec": 0}}
-TWO_ROBOTS = {"robots": [ONE_ROBOT["robots"][0],
-                         {**ONE_ROBOT["robots"][0], "name": "r2", "base": [-0.8, -0.8, 0.0]}]}
+#: Held still, s2 carries its weight and s3's on it (2 x 235 N) and the tool's, at a grip
+#: on a side face 0.15 m off its centroid (about 70 N m): 600 N, 150 N m.
+ROBOT = {**ONE_ROBOT["robots"][0], "payload_force": 600, "payload_torque": 150}
+TWO_ROBOTS = {"robots": [ROBOT, {**ROBOT, "name": "r2", "base": [-0.8, -0.8, 0.0]}]}
 
 
 def at(scene, blocks, moved=None) -> dict:

@@ -9,7 +9,10 @@ direction closest to world up (the world x axis on a horizontal face), y = z x x
 gripper is a box of the tool's size behind the TCP (its far face on the face gripped,
 centred on the TCP), which must not touch a block present (python-fcl against their convex
 hulls, as the insertion check); the TCP is within the robot's reach of its base. Of the
-faces that pass, a robot takes the one facing its base most.
+faces that pass, a robot takes the one facing its base most; a block it will hold, the one
+whose hold torque is least (its block's weight about the TCP and its tool's, what it carries
+at least: held still, the robot carries its block's weight and what leans on it), so that
+the payload left for what leans on the block is most.
 
 What the robot carries: the block's need (force F at the TCP, torque M about it, from the
 check) and its tool's weight, m_t g at the box centre c: F_r = F - m_t g, M_r = M +
@@ -129,6 +132,19 @@ def carry_wrench(robot: Robot, grip: GripFrame, block: PosedBlock, gravity) -> R
                         gravity)
 
 
+#: Digits (N m) to which hold torques are ranked: faces alike by symmetry tie to the
+#: rounding of their geometry and are taken by the base's direction.
+TORQUE_DIGITS = 6
+
+
+def hold_torque(robot: Robot, grip: GripFrame, block: PosedBlock, gravity) -> float:
+    """The torque (N m, rounded to TORQUE_DIGITS) ``robot`` needs at least to hold ``block``
+    still by ``grip``: its block's weight about the TCP and its tool's (the carry wrench's;
+    what leans on the block adds)."""
+    return round(float(np.linalg.norm(carry_wrench(robot, grip, block, gravity).torque_robot)),
+                 TORQUE_DIGITS)
+
+
 def wrench_need(w: RobotWrench, robot: Robot) -> str:
     """A robot's wrench with the tool's weight against its payload, in words."""
     return (f"|F| {np.linalg.norm(w.force_robot):.0f} N, |M| {np.linalg.norm(w.torque_robot):.0f}"
@@ -223,31 +239,37 @@ class GripChooser:
             if grip.face >= 0 else frozenset()
         return block in on or bool(self.collides(robot, grip, frozenset((block,))))
 
-    def choose(self, block: str, robot: Robot, present=None, carry: bool = False
-               ) -> tuple[GripFrame | None, str]:
+    def choose(self, block: str, robot: Robot, present=None, carry: bool = False,
+               hold: bool = False) -> tuple[GripFrame | None, str]:
         """``robot``'s grip of ``block`` with the blocks ``present`` (None: the finished
         assembly): on a face none of them touches, faces free in the finished assembly first
-        (no later block lands on them), then the one facing the robot's base most; its
-        gripper clear of them, within reach, ``carry`` (to place it) its carry wrench within
-        the payload, with a URDF an inverse kinematics solution. None and why not when there
-        is none."""
+        (no later block lands on them), then the one facing the robot's base most (``hold``:
+        the robot will hold the block, the one of least hold torque, :func:`hold_torque`);
+        its gripper clear of them, within reach, ``carry`` (to place it) its carry wrench
+        within the payload, with a URDF an inverse kinematics solution. None and why not
+        when there is none."""
         near = self.near(block)
         here = near if present is None else near & frozenset(present)
-        key = (block, robot.name, here, carry)
+        key = (block, robot.name, here, carry, hold)
         if key not in self._chosen:
-            self._chosen[key] = self._choose(block, robot, here, carry)
+            self._chosen[key] = self._choose(block, robot, here, carry, hold)
         return self._chosen[key]
 
-    def _choose(self, block: str, robot: Robot, here: frozenset[str], carry: bool
-                ) -> tuple[GripFrame | None, str]:
+    def _choose(self, block: str, robot: Robot, here: frozenset[str], carry: bool,
+                hold: bool) -> tuple[GripFrame | None, str]:
         base = np.asarray(robot.base, dtype=float)
         faces = [(g, on) for g, on in self.faces(block) if not on & here]
         if not faces:
             return None, f"block {block} has no face free of contacts to grip"
+        b = self.assembly.block(block)
+
+        def rank(face):
+            g, on = face
+            least = hold_torque(robot, g, b, self.assembly.gravity) if hold else 0.0
+            return bool(on), least, -float(g.normal @ _unit(base - g.point)), g.face
+
         why = []
-        for g, on in sorted(faces, key=lambda f: (bool(f[1]),
-                                                  -float(f[0].normal @ _unit(base - f[0].point)),
-                                                  f[0].face)):
+        for g, on in sorted(faces, key=rank):
             distance = float(np.linalg.norm(g.point - base))
             if distance > robot.reach:
                 why.append(f"face {g.face} {distance:.2f} m from {robot.name}'s base "
@@ -293,4 +315,5 @@ def validate_cell(cell: Cell, scene: Scene) -> None:
 
 
 __all__ = ["GripChooser", "GripFrame", "PRE_GRIP", "RobotWrench", "carry_wrench",
-           "robot_grip", "robot_wrench", "tool_box_pose", "validate_cell", "wrench_need"]
+           "hold_torque", "robot_grip", "robot_wrench", "tool_box_pose", "validate_cell",
+           "wrench_need"]

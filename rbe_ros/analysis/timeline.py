@@ -119,10 +119,11 @@ class CellSteps:
         self.cell, self.chooser = cell, GripChooser(assembly, cell)
         self.assembly = assembly
 
-    def _take(self, block: str, busy: dict[str, Busy], present, carry: bool = False
-              ) -> tuple[Robot, GripFrame] | str:
+    def _take(self, block: str, busy: dict[str, Busy], present, carry: bool = False,
+              hold: bool = False) -> tuple[Robot, GripFrame] | str:
         """The nearest free robot that can grip ``block`` among the blocks ``present``
-        (``carry``: and carry it to its pose within its payload), or why none can."""
+        (``carry``: and carry it to its pose within its payload; ``hold``: to hold it, by
+        the face of least hold torque), or why none can."""
         taken = {h.robot for h in busy.values()}
         why = []
         centroid = self.assembly.block(block).centroid
@@ -133,7 +134,7 @@ class CellSteps:
                 held = next(b for b, h in busy.items() if h.robot == r.name)
                 why.append(f"{r.name} is busy holding {held}")
                 continue
-            grip, reason = self.chooser.choose(block, r, present, carry)
+            grip, reason = self.chooser.choose(block, r, present, carry, hold)
             if grip is not None:
                 return r, grip
             why.append(reason)
@@ -155,7 +156,7 @@ class CellSteps:
 
         def taken(b, carry=False):
             while True:
-                found = self._take(b, busy, present, carry)
+                found = self._take(b, busy, present, carry, b in keep)
                 if not isinstance(found, str):
                     return found
                 if not drop:

@@ -81,7 +81,9 @@ def _verdict(assembly: Assembly, options: CheckOptions) -> Report:
         if placement.stands:        # its field: RBE's where that one needs no squeeze
             own = (report if placement.field is primary
                    else _report(model, placement.field, options))
-            return own if own.stable else report     # (a ratio at mu to the solver's rounding)
+            # a ratio at mu to the solver's rounding: RBE's report, with the wrenches of the
+            # field that stands (RBE's least hold may rest a held block on its neighbours)
+            return own if own.stable else replace(report, hold_wrenches=own.hold_wrenches)
         if placement.beyond is not None:
             return _exceeded(_report(model_of(assembly, options, bounded=False),
                                      placement.beyond, options), model.grips)

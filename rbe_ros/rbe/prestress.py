@@ -50,7 +50,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from .cones import pyramid_facets
-from .model import EquilibriumModel
+from .model import EquilibriumModel, build_model
+from .resultants import NEGLIGIBLE
 from .solver import Kept, Solution, SolveOptions, Weights, solve
 
 #: Weight of the kinetic energy of the motion against the check's objective 1/2 |f|^2 (both
@@ -121,6 +122,8 @@ class Placement:
     beyond: Solution | None = None
     #: the last step from rest (its net wrenches: the motion), when the blocks move
     motion: Solution | None = None
+    #: the friction caps (N per interface) within which ``field`` stands (None: no bound)
+    caps: np.ndarray | None = None
 
     @property
     def stands(self) -> bool:
@@ -141,6 +144,8 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
         field = solution if solution is not None and solution.solved else \
             solve(model, options, load=load)
         return Placement(field if field.solved else None)
+    if any(_still_grip(g) for g in model.grips):
+        return _held_still(model, options, load)
     # the check's field is the least |f|^2 of the steps' problem (see _own_caps)
     least = options.objective == "qp" and options.friction == "net" and not model.grips
     options = replace(options, objective="qp", friction="net")
@@ -159,12 +164,14 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
     motions, within = {True: Kept(), False: Kept()}, Kept()
     for count in range(1, MAX_STEPS + 1):
         bound = caps * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
+        kept = bound if caps.any() else bound + floor
         if solution is not None and solution.solved and _within(
-                model, solution, bound if caps.any() else bound + floor, options.cone):
+                model, solution, kept, options.cone):
             own = _own_caps(model, rigid, options, load, caps, floor, metric,
                             solution if least else None, motions[False], within)
             if own is None:
-                return (Placement(solution, steps=count - 1) if _held(model, solution)
+                return (Placement(solution, steps=count - 1, caps=kept)
+                        if _held(model, solution)
                         else Placement(None, steps=count - 1, beyond=solution))
             caps, motion = own
             bound = caps * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
@@ -204,6 +211,129 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
             break       # converged, or friction raising its own caps ever faster: a squeeze
         caps, change_before = normal, change
     return _moved(model, motion, count)
+
+
+def _still_grip(grip) -> bool:
+    """Whether a grip keeps its block still: it can apply a force and a torque (a pin grip,
+    torque capacity 0, lets its block turn about the grip)."""
+    return grip.max_force != 0 and grip.max_torque != 0
+
+
+def _held_still(model: EquilibriumModel, options: SolveOptions, load) -> Placement:
+    """The test with the blocks of grips that keep them still (:func:`_still_grip`) as
+    supports, then each robot's wrench: what its block's weight and contact forces leave
+    (:func:`_with_wrenches`) in the field of least wrenches the test accepts
+    (:func:`_least_still_hold`), checked against the capacities (beyond them: ``beyond``,
+    that field). A robot that holds its block still (position-
+    controlled) does not pre-load: its block presses a neighbour only where the motion the
+    loads start closes the contact, as a fixed block's does. As a free block whose wrench
+    costs (the least hold), the held block's own weight would rest on its neighbours and its
+    friction hold them, a squeeze by the robot: a box on a slope under an equal held box
+    stood up to tan 1.5 at mu 0.5, not 0.5 (tests/test_prestress.py); the 8 x 5 dome's
+    plan, step 18 (docs/METHOD.md, Holds)."""
+    still_ids = {g.block for g in model.grips if _still_grip(g)}
+    blocks = tuple(replace(b, support=True) if b.id in still_ids else b for b in model.blocks)
+    masses = np.array([model.blocks[j].mass for j in model.free])
+    gravity = model.dead_load.reshape(-1, 6)[:, :3].sum(axis=0) * model.force_scale \
+        / max(masses.sum(), 1e-300)
+    still = build_model(blocks, model.interfaces, gravity,
+                        tuple(g for g in model.grips if not _still_grip(g)))
+    load = model.dead_load if load is None else np.asarray(load, dtype=float)
+    keep = np.isin(model.free, still.free)
+    rows = load.reshape(-1, 6)[keep] * (model.force_scale / still.force_scale)
+    first = solve(still, options, load=rows.ravel())
+    found = placed(still, options, rows.ravel(), first if first.solved else None)
+    if not found.stands:
+        return replace(found, field=None, beyond=None)
+    field = _least_still_hold(model, options, load, found, still_ids, gravity)
+    return Placement(field, steps=found.steps, caps=found.caps) if _held(model, field) else \
+        Placement(None, steps=found.steps, beyond=field)
+
+
+def _least_still_hold(model: EquilibriumModel, options: SolveOptions, load, found: Placement,
+                      still_ids: set[str], gravity: np.ndarray) -> Solution:
+    """Of the fields the held-still test accepts, the one whose robots' wrenches are least
+    (the solver's hold term, the forces' objective scaled by LEAST_HOLD a tie-break), within
+    the capacities where one is. Accepted: the free blocks' forces within the settled caps
+    (``found.caps``), a still-held block pressing a free neighbour no more than in the field
+    that stands (``found.field``) and no support or other held block at all: it presses
+    only where the motion from rest closed a contact, and a robot cannot relieve itself by
+    resting its block on what it holds still (the squeeze of the least hold, _held_still).
+    A held block's contact pressed below the noise floor in the field that stands carries
+    nothing (left out: the solver's rounding there would read as friction beyond the cone).
+    The field that stands, its wrenches what it leaves (:func:`_with_wrenches`), is kept
+    where that least is not within the cones to the report's tolerance; a load leaning on a
+    held block and on a support moves to the support as far as the support's caps let it
+    (tests/test_prestress.py)."""
+    field = _with_wrenches(model, found.field, load)
+    index = {b.id: j for j, b in enumerate(model.blocks)}
+    held = np.zeros(len(model.blocks), dtype=bool)
+    held[[index[b] for b in still_ids]] = True
+    bearing = held | ~np.isin(np.arange(len(model.blocks)), model.free)
+    pairs = np.array([(it.a, it.b) for it in model.interfaces], dtype=int).reshape(-1, 2)
+    pressed = np.where(bearing[pairs].all(axis=1), 0.0,
+                       _sums(model, found.field.forces[0] - found.field.forces[1]))
+    touching = held[pairs].any(axis=1)
+    floor = _noise_floor(model.blocks, model.interfaces, model.free, model.force_scale)
+    kept = ~touching | (pressed > floor)
+    normal_cap = np.where(touching, pressed * (1.0 + CONE_TOL)
+                          + SHARE_TOL * model.force_scale, np.inf)[kept]
+    caps = None if found.caps is None else found.caps[kept]
+    least_model = build_model(model.blocks, tuple(it for it, k in zip(model.interfaces, kept)
+                                                  if k), gravity, model.grips)
+    w = options.weights
+    least_options = replace(options, objective="qp", friction="net", weights=Weights(
+        w.compression * LEAST_HOLD, w.tension * LEAST_HOLD, w.friction * LEAST_HOLD))
+    rigid = replace(least_model, grips=tuple(replace(g, max_force=_unless_none(g.max_force),
+                                                     max_torque=_unless_none(g.max_torque))
+                                             for g in model.grips))
+    least = solve(rigid, least_options, load=load, friction_cap=caps, normal_cap=normal_cap)
+    if least.solved and not _held(model, least):
+        # the least in the solver's measure (force and torque together) is beyond a
+        # capacity: another accepted field may be within them all
+        capped = solve(least_model, least_options, load=load, friction_cap=caps,
+                       normal_cap=normal_cap)
+        least = capped if capped.solved else least
+    if not least.solved or not _in_cones(least_model, least, options.mu):
+        return field
+    forces = np.zeros_like(field.forces)
+    forces[:, kept[model.vertex_interface]] = least.forces
+    return replace(least, forces=forces)
+
+
+def _in_cones(model: EquilibriumModel, field: Solution, mu: float) -> bool:
+    """Whether every interface's friction resultant in ``field`` is within mu times its
+    normal resultant to the report's tolerance (rbe/resultants.py: a resultant below
+    NEGLIGIBLE of W is none)."""
+    normal = _sums(model, field.forces[0] - field.forces[1])
+    shear = np.hypot(_sums(model, field.forces[2]), _sums(model, field.forces[3]))
+    zero = NEGLIGIBLE * model.force_scale
+    return bool(np.all(np.where(normal > zero, shear <= mu * normal * (1.0 + 1e-6),
+                                shear <= zero)))
+
+
+def _with_wrenches(model: EquilibriumModel, field: Solution, load: np.ndarray) -> Solution:
+    """``field`` (of the model with the still-held blocks as supports) as a field of
+    ``model``: each still-held block's grip takes what its weight and contact forces leave
+    (force F at the grip p, torque M about it: F = -R, M = -(M_c + (p - c) x F) for their
+    resultant R and moment M_c about the centroid c); the other grips keep their wrenches
+    in ``field``."""
+    row = {int(j): r for r, j in enumerate(model.free)}
+    rest = (model.a_eq @ field.forces.ravel() / model.force_scale + load).reshape(-1, 6)
+    others = iter(field.wrenches)
+    wrenches = np.zeros((len(model.grips), 6))
+    index = {b.id: j for j, b in enumerate(model.blocks)}
+    for k, g in enumerate(model.grips):
+        if not _still_grip(g):
+            wrenches[k] = next(others)
+            continue
+        j = index[g.block]
+        force = -rest[row[j], :3] * model.force_scale
+        moment = rest[row[j], 3:] * model.force_scale * model.length_scale
+        wrenches[k, :3] = force
+        wrenches[k, 3:] = -(moment + np.cross(np.asarray(g.point) - model.blocks[j].centroid,
+                                              force))
+    return replace(field, wrenches=wrenches, unbalanced=np.zeros(0))
 
 
 def _own_caps(model: EquilibriumModel, rigid: EquilibriumModel, options: SolveOptions, load,
@@ -367,9 +497,9 @@ def _settled(model: EquilibriumModel, rigid: EquilibriumModel, options: SolveOpt
     if model.grips:
         field = _least_hold(rigid, options, load, bound, field)
     if _held(model, field):
-        return Placement(field)
+        return Placement(field, caps=bound)
     capped = solve(model, options, load=load, friction_cap=bound)
-    return Placement(capped) if capped.solved else Placement(None, beyond=field)
+    return Placement(capped, caps=bound) if capped.solved else Placement(None, beyond=field)
 
 
 def _least_hold(rigid: EquilibriumModel, options: SolveOptions, load, bound: np.ndarray,

@@ -232,13 +232,16 @@ def _capped(cap: np.ndarray | None) -> np.ndarray:
 
 def solve(model: EquilibriumModel, options: SolveOptions = SolveOptions(), *,
           load: np.ndarray | None = None, live_load: np.ndarray | None = None,
-          friction_cap: np.ndarray | None = None,
+          friction_cap: np.ndarray | None = None, normal_cap: np.ndarray | None = None,
           inertia: sp.spmatrix | None = None, frictionless: bool = False,
           keep: Kept | None = None) -> Solution:
     """Solve the RBE problem of ``model`` under ``load`` (scaled p; default: dead load).
     ``friction_cap`` (N per interface, inf: none) bounds the resultant of each interface's
     friction forces in the cone's norm, as well as the vertex cones (Tresca bounds of the
-    placement test, rbe/prestress.py). ``inertia`` (a positive definite (6 m, 6 m) matrix
+    placement test, rbe/prestress.py). ``normal_cap`` (N per interface, inf: none) bounds
+    the resultant of each interface's normal forces (a block held still presses its
+    neighbours no more than the field that stands: the least hold of rbe/prestress.py; no
+    solver is kept with it). ``inertia`` (a positive definite (6 m, 6 m) matrix
     on the scaled equilibrium rows) turns equilibrium into the step from rest: the rows'
     imbalance e = A x + p is free, at the cost 1/2 e^T inertia e added to the objective
     (the kinetic energy of the motion it starts, rbe/prestress.py). ``frictionless``: no
@@ -253,6 +256,10 @@ def solve(model: EquilibriumModel, options: SolveOptions = SolveOptions(), *,
     cap = None if friction_cap is None else np.asarray(friction_cap, float) / model.force_scale
     if frictionless:            # fn >= 0 rows, no cones (as with no friction limit)
         options, cap = replace(options, mu=math.inf), None
+    normal = None if normal_cap is None else \
+        np.asarray(normal_cap, float) / model.force_scale
+    if normal is not None:
+        keep = None
     if keep is not None and live_load is None:
         again = keep.solve(model, options, p, cap)
         if again is not None:
@@ -266,7 +273,7 @@ def solve(model: EquilibriumModel, options: SolveOptions = SolveOptions(), *,
     v = _Variables(nv, tension, lp, multiplier, model.hold_columns.shape[1],
                    0 if inertia is None else model.a_eq.shape[0], not frictionless)
     a, b, cones, at_caps = _constraints(model, options, v, p, live_load, (1.0, MAX_MULTIPLIER),
-                                        cap)
+                                        cap, normal)
     p_diag, q = _objective(options, v, lp, multiplier)
     p_matrix = _Csc.diagonal(p_diag) if inertia is None else _with_inertia(p_diag, v, inertia)
     if lp and nv:
@@ -418,13 +425,15 @@ def _wrenches(model: EquilibriumModel, z: np.ndarray) -> np.ndarray:
 
 
 def _constraints(model: EquilibriumModel, options: SolveOptions, v: _Variables, p, column,
-                 bound: tuple[float, float], cap: np.ndarray | None = None):
+                 bound: tuple[float, float], cap: np.ndarray | None = None,
+                 normal: np.ndarray | None = None):
     """A, b and the cones of A x + s = b, s in K, in Clarabel's order: zero cone, nonnegative
     cone, second-order cones; and where b holds the caps (rows, factor on the cap: the caps
     of the capped interfaces in order, once per pyramid facet or once for the soc).
     ``column`` (a load, or None) is the equilibrium column of the multiplier variable,
     bounded by the row ``bound[0] * x <= bound[1]``. ``cap`` (scaled, per interface; see
-    solve) adds a cone on each capped interface's friction resultant. The equilibrium rows
+    solve) adds a cone on each capped interface's friction resultant, ``normal`` (likewise)
+    a row on its normal resultant. The equilibrium rows
     are taken as columns of model.a_eq's CSC arrays and stacked on the other rows, not
     rebuilt through coordinates (no sort)."""
     nv = v.nv
@@ -442,6 +451,13 @@ def _constraints(model: EquilibriumModel, options: SolveOptions, v: _Variables, 
         rows.add_rows([(v.index(k, np.arange(nv)), -1.0)], 0.0)
     if column is not None:
         rows.add_rows([(np.array([v.lam]), bound[0])], bound[1])
+    bounded = np.array([], dtype=int) if normal is None else np.flatnonzero(np.isfinite(normal))
+    if len(bounded):                # sum of (fn+ - fn-) over the interface <= normal
+        within = np.full(len(model.interfaces), -1)
+        within[bounded] = np.arange(len(bounded))
+        within = within[model.vertex_interface]
+        rows.add_sums(within, [(fn, 1.0)] + ([(v.index(1, np.arange(nv)), -1.0)]
+                                            if v.base[1] >= 0 else []), normal[bounded])
     lp = len(v.t) > 0
     fu, fv = v.index(2, np.arange(nv)), v.index(3, np.arange(nv))
     capped = np.array([], dtype=int) if cap is None else np.flatnonzero(np.isfinite(cap))

@@ -172,13 +172,14 @@ def test_the_bag_replays_its_plans(rbe, capsys):
     swapped = json.loads(json.dumps(arch.reports[0]))
     swapped["order"][1], swapped["order"][2] = swapped["order"][2], swapped["order"][1]
     forces = json.loads(json.dumps(arch.reports[0]))
-    forces["reports"][3]["worst_friction_ratio"] *= 1.01
+    forces["reports"][4]["worst_friction_ratio"] *= 1.01    # step 4's: 0.25 (held still,
+    # steps 0-3 need no friction)
     perturbed = rbe.tmp / "perturbed"
     write_runs(perturbed, [arch, arch], [[swapped], [forces]], bag_options(rbe.bag))
     assert main(["replay", str(perturbed), "--compare", "-o", str(rbe.tmp / "p_out")]) == 1
     out = capsys.readouterr().out
     assert "run 0 whole assembly plan result: order: recorded" in out
-    assert "run 1 step 3" in out and "worst_friction_ratio: recorded" in out
+    assert "run 1 step 4" in out and "worst_friction_ratio: recorded" in out
 
     # live: the arch's goal sent again to the running node (its settings put back after)
     live = replay_bag(perturbed, write=False, recheck=live_recheck("rbe_node", rbe.context, 60.0))

@@ -26,7 +26,7 @@ TOOL = {"box": [0.1, 0.1, 0.15], "tcp": [0.0, 0.0, 0.15], "mass": 2.0}
 pytestmark = pytest.mark.long
 
 CELL = {"robots": [
-    {"name": n, "base": b, "reach": 3.0, "payload_force": 1500, "payload_torque": 400,
+    {"name": n, "base": b, "reach": 3.0, "payload_force": 3000, "payload_torque": 1500,
      "tool": TOOL} for n, b in (("r1", [1.5, -1.5, 0.0]), ("r2", [-1.5, -1.5, 0.0]),
                                 ("r3", [0.0, 1.5, 0.0]))]}
 
@@ -94,8 +94,7 @@ def test_a_bad_cell_goal_is_aborted_with_the_reason(rbe):
         status, result = rbe.client.result(rbe.client.send_plan(goal, []))
         assert status == GoalStatus.STATUS_ABORTED
         assert result.message.startswith(reason) and not result.feasible
-    # the node keeps planning (an empty goal cell: the node's cell_file; its robots carry
-    # 1500 N, so not a 5-voussoir arch's 1730 N blocks)
+    # the node keeps planning (an empty goal cell: the node's cell_file)
     goal = PlanSequence.Goal(assembly=state_msg(generators.semicircular_arch(7)), max_held=2)
     status, result = rbe.client.result(rbe.client.send_plan(goal, []))
     assert status == GoalStatus.STATUS_SUCCEEDED and result.feasible

@@ -457,19 +457,30 @@ def test_a_block_under_a_held_block_on_an_incline_stands_as_under_a_fixed_one(sl
         assert held.unstable_blocks == fixed.unstable_blocks == ("F",)
 
 
-@pytest.mark.xfail(strict=True, reason="a pin grip keeps the least-hold path: its block's "
-                   "weight rests on F and its friction holds F (rbe/prestress.py, _still_grip)")
-def test_a_block_under_a_pinned_block_on_an_incline_slides_beyond_mu():
-    """As above with H pinned at its centroid (no torque): H cannot translate, F slides
-    parallel to H's face, so F slides for tan(theta) > mu (0.8 at mu 0.5)."""
-    theta = math.atan(0.8)
+@pytest.mark.parametrize("slope, stands", [(0.45, True), (0.8, False)])
+def test_a_block_under_a_pinned_block_on_an_incline_stands_as_under_a_fixed_one(slope, stands):
+    """As above with H pinned at its centroid (torque capacity 0): its weight has no moment
+    about the pin, so H neither turns nor moves, and F set from rest slides parallel to H's
+    face: that contact gets no normal force. F stands exactly when tan(theta) <= mu = 0.5
+    (at 0.8 it slides, a = g (sin - mu cos) = 0.23 g), and the pin carries H's weight, -m g,
+    no torque (closed form). Before, the pin's force was a costed load and H's weight rested
+    on F, whose friction held F beyond mu."""
+    theta = math.atan(slope)
     gravity = G * np.array([math.sin(theta), 0.0, -math.cos(theta)])
     blocks = [_box("ground", (-1.5, -1.5, -0.2), (1.5, 1.5, 0), density=2000.0, support=True),
               _box("F", (-0.5, -0.5, 0), (0.5, 0.5, 0.5), density=2000.0),
               _box("H", (-0.5, -0.5, 0.5), (0.5, 0.5, 1.0), density=2000.0)]
     full = Assembly.from_scene(make_scene("under_pinned", blocks, gravity))
     pinned = full.subset({"ground", "F", "H"}, {"H"}, (Grip("H", max_torque=0.0),))
-    assert not check(pinned, CheckOptions(solve=SolveOptions(mu=0.5))).stable
+    report = check(pinned, CheckOptions(solve=SolveOptions(mu=0.5)))
+    assert report.stable == stands
+    if stands:
+        np.testing.assert_allclose(report.hold_wrenches[0].force, -1000.0 * gravity,
+                                   atol=1e-3 * G * 1000)
+        np.testing.assert_array_equal(report.hold_wrenches[0].torque, 0.0)
+    else:
+        assert report.status == Status.FRICTION_EXCEEDED
+        assert report.unstable_blocks == ("F",)
 
 
 def test_the_step_from_rest_accelerates_a_frictionless_block_down_an_incline_at_g_sin():

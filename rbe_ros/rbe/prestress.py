@@ -145,9 +145,15 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
         return _held_still(model, options, load)
     # the check's field is the least |f|^2 of the steps' problem (see _own_caps)
     least = options.objective == "qp" and options.friction == "net" and not model.grips
-    options = replace(options, objective="qp", friction="net")
+    # a grip left here (a pin: its block may turn about it) fixes what it can apply (the
+    # grip point's position), its wrench the reaction of that, free of cost: the steps'
+    # motion is then the one with the point still (module docstring, Pins); the check's
+    # field, the least hold, is not the one that stands
+    options = replace(options, objective="qp", friction="net",
+                      weights=replace(options.weights, hold=0.0))
+    solution = None if model.grips else solution
     metric = inertia_metric(model)
-    # a robot keeps its block where it is (its arm is position-controlled): during the
+    # a robot keeps its grip where it is (its arm is position-controlled): during the
     # steps its wrench is what holding it takes; the capacities bound the field that stands
     rigid = replace(model, grips=tuple(replace(g, max_force=_unless_none(g.max_force),
                                                max_torque=_unless_none(g.max_torque))
@@ -175,7 +181,7 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
         # left), without the motion's solve; tried first (again only once the motion has
         # halved since: caps that creep leave a motion near rest step after step)
         early = motion is not None and _unbalance(model, motion) <= tried / 2
-        settled = _settled(model, rigid, options, load, caps, floor, within) if early else None
+        settled = _settled(model, rigid, options, load, caps, within) if early else None
         if early and settled is None:
             tried = _unbalance(model, motion)
         if settled is None:
@@ -186,7 +192,7 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
             if not motion.solved:
                 break
             if not early and _still(model, motion):
-                settled = _settled(model, rigid, options, load, caps, floor, within)
+                settled = _settled(model, rigid, options, load, caps, within)
         if settled is not None:     # no motion left: stands, unless it rubs on caps it lacks
             own = _own_caps(model, rigid, options, load, caps, floor, metric,
                             None if model.grips else settled.field, motions[False], within)
@@ -404,34 +410,22 @@ def _satisfies(matrix, rhs: np.ndarray, up: np.ndarray, x: np.ndarray) -> bool:
 
 
 def _settled(model: EquilibriumModel, rigid: EquilibriumModel, options: SolveOptions, load,
-             caps: np.ndarray, floor: np.ndarray, within: Kept) -> Placement | None:
+             caps: np.ndarray, within: Kept) -> Placement | None:
     """The field that stands once a step leaves no motion: the least one within the caps
-    (None if there is none). With grips, again with caps from its own normal forces until
-    they settle: a robot's wrench is a load, and the normal forces it makes give friction
-    (else a robot that holds its block still would carry all of it without friction).
-    Of the fields within the settled caps, the robots' is the least wrench that any of them
-    needs (_least_hold). Beyond the grips' capacities (``beyond``, that least wrench) unless
-    a field within the caps keeps them. ``within``: the solver kept for the problem."""
-    field = None
-    for _ in range(MAX_STEPS):
-        bound = caps * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
-        found = solve(rigid, options, load=load, friction_cap=bound, keep=within)
-        if not found.solved:
-            break
-        field = found
-        normal = options.mu * _above_noise(_sums(model, field.forces[0]), floor)
-        if not model.grips or np.abs(normal - caps).max(initial=0.0) \
-                <= CONVERGED * model.force_scale:
-            break
-        caps = normal
-    if field is None:
+    (None if there is none), the grips' wrenches reactions as in the steps (their caps
+    come from the steps alone: a field's own normal forces include those a grip's force
+    makes, a squeeze). Beyond the grips' capacities, the least field within the caps and
+    them if there is one, else ``beyond``: the least wrench that a field within the caps
+    needs (_least_hold). ``within``: the solver kept for the problem."""
+    bound = caps * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
+    field = solve(rigid, options, load=load, friction_cap=bound, keep=within)
+    if not field.solved:
         return None
-    if model.grips:
-        field = _least_hold(rigid, options, load, bound, field)
     if _held(model, field):
         return Placement(field)
     capped = solve(model, options, load=load, friction_cap=bound)
-    return Placement(capped) if capped.solved else Placement(None, beyond=field)
+    return Placement(capped) if capped.solved else \
+        Placement(None, beyond=_least_hold(rigid, options, load, bound, field))
 
 
 def _least_hold(rigid: EquilibriumModel, options: SolveOptions, load, bound: np.ndarray,
@@ -439,10 +433,11 @@ def _least_hold(rigid: EquilibriumModel, options: SolveOptions, load, bound: np.
     """The field within ``bound`` whose robots' wrenches are least (the solver's hold term,
     the check's objective only a tie-break): a robot's wrench is whatever the contacts leave
     it, and any field within the settled caps is one the test accepts (a capped check takes
-    it), so the wrench a robot needs is the least of them. ``field`` if the solve fails."""
+    it), so the wrench a robot needs beyond its capacity is the least of them. ``field``
+    if the solve fails."""
     w = options.weights
     least = solve(rigid, replace(options, weights=Weights(
-        w.compression * LEAST_HOLD, w.tension * LEAST_HOLD, w.friction * LEAST_HOLD)),
+        w.compression * LEAST_HOLD, w.tension * LEAST_HOLD, w.friction * LEAST_HOLD, 1.0)),
         load=load, friction_cap=bound)
     return least if least.solved else field
 

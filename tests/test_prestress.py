@@ -483,6 +483,64 @@ def test_a_block_under_a_pinned_block_on_an_incline_stands_as_under_a_fixed_one(
         assert report.unstable_blocks == ("F",)
 
 
+def _pinned_box(grip, wall_top: float, ground: bool) -> tuple:
+    """A 0.6 x 0.5 x 0.4 m box (x in [0, 0.6], z in [z0, z0 + 0.4], 240 kg) touching a wall
+    (a support, x < 0) with its left face, on the ground (z0 = 0) or hanging (z0 = 1),
+    pinned at ``grip`` (relative to its top face's centre): (the check's report, m g, the
+    box's interfaces by the other block's id)."""
+    z0 = 0.0 if ground else 1.0
+    blocks = [_box("wall", (-0.3, -0.5, 0.0), (0.0, 0.5, wall_top), density=DENSITY,
+                   support=True),
+              _box("box", (0.0, -0.25, z0), (0.6, 0.25, z0 + 0.4), density=DENSITY)]
+    if ground:
+        blocks.insert(0, _box("ground", (-1, -1, -0.2), (1, 1, 0), density=DENSITY,
+                              support=True))
+    full = Assembly.from_scene(make_scene("pinned_box", blocks))
+    point = np.array([0.3, 0.0, z0 + 0.4]) + np.asarray(grip, dtype=float)
+    ids = {b.id for b in blocks}
+    report = check(full.subset(ids, {"box"}, (Grip("box", point, max_torque=0.0),)),
+                   CheckOptions())
+    contacts = {(it.block_a if it.block_b == "box" else it.block_b): it
+                for it in report.interfaces}
+    return report, DENSITY * 0.6 * 0.5 * 0.4 * G, contacts
+
+
+def test_a_box_pinned_at_its_top_centre_rests_against_nothing():
+    """A box on the ground beside a wall, touching both, pinned at its top centre: its
+    weight has no moment about the pin, so it neither turns nor moves, no contact closes,
+    and the pin carries m g = 2354 N, no torque; the ground and the wall carry nothing
+    (closed form). The least wrench would rest it on the ground (a wrench of 0)."""
+    report, weight, contacts = _pinned_box((0.0, 0.0, 0.0), 1.0, ground=True)
+    assert report.stable
+    (w,) = report.hold_wrenches
+    np.testing.assert_allclose(w.force, [0.0, 0.0, weight], atol=1e-3 * weight)
+    np.testing.assert_array_equal(w.torque, 0.0)
+    assert set(contacts) == {"ground", "wall"}
+    for it in contacts.values():
+        assert np.abs(it.normal_forces).sum() < 1e-3 * weight
+        assert np.abs(it.tangential_forces).sum() < 1e-3 * weight
+
+
+def test_a_box_pinned_off_its_centroid_turns_into_the_wall_beside_it():
+    """The box hanging beside the wall, pinned on its top face d = 0.2 m left of its
+    centroid: the weight's moment about the pin, m g d, turns it (its right side down), and
+    its left face below the pin moves into the wall. Moments about the pin: the wall's
+    normal force N at the bottom edge (lever b = 0.4 m below the pin; the top edge has
+    none) balances it, N = m g d / b = m g / 2; frictionless at the first step, which
+    leaves no motion. The pin: F = (-N, 0, m g), no torque (hand calculation)."""
+    report, weight, contacts = _pinned_box((-0.2, 0.0, 0.0), 1.8, ground=False)
+    assert report.stable
+    (w,) = report.hold_wrenches
+    normal = weight * 0.2 / 0.4
+    np.testing.assert_allclose(w.force, [-normal, 0.0, weight], atol=1e-3 * weight)
+    np.testing.assert_array_equal(w.torque, 0.0)
+    (wall,) = contacts.values()
+    assert wall.normal_forces.sum() == pytest.approx(normal, rel=1e-3)
+    bottom = wall.polygon[:, 2] < 1.0 + 1e-9
+    assert wall.normal_forces[bottom].sum() == pytest.approx(normal, rel=1e-3)
+    assert np.abs(wall.tangential_forces).sum() < 1e-3 * weight
+
+
 def test_the_step_from_rest_accelerates_a_frictionless_block_down_an_incline_at_g_sin():
     """The first step (no friction): the block on a 20 deg incline slides with g sin 20
     along it (closed form), the incline's normal force W cos 20."""

@@ -39,6 +39,16 @@ without friction there gives the caps instead.
 A normal force that only a squeeze gives never enters a cap: the step from rest has no
 reason to produce it, and a cap fixed before a step cannot grow with the squeeze of that
 step. Normal forces that the load's moment produces (a block turning onto a face) enter.
+
+Pins. A robot that holds its block still makes it a support (:func:`_held_still`). A pin
+grip (torque capacity 0) fixes its grip point p and lets the block turn about it: in every
+solve of the steps its force is a free variable that costs nothing, the reaction of the
+constraint v + omega x (p - c) = 0 (the least 1/2 e^T M^-1 e over it leaves the point no
+acceleration, Gauss's least constraint). Its block then presses a neighbour only where
+the turn its loads start about the pin closes the contact; a costed force would rather
+rest its weight on the neighbours, a squeeze that gives them friction. The field that
+stands is the least |f|^2 with the pin's reaction; the least wrench (the check's) decides
+the capacities only (:func:`_settled`).
 """
 from __future__ import annotations
 
@@ -101,9 +111,10 @@ LEAST_TOL = 1e-10
 #: Clarabel's iterations on one of them, then HiGHS: a partial dome's take 31-33; those it
 #: does not solve (a shelf's, with caps at the solver's tolerance) it fails after some 170.
 LEAST_MAX_ITER = 50
-#: The settled caps' least hold: the check's objective scaled by this against the robots'
-#: wrenches, so that solver.HOLD_WEIGHT's bound on how far the wrench is from the least,
-#: O(g / w), is this much tighter (docs/METHOD.md, Holds: the dome state of issue 31).
+#: The least hold within the settled caps (the wrench needed beyond the capacities): the
+#: check's objective scaled by this against the robots' wrenches, so that
+#: solver.HOLD_WEIGHT's bound on how far the wrench is from the least, O(g / w), is this
+#: much tighter.
 LEAST_HOLD = 1e-3
 
 
@@ -216,7 +227,7 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
 
 def _still_grip(grip) -> bool:
     """Whether a grip keeps its block still: it can apply a force and a torque (a pin grip,
-    torque capacity 0, lets its block turn about the grip)."""
+    torque capacity 0, lets its block turn about the grip: module docstring, Pins)."""
     return grip.max_force != 0 and grip.max_torque != 0
 
 

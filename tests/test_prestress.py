@@ -483,11 +483,11 @@ def test_a_block_under_a_pinned_block_on_an_incline_stands_as_under_a_fixed_one(
         assert report.unstable_blocks == ("F",)
 
 
-def _pinned_box(grip, wall_top: float, ground: bool) -> tuple:
+def _pinned_box(grip, wall_top: float, ground: bool, mu: float = 0.6) -> tuple:
     """A 0.6 x 0.5 x 0.4 m box (x in [0, 0.6], z in [z0, z0 + 0.4], 240 kg) touching a wall
     (a support, x < 0) with its left face, on the ground (z0 = 0) or hanging (z0 = 1),
-    pinned at ``grip`` (relative to its top face's centre): (the check's report, m g, the
-    box's interfaces by the other block's id)."""
+    pinned at ``grip`` (relative to its top face's centre): (the check's report at ``mu``,
+    m g, the box's interfaces by the other block's id)."""
     z0 = 0.0 if ground else 1.0
     blocks = [_box("wall", (-0.3, -0.5, 0.0), (0.0, 0.5, wall_top), density=DENSITY,
                    support=True),
@@ -499,18 +499,20 @@ def _pinned_box(grip, wall_top: float, ground: bool) -> tuple:
     point = np.array([0.3, 0.0, z0 + 0.4]) + np.asarray(grip, dtype=float)
     ids = {b.id for b in blocks}
     report = check(full.subset(ids, {"box"}, (Grip("box", point, max_torque=0.0),)),
-                   CheckOptions())
+                   CheckOptions(solve=SolveOptions(mu=mu)))
     contacts = {(it.block_a if it.block_b == "box" else it.block_b): it
                 for it in report.interfaces}
     return report, DENSITY * 0.6 * 0.5 * 0.4 * G, contacts
 
 
-def test_a_box_pinned_at_its_top_centre_rests_against_nothing():
+@pytest.mark.parametrize("mu", [0.6, math.inf])
+def test_a_box_pinned_at_its_top_centre_rests_against_nothing(mu):
     """A box on the ground beside a wall, touching both, pinned at its top centre: its
     weight has no moment about the pin, so it neither turns nor moves, no contact closes,
     and the pin carries m g = 2354 N, no torque; the ground and the wall carry nothing
-    (closed form). The least wrench would rest it on the ground (a wrench of 0)."""
-    report, weight, contacts = _pinned_box((0.0, 0.0, 0.0), 1.0, ground=True)
+    (closed form; without a friction limit too). The least wrench would rest it on the
+    ground (a wrench of 0)."""
+    report, weight, contacts = _pinned_box((0.0, 0.0, 0.0), 1.0, ground=True, mu=mu)
     assert report.stable
     (w,) = report.hold_wrenches
     np.testing.assert_allclose(w.force, [0.0, 0.0, weight], atol=1e-3 * weight)

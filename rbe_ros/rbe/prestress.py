@@ -148,21 +148,22 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
     step's caps, none, it keeps to the noise floor: friction below 1% of the lighter
     block's weight is the solver's rounding there (a running-bond wall's QP field: 1e-3 of
     a brick's weight)."""
+    still = any(_still_grip(g) for g in model.grips)
+    if model.grips and not still:
+        # a pin (its block may turn about it) fixes what it can apply, the grip point's
+        # position, its wrench the reaction of that, free of cost: the steps' motion is
+        # then the one with the point still (module docstring, Pins); the check's field,
+        # the least hold, is not the one that stands
+        options, solution = replace(options, weights=replace(options.weights, hold=0.0)), None
     if not math.isfinite(options.mu) or not len(model.free):    # nothing can slide
         field = solution if solution is not None and solution.solved else \
             solve(model, options, load=load)
         return Placement(field if field.solved else None)
-    if any(_still_grip(g) for g in model.grips):
+    if still:
         return _held_still(model, options, load)
     # the check's field is the least |f|^2 of the steps' problem (see _own_caps)
     least = options.objective == "qp" and options.friction == "net" and not model.grips
-    # a grip left here (a pin: its block may turn about it) fixes what it can apply (the
-    # grip point's position), its wrench the reaction of that, free of cost: the steps'
-    # motion is then the one with the point still (module docstring, Pins); the check's
-    # field, the least hold, is not the one that stands
-    options = replace(options, objective="qp", friction="net",
-                      weights=replace(options.weights, hold=0.0))
-    solution = None if model.grips else solution
+    options = replace(options, objective="qp", friction="net")
     metric = inertia_metric(model)
     # a robot keeps its grip where it is (its arm is position-controlled): during the
     # steps its wrench is what holding it takes; the capacities bound the field that stands

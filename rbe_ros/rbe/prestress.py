@@ -144,7 +144,8 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
     friction of ``options`` (a check's deciding problem). ``solution``: a field of the RBE
     problem already solved (of ``model`` or of it without the grips' capacities); where it
     keeps a step's caps it is the field that stands, without that step's solves (a wall on
-    level ground needs no friction: no solve at all), or beyond the capacities. The first
+    level ground needs no friction: no solve at all), or beyond the capacities (not with a
+    pin, whose field is its reaction's: module docstring, Pins). The first
     step's caps, none, it keeps to the noise floor: friction below 1% of the lighter
     block's weight is the solver's rounding there (a running-bond wall's QP field: 1e-3 of
     a brick's weight)."""

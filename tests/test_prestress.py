@@ -494,19 +494,90 @@ def test_a_beam_on_a_held_post_rests_on_the_fixed_one_and_the_robot_carries_its_
                                hold_torque_max=1.0)).stable
 
 
-@pytest.mark.xfail(strict=True, reason="a pin grip keeps the least-hold path: its block's "
-                   "weight rests on F and its friction holds F (rbe/prestress.py, _still_grip)")
-def test_a_block_under_a_pinned_block_on_an_incline_slides_beyond_mu():
-    """As above with H pinned at its centroid (no torque): H cannot translate, F slides
-    parallel to H's face, so F slides for tan(theta) > mu (0.8 at mu 0.5)."""
-    theta = math.atan(0.8)
+@pytest.mark.parametrize("slope, stands", [(0.45, True), (0.8, False)])
+def test_a_block_under_a_pinned_block_on_an_incline_stands_as_under_a_fixed_one(slope, stands):
+    """As above with H pinned at its centroid (torque capacity 0): its weight has no moment
+    about the pin, so H neither turns nor moves, and F set from rest slides parallel to H's
+    face: that contact gets no normal force. F stands exactly when tan(theta) <= mu = 0.5
+    (at 0.8 it slides, a = g (sin - mu cos) = 0.23 g), and the pin carries H's weight, -m g,
+    no torque (closed form). Before, the pin's force was a costed load and H's weight rested
+    on F, whose friction held F beyond mu."""
+    theta = math.atan(slope)
     gravity = G * np.array([math.sin(theta), 0.0, -math.cos(theta)])
     blocks = [_box("ground", (-1.5, -1.5, -0.2), (1.5, 1.5, 0), density=2000.0, support=True),
               _box("F", (-0.5, -0.5, 0), (0.5, 0.5, 0.5), density=2000.0),
               _box("H", (-0.5, -0.5, 0.5), (0.5, 0.5, 1.0), density=2000.0)]
     full = Assembly.from_scene(make_scene("under_pinned", blocks, gravity))
     pinned = full.subset({"ground", "F", "H"}, {"H"}, (Grip("H", max_torque=0.0),))
-    assert not check(pinned, CheckOptions(solve=SolveOptions(mu=0.5))).stable
+    report = check(pinned, CheckOptions(solve=SolveOptions(mu=0.5)))
+    assert report.stable == stands
+    if stands:
+        np.testing.assert_allclose(report.hold_wrenches[0].force, -1000.0 * gravity,
+                                   atol=1e-3 * G * 1000)
+        np.testing.assert_array_equal(report.hold_wrenches[0].torque, 0.0)
+    else:
+        assert report.status == Status.FRICTION_EXCEEDED
+        assert report.unstable_blocks == ("F",)
+
+
+def _pinned_box(grip, wall_top: float, ground: bool, mu: float = 0.6) -> tuple:
+    """A 0.6 x 0.5 x 0.4 m box (x in [0, 0.6], z in [z0, z0 + 0.4], 240 kg) touching a wall
+    (a support, x < 0) with its left face, on the ground (z0 = 0) or hanging (z0 = 1),
+    pinned at ``grip`` (relative to its top face's centre): (the check's report at ``mu``,
+    m g, the box's interfaces by the other block's id)."""
+    z0 = 0.0 if ground else 1.0
+    blocks = [_box("wall", (-0.3, -0.5, 0.0), (0.0, 0.5, wall_top), density=DENSITY,
+                   support=True),
+              _box("box", (0.0, -0.25, z0), (0.6, 0.25, z0 + 0.4), density=DENSITY)]
+    if ground:
+        blocks.insert(0, _box("ground", (-1, -1, -0.2), (1, 1, 0), density=DENSITY,
+                              support=True))
+    full = Assembly.from_scene(make_scene("pinned_box", blocks))
+    point = np.array([0.3, 0.0, z0 + 0.4]) + np.asarray(grip, dtype=float)
+    ids = {b.id for b in blocks}
+    report = check(full.subset(ids, {"box"}, (Grip("box", point, max_torque=0.0),)),
+                   CheckOptions(solve=SolveOptions(mu=mu)))
+    contacts = {(it.block_a if it.block_b == "box" else it.block_b): it
+                for it in report.interfaces}
+    return report, DENSITY * 0.6 * 0.5 * 0.4 * G, contacts
+
+
+@pytest.mark.parametrize("mu", [0.6, math.inf])
+def test_a_box_pinned_at_its_top_centre_rests_against_nothing(mu):
+    """A box on the ground beside a wall, touching both, pinned at its top centre: its
+    weight has no moment about the pin, so it neither turns nor moves, no contact closes,
+    and the pin carries m g = 2354 N, no torque; the ground and the wall carry nothing
+    (closed form; without a friction limit too). The least wrench would rest it on the
+    ground (a wrench of 0)."""
+    report, weight, contacts = _pinned_box((0.0, 0.0, 0.0), 1.0, ground=True, mu=mu)
+    assert report.stable
+    (w,) = report.hold_wrenches
+    np.testing.assert_allclose(w.force, [0.0, 0.0, weight], atol=1e-3 * weight)
+    np.testing.assert_array_equal(w.torque, 0.0)
+    assert set(contacts) == {"ground", "wall"}
+    for it in contacts.values():
+        assert np.abs(it.normal_forces).sum() < 1e-3 * weight
+        assert np.abs(it.tangential_forces).sum() < 1e-3 * weight
+
+
+def test_a_box_pinned_off_its_centroid_turns_into_the_wall_beside_it():
+    """The box hanging beside the wall, pinned on its top face d = 0.2 m left of its
+    centroid: the weight's moment about the pin, m g d, turns it (its right side down), and
+    its left face below the pin moves into the wall. Moments about the pin: the wall's
+    normal force N at the bottom edge (lever b = 0.4 m below the pin; the top edge has
+    none) balances it, N = m g d / b = m g / 2; frictionless at the first step, which
+    leaves no motion. The pin: F = (-N, 0, m g), no torque (hand calculation)."""
+    report, weight, contacts = _pinned_box((-0.2, 0.0, 0.0), 1.8, ground=False)
+    assert report.stable
+    (w,) = report.hold_wrenches
+    normal = weight * 0.2 / 0.4
+    np.testing.assert_allclose(w.force, [-normal, 0.0, weight], atol=1e-3 * weight)
+    np.testing.assert_array_equal(w.torque, 0.0)
+    (wall,) = contacts.values()
+    assert wall.normal_forces.sum() == pytest.approx(normal, rel=1e-3)
+    bottom = wall.polygon[:, 2] < 1.0 + 1e-9
+    assert wall.normal_forces[bottom].sum() == pytest.approx(normal, rel=1e-3)
+    assert np.abs(wall.tangential_forces).sum() < 1e-3 * weight
 
 
 def test_the_step_from_rest_accelerates_a_frictionless_block_down_an_incline_at_g_sin():

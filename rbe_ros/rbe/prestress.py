@@ -39,6 +39,16 @@ without friction there gives the caps instead.
 A normal force that only a squeeze gives never enters a cap: the step from rest has no
 reason to produce it, and a cap fixed before a step cannot grow with the squeeze of that
 step. Normal forces that the load's moment produces (a block turning onto a face) enter.
+
+Pins. A robot that holds its block still makes it a support (:func:`_held_still`). A pin
+grip (torque capacity 0) fixes its grip point p and lets the block turn about it: in every
+solve of the steps its force is a free variable that costs nothing, the reaction of the
+constraint v + omega x (p - c) = 0 (the least 1/2 e^T M^-1 e over it leaves the point no
+acceleration, Gauss's least constraint). Its block then presses a neighbour only where
+the turn its loads start about the pin closes the contact; a costed force would rather
+rest its weight on the neighbours, a squeeze that gives them friction. The field that
+stands is the least |f|^2 with the pin's reaction; the least wrench (the check's) decides
+the capacities only (:func:`_settled`).
 """
 from __future__ import annotations
 
@@ -102,9 +112,10 @@ LEAST_TOL = 1e-10
 #: Clarabel's iterations on one of them, then HiGHS: a partial dome's take 31-33; those it
 #: does not solve (a shelf's, with caps at the solver's tolerance) it fails after some 170.
 LEAST_MAX_ITER = 50
-#: The settled caps' least hold: the check's objective scaled by this against the robots'
-#: wrenches, so that solver.HOLD_WEIGHT's bound on how far the wrench is from the least,
-#: O(g / w), is this much tighter (docs/METHOD.md, Holds: the dome state of issue 31).
+#: The least hold within the settled caps (the wrench needed beyond the capacities): the
+#: check's objective scaled by this against the robots' wrenches, so that
+#: solver.HOLD_WEIGHT's bound on how far the wrench is from the least, O(g / w), is this
+#: much tighter.
 LEAST_HOLD = 1e-3
 
 
@@ -136,21 +147,29 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
     friction of ``options`` (a check's deciding problem). ``solution``: a field of the RBE
     problem already solved (of ``model`` or of it without the grips' capacities); where it
     keeps a step's caps it is the field that stands, without that step's solves (a wall on
-    level ground needs no friction: no solve at all), or beyond the capacities. The first
+    level ground needs no friction: no solve at all), or beyond the capacities (not with a
+    pin, whose field is its reaction's: module docstring, Pins). The first
     step's caps, none, it keeps to the noise floor: friction below 1% of the lighter
     block's weight is the solver's rounding there (a running-bond wall's QP field: 1e-3 of
     a brick's weight)."""
+    still = any(_still_grip(g) for g in model.grips)
+    if model.grips and not still:
+        # a pin (its block may turn about it) fixes what it can apply, the grip point's
+        # position, its wrench the reaction of that, free of cost: the steps' motion is
+        # then the one with the point still (module docstring, Pins); the check's field,
+        # the least hold, is not the one that stands
+        options, solution = replace(options, weights=replace(options.weights, hold=0.0)), None
     if not math.isfinite(options.mu) or not len(model.free):    # nothing can slide
         field = solution if solution is not None and solution.solved else \
             solve(model, options, load=load)
         return Placement(field if field.solved else None)
-    if any(_still_grip(g) for g in model.grips):
+    if still:
         return _held_still(model, options, load)
     # the check's field is the least |f|^2 of the steps' problem (see _own_caps)
     least = options.objective == "qp" and options.friction == "net" and not model.grips
     options = replace(options, objective="qp", friction="net")
     metric = inertia_metric(model)
-    # a robot keeps its block where it is (its arm is position-controlled): during the
+    # a robot keeps its grip where it is (its arm is position-controlled): during the
     # steps its wrench is what holding it takes; the capacities bound the field that stands
     rigid = replace(model, grips=tuple(replace(g, max_force=_unless_none(g.max_force),
                                                max_torque=_unless_none(g.max_torque))
@@ -180,7 +199,7 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
         # left), without the motion's solve; tried first (again only once the motion has
         # halved since: caps that creep leave a motion near rest step after step)
         early = motion is not None and _unbalance(model, motion) <= tried / 2
-        settled = _settled(model, rigid, options, load, caps, floor, within) if early else None
+        settled = _settled(model, rigid, options, load, caps, within) if early else None
         if early and settled is None:
             tried = _unbalance(model, motion)
         if settled is None:
@@ -191,7 +210,7 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
             if not motion.solved:
                 break
             if not early and _still(model, motion):
-                settled = _settled(model, rigid, options, load, caps, floor, within)
+                settled = _settled(model, rigid, options, load, caps, within)
         if settled is not None:     # no motion left: stands, unless it rubs on caps it lacks
             own = _own_caps(model, rigid, options, load, caps, floor, metric,
                             None if model.grips else settled.field, motions[False], within)
@@ -215,7 +234,7 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
 
 def _still_grip(grip) -> bool:
     """Whether a grip keeps its block still: it can apply a force and a torque (a pin grip,
-    torque capacity 0, lets its block turn about the grip)."""
+    torque capacity 0, lets its block turn about the grip: module docstring, Pins)."""
     return grip.max_force != 0 and grip.max_torque != 0
 
 
@@ -472,34 +491,22 @@ def _satisfies(matrix, rhs: np.ndarray, up: np.ndarray, x: np.ndarray) -> bool:
 
 
 def _settled(model: EquilibriumModel, rigid: EquilibriumModel, options: SolveOptions, load,
-             caps: np.ndarray, floor: np.ndarray, within: Kept) -> Placement | None:
+             caps: np.ndarray, within: Kept) -> Placement | None:
     """The field that stands once a step leaves no motion: the least one within the caps
-    (None if there is none). With grips, again with caps from its own normal forces until
-    they settle: a robot's wrench is a load, and the normal forces it makes give friction
-    (else a robot that holds its block still would carry all of it without friction).
-    Of the fields within the settled caps, the robots' is the least wrench that any of them
-    needs (_least_hold). Beyond the grips' capacities (``beyond``, that least wrench) unless
-    a field within the caps keeps them. ``within``: the solver kept for the problem."""
-    field = None
-    for _ in range(MAX_STEPS):
-        bound = caps * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
-        found = solve(rigid, options, load=load, friction_cap=bound, keep=within)
-        if not found.solved:
-            break
-        field = found
-        normal = options.mu * _above_noise(_sums(model, field.forces[0]), floor)
-        if not model.grips or np.abs(normal - caps).max(initial=0.0) \
-                <= CONVERGED * model.force_scale:
-            break
-        caps = normal
-    if field is None:
+    (None if there is none), the grips' wrenches reactions as in the steps (their caps
+    come from the steps alone: a field's own normal forces include those a grip's force
+    makes, a squeeze). Beyond the grips' capacities, the least field within the caps and
+    them if there is one, else ``beyond``: the least wrench that a field within the caps
+    needs (_least_hold). ``within``: the solver kept for the problem."""
+    bound = caps * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
+    field = solve(rigid, options, load=load, friction_cap=bound, keep=within)
+    if not field.solved:
         return None
-    if model.grips:
-        field = _least_hold(rigid, options, load, bound, field)
     if _held(model, field):
         return Placement(field, caps=bound)
     capped = solve(model, options, load=load, friction_cap=bound)
-    return Placement(capped, caps=bound) if capped.solved else Placement(None, beyond=field)
+    return Placement(capped, caps=bound) if capped.solved else \
+        Placement(None, beyond=_least_hold(rigid, options, load, bound, field))
 
 
 def _least_hold(rigid: EquilibriumModel, options: SolveOptions, load, bound: np.ndarray,
@@ -507,10 +514,11 @@ def _least_hold(rigid: EquilibriumModel, options: SolveOptions, load, bound: np.
     """The field within ``bound`` whose robots' wrenches are least (the solver's hold term,
     the check's objective only a tie-break): a robot's wrench is whatever the contacts leave
     it, and any field within the settled caps is one the test accepts (a capped check takes
-    it), so the wrench a robot needs is the least of them. ``field`` if the solve fails."""
+    it), so the wrench a robot needs beyond its capacity is the least of them. ``field``
+    if the solve fails."""
     w = options.weights
     least = solve(rigid, replace(options, weights=Weights(
-        w.compression * LEAST_HOLD, w.tension * LEAST_HOLD, w.friction * LEAST_HOLD)),
+        w.compression * LEAST_HOLD, w.tension * LEAST_HOLD, w.friction * LEAST_HOLD, 1.0)),
         load=load, friction_cap=bound)
     return least if least.solved else field
 

@@ -70,11 +70,14 @@ HOLD_WEIGHT = 1e4
 
 @dataclass(frozen=True)
 class Weights:
-    """Entries of c for compression fn+, tension fn- (the penalty) and friction fu, fv."""
+    """Entries of c for compression fn+, tension fn- (the penalty) and friction fu, fv; the
+    factor on HOLD_WEIGHT of the grips' wrenches (0: they cost nothing, the reactions of the
+    grips' kinematic constraints, as the placement test takes a pin, rbe/prestress.py)."""
 
     compression: float = 1.0
     tension: float = 1e6
     friction: float = 1.0
+    hold: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -738,7 +741,7 @@ def _objective(options: SolveOptions, v: _Variables, lp: bool, multiplier: bool)
     if multiplier:
         q[v.lam] = -1.0
         return p_diag, q
-    p_diag[v.hold] = HOLD_WEIGHT / max(nv, 1)
+    p_diag[v.hold] = w.hold * HOLD_WEIGHT / max(nv, 1)
     target = q if lp else p_diag
     for kind, weight in ((0, w.compression), (1, w.tension), (2, w.friction), (3, w.friction)):
         if v.base[kind] >= 0 and not (lp and kind >= 2):

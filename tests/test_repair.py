@@ -10,10 +10,15 @@ import math
 import pytest
 
 from rbe_ros import generators
+from rbe_ros.analysis.asbuilt import declared
+from rbe_ros.analysis.assembly import Assembly
 from rbe_ros.analysis.lookahead import check_plan_design, look_ahead
+from rbe_ros.analysis.options import CheckOptions
+from rbe_ros.analysis.steps import sequence_step, step_count
+from rbe_ros.analysis.verdict import check
 from rbe_ros.cli import main
 from rbe_ros.io.poses import scene_at_poses
-from rbe_ros.io.scene_json import scene_to_dict
+from rbe_ros.io.scene_json import load_scene, scene_to_dict
 from rbe_ros.scene import SceneError, box_block, make_scene
 
 #: Block a's measured deviation: 4 mm outward along x, 3 deg about z.
@@ -61,6 +66,19 @@ def files(tmp_path):
     return tmp_path, plan, measured
 
 
+def stands_whole(plan, start=0) -> list[bool]:
+    """Whether each step of ``plan`` from ``start`` on stands, each state checked whole and
+    on its own (its contacts detected on its blocks alone, no forces of another state): the
+    second computation of a repaired plan, independent of the repair's incremental walk."""
+    options = declared(CheckOptions(), plan)
+    out = []
+    for k in range(start, step_count(plan)):
+        step = sequence_step(plan, k)
+        state = Assembly.from_scene(plan.subset(step.present), options.contact)
+        out.append(check(state.subset(step.present, step.held, step.grips), options).stable)
+    return out
+
+
 def run(capsys, *argv):
     code = main([str(a) for a in argv])
     out = capsys.readouterr()
@@ -85,6 +103,7 @@ def test_a_later_step_fails_at_the_measured_poses(files, capsys, tmp_path):
         sequence=scene.sequence, pose_uncertainty=scene.pose_uncertainty))))
     code, out, _ = run(capsys, "check", asbuilt, "--sequence", "--json")
     assert [r["stable"] for r in json.loads(out)["reports"]] == [True, False, True]
+    assert stands_whole(load_scene(asbuilt)) == [True, False, True]     # the oracle sees it
     # the look-ahead finds it, step by step, with the as-built state first
     ahead = look_ahead(scene, built, lookahead_steps=0)
     assert ahead.current_step == 1 and ahead.total_steps == 3 and ahead.as_built.stable
@@ -109,6 +128,7 @@ def test_repair_by_order_every_remaining_step_rechecked(files, capsys):
     reports = json.loads(out)["reports"]
     assert [r["block_placed"] for r in reports] == ["a", "c", "b"]
     assert all(r["stable"] for r in reports)
+    assert stands_whole(load_scene(out_file)) == [True] * 3
     assert com_x(A, C, shift=SHIFT) < 0          # the closed form of the new step 1
 
 
@@ -124,6 +144,7 @@ def test_repair_by_a_hold_within_k(files, capsys):
     code, out, _ = run(capsys, "check", out_file, "--sequence", "--json")
     reports = json.loads(out)["reports"]
     assert all(r["stable"] for r in reports)
+    assert stands_whole(load_scene(out_file)) == [True] * 3
     assert reports[1]["held_blocks"] == result["held"][1]
     # the robot carries what tips: a moment about the edge, so a force > 0
     assert max(math.hypot(*w["force"].values()) for w in reports[1]["hold_wrenches"]) > 0.1

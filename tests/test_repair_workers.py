@@ -22,7 +22,7 @@ from rbe_ros.analysis.repair import repair_plan
 from rbe_ros.io.poses import scene_at_poses
 from rbe_ros.io.scene_json import scene_to_dict
 
-from test_repair import SHIFT, YAW, counterweight, pose, run
+from test_repair import SHIFT, YAW, counterweight, pose, run, stands_whole
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -100,7 +100,8 @@ def test_the_thin_dome_repair_on_two_processes():
     repair on two worker processes re-plans the remainder from there (the fifth course's
     rest from its other end: held still, neither one more hold nor a swap saves the step),
     as the repair without workers does, and every remaining step of its plan stands when
-    check_sequence checks it."""
+    check_sequence checks it and
+    when each state is checked whole on its own."""
     sys.path.insert(0, str(ROOT / "benchmarks"))
     import repair as bench
     scene = replace(generators.dome(t_base=0.3, t_oculus=0.15),
@@ -120,3 +121,5 @@ def test_the_thin_dome_repair_on_two_processes():
     reports = check_sequence(pooled.scene)
     assert [r.stable for r in reports[half:]] == [s.stable for s in pooled.steps]
     assert all(r.stable for r in reports[half:])
+    # and each remaining state whole, on its own (no kept forces of another state)
+    assert stands_whole(pooled.scene, half) == [True] * (len(reports) - half)

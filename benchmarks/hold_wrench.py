@@ -3,7 +3,8 @@ docs/HOLD_WRENCH.md.
 
 Each planned scene (the 7-voussoir arch and the 8 x 5 dome planned here with 2 holds, the
 14 x 10 dome of docs/plan_dome.json) is checked both ways in this one run: a held block
-free with a robot's wrench (unbounded: the same verdicts), and held blocks as plain
+held still by a robot's grip (unbounded: the same verdicts; its wrench the least the
+placement test admits, docs/METHOD.md "Holds"), and held blocks as plain
 supports, as before hold wrenches (the steps' grips left out, which is all that differs).
 Two ratios: one check (verdict.check) of each step with holds, summed over those steps
 (the bar of issue 21: 1.3x), and the whole check_sequence, whose steps with holds lose
@@ -147,8 +148,9 @@ def main(argv=None) -> int:
         "# Cost of the hold wrenches",
         "",
         "`make bench-holds` (`python benchmarks/hold_wrench.py`): each planned scene checked "
-        "step by step with the robots' wrenches (a held block free with an unknown wrench at "
-        "its grip, unbounded) and with the held blocks as plain supports (as before), in one "
+        "step by step with the robots' wrenches (a held block held still by a robot's grip, "
+        "unbounded: a support of the placement test, the robot's wrench the least it "
+        "admits) and with the held blocks as plain supports (as before), in one "
         f"run, best of {args.repeats}. Bar (issue 21): 1.3x. With unbounded robots the two"
         " ways should give the same verdicts; the last column lists the steps of"
         " check_sequence where they differ (with wrenches / as supports).",

@@ -67,12 +67,14 @@ def _patched_build(nlgs: dict) -> Path:
     for name, off, fmt, _ in NLGS_DATA:
         if name in nlgs:
             struct.pack_into(fmt, data, at + off, type(_)(nlgs[name]))
-    key = hashlib.sha1(json.dumps(nlgs, sort_keys=True).encode()).hexdigest()[:10]
+    # keyed by the installation too: the copy links its libraries, and a venv removed since
+    # (another worktree's) would leave a copy that cannot load
+    libs = (pkg.parent / "compas_lmgc90.libs").resolve()   # the extension's RPATH
+    key = hashlib.sha1(json.dumps([nlgs, str(libs)], sort_keys=True).encode()).hexdigest()[:10]
     root = Path(tempfile.gettempdir()) / f"rbe_lmgc90_nlgs_{key}"
     if not (root / "compas_lmgc90" / ext.name).exists():
         tmp = Path(tempfile.mkdtemp(dir=tempfile.gettempdir()))
         shutil.copytree(pkg, tmp / "compas_lmgc90", ignore=shutil.ignore_patterns("__pycache__"))
-        libs = pkg.parent / "compas_lmgc90.libs"            # the extension's RPATH
         if libs.exists():
             (tmp / "compas_lmgc90.libs").symlink_to(libs)
         (tmp / "compas_lmgc90" / ext.name).write_bytes(bytes(data))

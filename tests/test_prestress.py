@@ -470,20 +470,29 @@ def test_a_block_under_a_held_block_on_an_incline_stands_as_under_a_fixed_one(sl
         assert held.unstable_blocks == fixed.unstable_blocks == ("F",)
 
 
-def test_a_beam_on_a_held_post_rests_on_the_fixed_one_and_the_robot_carries_its_post():
-    """A slab B (0.2 m thick) over a fixed post P (x in [-1, 0]) and a held post H (x in
-    [0, 1], 1 m cubes, 19.62 kN, held still at its centroid), B's centroid above P's face:
-    it stands on P alone, so of the fields the test accepts (no friction needed: caps 0),
-    the least wrench carries H's weight alone, F = m_H g up, M = 0 (closed form). The
-    field of least forces spreads B's weight over both posts and loads the robot with
-    2.76 kN and 637 N m more. Capacities 1% above H's weight and 1 N m stand."""
+def _beam_on_posts(gravity=(0.0, 0.0, -G), held_post=(0.0, 0.0)) -> Assembly:
+    """A slab B (x in [-1, 0.6], 0.2 m thick, 640 kg) over a fixed post P (x in [-1, 0]) and
+    a post H (x in [0, 1], 1 m cubes, 2000 kg) on the ground, to be held; ``held_post``:
+    H's x and z from (0, 0) (a gap to P, to the ground)."""
+    x, z = held_post
     blocks = [_box("ground", (-1.5, -1.5, -0.2), (1.5, 1.5, 0), density=2000.0, support=True),
               _box("P", (-1.0, -0.5, 0), (0.0, 0.5, 1.0), density=2000.0, support=True),
-              _box("H", (0.0, -0.5, 0), (1.0, 0.5, 1.0), density=2000.0),
+              _box("H", (x, -0.5, z), (1.0, 0.5, 1.0), density=2000.0),
               _box("B", (-1.0, -0.5, 1.0), (0.6, 0.5, 1.2), density=2000.0)]
-    full = Assembly.from_scene(make_scene("beam_on_posts", blocks))
-    step = gripped(full, {"ground", "P", "H", "B"}, ("H",))
-    options = CheckOptions(solve=SolveOptions(mu=0.5))
+    return Assembly.from_scene(make_scene("beam_on_posts", blocks, gravity))
+
+
+@pytest.mark.parametrize("mu", [0.5, math.inf])
+def test_a_beam_on_a_held_post_rests_on_the_fixed_one_and_the_robot_carries_its_post(mu):
+    """B over P and H, H held still at its centroid: B's centroid is above P's face, so it
+    stands on P alone, and of the fields the test accepts (no friction needed: caps 0),
+    the least wrench carries H's weight alone, F = m_H g up, M = 0 (closed form), without
+    a friction limit too (the test's, not the check's field: that one rests H on the
+    ground and squeezes it against P). The field of least forces spreads B's weight over
+    both posts and loads the robot with 2.76 kN and 637 N m more. Capacities 1% above H's
+    weight and 1 N m stand."""
+    step = gripped(_beam_on_posts(), {"ground", "P", "H", "B"}, ("H",))
+    options = CheckOptions(solve=SolveOptions(mu=mu))
     report = check(step, options)
     assert report.stable
     weight = 2000.0 * G
@@ -492,6 +501,50 @@ def test_a_beam_on_a_held_post_rests_on_the_fixed_one_and_the_robot_carries_its_
     np.testing.assert_allclose(report.hold_wrenches[0].torque, 0.0, atol=1e-6 * weight)
     assert check(step, replace(options, hold_force_max=1.01 * weight,
                                hold_torque_max=1.0)).stable
+
+
+@pytest.mark.parametrize("mu", [0.5, math.inf])
+def test_a_beam_pinned_at_its_centroid_over_a_held_post_rests_on_neither(mu):
+    """B pinned at its centroid, H held still: B's weight has no moment about the pin, so
+    B neither turns nor moves and no contact closes: the pin carries m_B g = 6278 N (its
+    reaction, not the least wrench, which would rest B on P), the robot m_H g, no torques
+    (closed form; without a friction limit too)."""
+    step = _beam_on_posts().subset({"ground", "P", "H", "B"}, {"H", "B"},
+                                   (Grip("H"), Grip("B", max_torque=0.0)))
+    report = check(step, CheckOptions(solve=SolveOptions(mu=mu)))
+    assert report.stable
+    held, pin = report.hold_wrenches
+    assert (held.block, pin.block) == ("H", "B")
+    np.testing.assert_allclose(held.force, [0, 0, 2000.0 * G], atol=1e-6 * 2000.0 * G)
+    np.testing.assert_allclose(held.torque, 0.0, atol=1e-6 * 2000.0 * G)
+    np.testing.assert_allclose(pin.force, [0, 0, 640.0 * G], atol=1e-3 * 640.0 * G)
+    np.testing.assert_array_equal(pin.torque, 0.0)
+
+
+def test_a_held_blocks_least_wrench_is_of_a_field_the_report_accepts():
+    """The pyramid4 cone (|fu|, |fv| <= mu fn) with gravity tilted along the diagonal of B's
+    faces (tan 0.3 each way: |V|/N 0.42 on level faces, within mu = 0.5), H held still in
+    the air (clear of P and the ground): the least wrench the test admits rubs B on H at
+    the pyramid's corner, |V|/N = sqrt 2 mu there, which the report's friction test (|V|
+    Euclidean, whatever the cone) flags. So the check keeps the field that stands: its
+    report is stable and the robot's wrench is what holds H against it (Newton on H from
+    the reported forces; with the least's wrench the report would show RBE's forces)."""
+    t = 0.3
+    gravity = G * np.array([t, t, -1.0]) / math.sqrt(1 + 2 * t * t)
+    step = gripped(_beam_on_posts(gravity, (0.05, 0.2)), {"ground", "P", "H", "B"}, ("H",))
+    report = check(step, CheckOptions(solve=SolveOptions(mu=0.5, cone="pyramid4")))
+    assert report.stable
+    assert all(r.friction_ratio <= 0.5 * (1 + 1e-6) for r in report.interfaces)
+    (wrench,) = report.hold_wrenches
+    (joint,) = [r for r in report.interfaces if {r.block_a, r.block_b} == {"B", "H"}]
+    on_h = (joint.normal_forces[:, None] * joint.normal + joint.tangential_forces) \
+        * (1.0 if joint.block_b == "H" else -1.0)          # B's forces on H per vertex
+    mass = 2000.0 * 0.95 * 0.8
+    np.testing.assert_allclose(wrench.force + on_h.sum(axis=0) + mass * gravity, 0.0,
+                               atol=1e-4 * mass * G)
+    moment = np.cross(joint.polygon - wrench.grip_point, on_h).sum(axis=0)
+    np.testing.assert_allclose(wrench.torque + moment, 0.0, atol=1e-4 * mass * G)
+    assert np.linalg.norm(on_h.sum(axis=0)) > 0.1 * mass * G     # B leans on H
 
 
 @pytest.mark.parametrize("slope, stands", [(0.45, True), (0.8, False)])

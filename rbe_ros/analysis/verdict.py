@@ -368,14 +368,9 @@ def _flag_sliding(results: list[InterfaceResult], capacity: float) -> list[Inter
 def _moving_block(model, r: InterfaceResult) -> str:
     """The block that would move at a failing interface: the upper one, unless it is a support."""
     support = {b.id for b in model.blocks if b.support}
-    upper, lower = ((r.block_b, r.block_a) if r.normal @ _load_direction(model) <= 0
+    upper, lower = ((r.block_b, r.block_a) if r.normal @ model.gravity <= 0
                     else (r.block_a, r.block_b))
     return lower if upper in support else upper
-
-
-def _load_direction(model):
-    """Direction of the dead load of the model (the weight of its free blocks)."""
-    return model.dead_load.reshape(-1, 6)[:, :3].sum(axis=0)
 
 
 def _failed(solution) -> Report:

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
@@ -62,6 +63,7 @@ class EquilibriumModel:
     v: np.ndarray
     force_scale: float           # W in N
     length_scale: float          # L in m
+    gravity: np.ndarray          # (3,) m/s^2, of which dead_load is the free blocks' weights
     grips: tuple[Grip, ...] = ()
     #: (6 m, number of hold variables): the equilibrium columns of the grips' wrenches
     hold_columns: sp.csc_matrix = field(default_factory=lambda: sp.csc_matrix((0, 0)))
@@ -71,6 +73,11 @@ class EquilibriumModel:
     @property
     def num_vertices(self) -> int:
         return len(self.points)
+
+    @cached_property
+    def index(self) -> dict[str, int]:
+        """Each block's position in ``blocks`` by its id (grips name their block by id)."""
+        return {b.id: j for j, b in enumerate(self.blocks)}
 
     def wrench_load(self, wrenches: dict[int, np.ndarray]) -> np.ndarray:
         """Scaled load vector p of known wrenches (force, moment about the centroid; 6 numbers
@@ -154,7 +161,7 @@ def build_model(blocks, interfaces, gravity, grips=()) -> EquilibriumModel:
     hold_columns, layout = _hold_columns(blocks, grips, row_of, 6 * len(free), length_scale)
     return EquilibriumModel(blocks, interfaces, free, a_eq,
                             _weights(blocks, free, gravity, force_scale), vi,
-                            points, n, u, v, force_scale, length_scale, grips,
+                            points, n, u, v, force_scale, length_scale, gravity, grips,
                             hold_columns, layout)
 
 

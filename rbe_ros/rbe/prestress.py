@@ -48,7 +48,9 @@ acceleration, Gauss's least constraint). Its block then presses a neighbour only
 the turn its loads start about the pin closes the contact; a costed force would rather
 rest its weight on the neighbours, a squeeze that gives them friction. The field that
 stands is the least |f|^2 with the pin's reaction; the least wrench (the check's) decides
-the capacities only (:func:`_settled`).
+the capacities only (:func:`_settled`). Beside a grip that holds its block still, the pin
+keeps that reaction, a known load in the least of the still grips' wrenches
+(:func:`_least_still_hold`).
 """
 from __future__ import annotations
 
@@ -61,7 +63,7 @@ import scipy.sparse as sp
 
 from .cones import pyramid_facets
 from .model import EquilibriumModel, build_model
-from .resultants import NEGLIGIBLE
+from .resultants import exceeds, friction_ratios
 from .solver import Kept, Solution, SolveOptions, Weights, solve
 
 #: Weight of the kinetic energy of the motion against the check's objective 1/2 |f|^2 (both
@@ -152,8 +154,11 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
     step's caps, none, it keeps to the noise floor: friction below 1% of the lighter
     block's weight is the solver's rounding there (a running-bond wall's QP field: 1e-3 of
     a brick's weight)."""
-    still = any(_still_grip(g) for g in model.grips)
-    if model.grips and not still:
+    if any(_still_grip(g) for g in model.grips):
+        # its block a support, then its wrench: at mu = inf as at finite mu (the least the
+        # test admits, not the check's field's, which rests the block on its neighbours)
+        return _held_still(model, options, load)
+    if model.grips:
         # a pin (its block may turn about it) fixes what it can apply, the grip point's
         # position, its wrench the reaction of that, free of cost: the steps' motion is
         # then the one with the point still (module docstring, Pins); the check's field,
@@ -163,8 +168,6 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
         field = solution if solution is not None and solution.solved else \
             solve(model, options, load=load)
         return Placement(field if field.solved else None)
-    if still:
-        return _held_still(model, options, load)
     # the check's field is the least |f|^2 of the steps' problem (see _own_caps)
     least = options.objective == "qp" and options.friction == "net" and not model.grips
     options = replace(options, objective="qp", friction="net")
@@ -252,10 +255,7 @@ def _held_still(model: EquilibriumModel, options: SolveOptions, load) -> Placeme
     plan, step 18 (docs/METHOD.md, Holds)."""
     still_ids = {g.block for g in model.grips if _still_grip(g)}
     blocks = tuple(replace(b, support=True) if b.id in still_ids else b for b in model.blocks)
-    masses = np.array([model.blocks[j].mass for j in model.free])
-    gravity = model.dead_load.reshape(-1, 6)[:, :3].sum(axis=0) * model.force_scale \
-        / max(masses.sum(), 1e-300)
-    still = build_model(blocks, model.interfaces, gravity,
+    still = build_model(blocks, model.interfaces, model.gravity,
                         tuple(g for g in model.grips if not _still_grip(g)))
     load = model.dead_load if load is None else np.asarray(load, dtype=float)
     keep = np.isin(model.free, still.free)
@@ -264,13 +264,13 @@ def _held_still(model: EquilibriumModel, options: SolveOptions, load) -> Placeme
     found = placed(still, options, rows.ravel(), first if first.solved else None)
     if not found.stands:
         return replace(found, field=None, beyond=None)
-    field = _least_still_hold(model, options, load, found, still_ids, gravity)
+    field = _least_still_hold(model, options, load, found, still_ids)
     return Placement(field, steps=found.steps, caps=found.caps) if _held(model, field) else \
         Placement(None, steps=found.steps, beyond=field)
 
 
 def _least_still_hold(model: EquilibriumModel, options: SolveOptions, load, found: Placement,
-                      still_ids: set[str], gravity: np.ndarray) -> Solution:
+                      still_ids: set[str]) -> Solution:
     """Of the fields the held-still test accepts, the one whose robots' wrenches are least
     (the solver's hold term, the forces' objective scaled by LEAST_HOLD a tie-break), within
     the capacities where one is. Accepted: the free blocks' forces within the settled caps
@@ -283,11 +283,11 @@ def _least_still_hold(model: EquilibriumModel, options: SolveOptions, load, foun
     The field that stands, its wrenches what it leaves (:func:`_with_wrenches`), is kept
     where that least is not within the cones to the report's tolerance; a load leaning on a
     held block and on a support moves to the support as far as the support's caps let it
-    (tests/test_prestress.py)."""
+    (tests/test_prestress.py). A pin's wrench stays its reaction in the field that stands
+    (module docstring, Pins)."""
     field = _with_wrenches(model, found.field, load)
-    index = {b.id: j for j, b in enumerate(model.blocks)}
     held = np.zeros(len(model.blocks), dtype=bool)
-    held[[index[b] for b in still_ids]] = True
+    held[[model.index[b] for b in still_ids]] = True
     bearing = held | ~np.isin(np.arange(len(model.blocks)), model.free)
     pairs = np.array([(it.a, it.b) for it in model.interfaces], dtype=int).reshape(-1, 2)
     pressed = np.where(bearing[pairs].all(axis=1), 0.0,
@@ -298,16 +298,31 @@ def _least_still_hold(model: EquilibriumModel, options: SolveOptions, load, foun
     normal_cap = np.where(touching, pressed * (1.0 + CONE_TOL)
                           + SHARE_TOL * model.force_scale, np.inf)[kept]
     caps = None if found.caps is None else found.caps[kept]
-    least_model = build_model(model.blocks, tuple(it for it, k in zip(model.interfaces, kept)
-                                                  if k), gravity, model.grips)
+    # a pin's wrench a known load on its block: a cost, the least would shed it onto the
+    # block's neighbours
+    still = [k for k, g in enumerate(model.grips) if _still_grip(g)]
+    pinned, blocks = {}, model.blocks
+    if len(still) < len(model.grips):
+        for g, wrench in zip(model.grips, field.wrenches):
+            if not _still_grip(g):
+                j = model.index[g.block]
+                arm = np.asarray(g.point) - model.blocks[j].centroid
+                pinned[j] = pinned.get(j, 0.0) + np.concatenate(
+                    (wrench[:3], wrench[3:] + np.cross(arm, wrench[:3])))
+        blocks = tuple(replace(b, support=False) if j in pinned else b
+                       for j, b in enumerate(model.blocks))
+    least_model = build_model(blocks, tuple(it for it, k in zip(model.interfaces, kept) if k),
+                              model.gravity, tuple(model.grips[k] for k in still))
+    if pinned:
+        load = load + least_model.wrench_load(pinned)
     w = options.weights
     least_options = replace(options, objective="qp", friction="net", weights=Weights(
         w.compression * LEAST_HOLD, w.tension * LEAST_HOLD, w.friction * LEAST_HOLD))
     rigid = replace(least_model, grips=tuple(replace(g, max_force=_unless_none(g.max_force),
                                                      max_torque=_unless_none(g.max_torque))
-                                             for g in model.grips))
+                                             for g in least_model.grips))
     least = solve(rigid, least_options, load=load, friction_cap=caps, normal_cap=normal_cap)
-    if least.solved and not _held(model, least):
+    if least.solved and not _held(least_model, least):
         # the least in the solver's measure (force and torque together) is beyond a
         # capacity: another accepted field may be within them all
         capped = solve(least_model, least_options, load=load, friction_cap=caps,
@@ -317,18 +332,21 @@ def _least_still_hold(model: EquilibriumModel, options: SolveOptions, load, foun
         return field
     forces = np.zeros_like(field.forces)
     forces[:, kept[model.vertex_interface]] = least.forces
-    return replace(least, forces=forces)
+    wrenches = field.wrenches.copy()
+    wrenches[still] = least.wrenches
+    return replace(least, forces=forces, wrenches=wrenches)
 
 
 def _in_cones(model: EquilibriumModel, field: Solution, mu: float) -> bool:
-    """Whether every interface's friction resultant in ``field`` is within mu times its
-    normal resultant to the report's tolerance (rbe/resultants.py: a resultant below
-    NEGLIGIBLE of W is none)."""
+    """Whether no interface of ``field`` exceeds mu by the report's friction test
+    (rbe/resultants.py): |V| in the Euclidean norm whatever the cone. Not the check's cone:
+    the least is solved within it, so its resultants are too (a pyramid's facets, summed
+    over an interface's vertices, bound its resultant), and an outer pyramid's corner (|V|
+    up to sqrt 2 mu N for pyramid4) is a field the report flags: the check would show RBE's
+    forces with the wrenches of another field (tests/test_prestress.py)."""
     normal = _sums(model, field.forces[0] - field.forces[1])
     shear = np.hypot(_sums(model, field.forces[2]), _sums(model, field.forces[3]))
-    zero = NEGLIGIBLE * model.force_scale
-    return bool(np.all(np.where(normal > zero, shear <= mu * normal * (1.0 + 1e-6),
-                                shear <= zero)))
+    return not exceeds(friction_ratios(shear, normal, model.force_scale), mu).any()
 
 
 def _with_wrenches(model: EquilibriumModel, field: Solution, load: np.ndarray) -> Solution:
@@ -341,12 +359,11 @@ def _with_wrenches(model: EquilibriumModel, field: Solution, load: np.ndarray) -
     rest = (model.a_eq @ field.forces.ravel() / model.force_scale + load).reshape(-1, 6)
     others = iter(field.wrenches)
     wrenches = np.zeros((len(model.grips), 6))
-    index = {b.id: j for j, b in enumerate(model.blocks)}
     for k, g in enumerate(model.grips):
         if not _still_grip(g):
             wrenches[k] = next(others)
             continue
-        j = index[g.block]
+        j = model.index[g.block]
         force = -rest[row[j], :3] * model.force_scale
         moment = rest[row[j], 3:] * model.force_scale * model.length_scale
         wrenches[k, :3] = force

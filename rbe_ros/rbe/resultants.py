@@ -13,6 +13,9 @@ from .solver import Solution
 
 #: Forces below this share of the free weight are numerically zero.
 NEGLIGIBLE = 1e-7
+#: A friction ratio exceeds its threshold when above it by more than this share (the solver's
+#: rounding of a field at its cone).
+RATIO_TOL = 1e-6
 
 
 def interface_results(model: EquilibriumModel, solution: Solution, *, mu_threshold: float,
@@ -53,9 +56,7 @@ def interface_results(model: EquilibriumModel, solution: Solution, *, mu_thresho
         cop[i] = interfaces[i].frame.origin
     forces = fn[:, None] * model.normal + tangential
     torque = (_segment_sum(cross(model.points - cop[vi], forces), vi, m) * n).sum(axis=1)
-    loaded = big_n > NEGLIGIBLE * scale
-    ratio = np.where(shear_norm > NEGLIGIBLE * scale, math.inf, 0.0)
-    ratio[loaded] = shear_norm[loaded] / big_n[loaded]
+    ratio = friction_ratios(shear_norm, big_n, scale)
     tension = np.zeros(m, dtype=bool)
     tension_limit = tension_tol * scale
     tension[vi[fn_neg > tension_limit]] = True
@@ -65,8 +66,8 @@ def interface_results(model: EquilibriumModel, solution: Solution, *, mu_thresho
     # that a ratio at or below the threshold (the cone's own limit included) is never
     # flagged, nor an interface whose net force is a rounding-level tension with no shear.
     with np.errstate(invalid="ignore"):     # mu = inf with N = 0: no sliding, as inf * 0 = nan
-        slides = shear_norm > mu * np.maximum(big_n, 0.0) * (1 + 1e-6) + NEGLIGIBLE * scale
-    exceeded = (ratio > mu_threshold * (1 + 1e-6)) | slides
+        slides = shear_norm > mu * np.maximum(big_n, 0.0) * (1 + RATIO_TOL) + NEGLIGIBLE * scale
+    exceeded = exceeds(ratio, mu_threshold) | slides
     resultant = big_n[:, None] * n + shear
 
     polygon = model.points.copy()
@@ -89,3 +90,18 @@ def _segment_sum(x: np.ndarray, segment: np.ndarray, count: int) -> np.ndarray:
     for j in range(x.shape[1]):
         out[:, j] = np.bincount(segment, weights=x[:, j], minlength=count)
     return out
+
+
+def friction_ratios(shear: np.ndarray, normal: np.ndarray, scale: float) -> np.ndarray:
+    """|V|/N per interface from its shear |V| (the Euclidean norm, whatever the cone: the
+    report's friction test) and normal resultant N: inf where N is negligible and |V| is
+    not, 0 where neither is (negligible: NEGLIGIBLE of the free weight ``scale``)."""
+    loaded = normal > NEGLIGIBLE * scale
+    ratio = np.where(shear > NEGLIGIBLE * scale, math.inf, 0.0)
+    ratio[loaded] = shear[loaded] / normal[loaded]
+    return ratio
+
+
+def exceeds(ratio: np.ndarray, threshold: float) -> np.ndarray:
+    """Whether each friction ratio exceeds ``threshold`` (to RATIO_TOL)."""
+    return ratio > threshold * (1 + RATIO_TOL)

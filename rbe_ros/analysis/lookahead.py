@@ -15,7 +15,10 @@ once, each step through the incremental checker (:class:`StepChecker`), and each
 candidates share most of their states with the plan (:mod:`rbe_ros.analysis.repair`). With
 workers, each state is checked whole in a worker process (:class:`StepPool`), the states
 asked for first, then those queued ahead (:meth:`StepRunner.prefetch`): the verdicts are
-those of the whole steps, as the incremental checker's are.
+those of the whole steps, as the incremental checker's are. A look-ahead hands what it checked
+to the repair that follows it on the same as-built state (:class:`Checked`; the node's repair
+runs in a process of its own): the repair checks none of those states again and walks on from
+the look-ahead's first failing step with the look-ahead's checker there.
 """
 from __future__ import annotations
 
@@ -161,6 +164,9 @@ class Lookahead:
     #: last whose state is the as-built one with its check (:meth:`rbe_ros.analysis.
     #: cell_execution.CellAhead.timeline`)
     timeline: object = None
+    #: the states checked, for the repair that follows (:func:`rbe_ros.analysis.repair.
+    #: repair_plan`'s ``checked``)
+    checked: Checked | None = field(default=None, repr=False)
 
     @property
     def failing(self) -> StepAhead | None:
@@ -185,6 +191,29 @@ def where(step: int, block: str) -> str:
     return f"step {step} ({block or 'release'})"
 
 
+def _basis(scene: Scene, options: CheckOptions, placed: int, min_margin_g: float) -> tuple:
+    """What the reports of a :class:`StepRunner` are of: the blocks at their poses (the placed
+    ones measured), the holds' grips and capacities, the approaches, the options, the steps
+    done and the margin asked for."""
+    poses = tuple((b.id, b.support, b.position.tobytes(), b.orientation.tobytes())
+                  for b in scene.blocks)
+    approach = tuple(sorted((b, None if a is None else np.asarray(a, float).tobytes())
+                            for b, a in zip(scene.sequence, scene.approach)))
+    return poses, scene.holds, approach, options, placed, min_margin_g
+
+
+@dataclass(frozen=True)
+class Checked:
+    """What a :class:`StepRunner` checked (a look-ahead's), for another on the same as-built
+    state (the repair that follows it): each state's report, and the walk of the plan up to
+    its first failing step (not included), with the incremental checker there."""
+
+    basis: tuple                        # :func:`_basis` of the runner's scene
+    reports: dict[tuple, Report]        # (blocks present, blocks held) -> report, slim
+    walk: tuple[tuple, ...]             # the states walked, from the as-built one, in order
+    checker: StepChecker                # the checker after the walk
+
+
 class StepRunner:
     """Checks steps of plans on one as-built scene (the blocks at their poses; a plan is a
     sequence and holds over these blocks), each state once.
@@ -194,22 +223,32 @@ class StepRunner:
     the placed blocks) is validated as a check validates a scene; blocks not placed are at
     design and may overlap a deviated one: their step is then not insertable. ``workers``
     >= 1: states checked whole on that many processes (:meth:`close` them), not by
-    ``checker``."""
+    ``checker``. ``tolerance`` False: whether the as-built state's verdict hangs on the
+    contact tolerance is not asked (a repair needs only whether it stands: :meth:`explained`
+    asks it of a state that does not). ``checked``: a look-ahead's states on the same
+    as-built state, known (ValueError when they are of another)."""
 
     def __init__(self, scene: Scene, options: CheckOptions, placed: int,
                  min_margin_g: float = 0.0,
-                 should_stop: Callable[[], bool] | None = None, workers: int = 0):
+                 should_stop: Callable[[], bool] | None = None, workers: int = 0, *,
+                 tolerance: bool = True, checked: Checked | None = None):
         options = declared(options, scene)
         if min_margin_g > 0 and not options.margin_directions:
             options = replace(options, margin_directions=DEFAULT_DIRECTIONS)
         self.scene, self.options, self.min_margin_g = scene, options, min_margin_g
-        self.placed = placed
+        self.placed, self.tolerance = placed, tolerance
         self.should_stop = should_stop
+        self.basis = _basis(scene, options, placed, min_margin_g)
+        if checked is not None and checked.basis != self.basis:
+            raise ValueError("the states handed over were checked on another as-built state, "
+                             "plan or options")
+        self.handed = checked
         order = plan_order(scene)
         built = {*order[:placed]} | {b.id for b in scene.blocks if b.support}
         validated_assembly(scene.subset(built), options.limits, options.contact)
         self.full = Assembly.from_scene(scene, options.contact)
-        self.memo: dict[tuple, Report] = {}
+        self.memo: dict[tuple, Report] = dict(checked.reports) if checked else {}
+        self._unasked: set[tuple] = set()      # as-built states the tolerance was not asked of
         self.checks = 0
         self.checker = StepChecker(options, local=not options.full_solve)
         #: further checks of each step ahead (a cell's: :mod:`rbe_ros.analysis.
@@ -276,19 +315,37 @@ class StepRunner:
         if found is None and self.pool is not None:
             found = self._pooled(plan, step)
         if found is None:
-            if self.should_stop is not None and self.should_stop():
-                raise TimeoutError(f"stopped before {where(k, step.block)}")
-            assembly = self.full.subset(step.present, step.held, step.grips)
-            found = checker.check(assembly)
-            # whether a verdict hangs on the contact tolerance is asked of the state built
-            # (placed blocks only), not of the steps ahead: one or two solves each
-            found = _completed(found, assembly, step.held, self.options,
-                               Placed(self.full, step.present, step.block,
-                                      plan.approach_of(step.block)),
-                               tolerance=k < self.placed)
-            found = self.memo[key] = slim(found)
-            self.checks += 1
+            found = self._check(plan, step, checker, self.tolerance)
         return replace(found, step_index=k, block_placed=step.block)
+
+    def _check(self, plan: Scene, step: Step, checker: StepChecker, tolerance: bool) -> Report:
+        """The check of ``step`` of ``plan`` by ``checker``, kept (slim)."""
+        if self.should_stop is not None and self.should_stop():
+            raise TimeoutError(f"stopped before {where(step.index, step.block)}")
+        assembly = self.full.subset(step.present, step.held, step.grips)
+        found = checker.check(assembly)
+        # whether a verdict hangs on the contact tolerance is asked of the state built
+        # (placed blocks only), not of the steps ahead: one or two solves each
+        found = _completed(found, assembly, step.held, self.options,
+                           Placed(self.full, step.present, step.block,
+                                  plan.approach_of(step.block)),
+                           tolerance=tolerance and step.index < self.placed)
+        if not tolerance and step.index < self.placed:
+            self._unasked.add((step.present, step.held))
+        found = self.memo[(step.present, step.held)] = slim(found)
+        self.checks += 1
+        return found
+
+    def explained(self, plan: Scene) -> Report:
+        """The report of the as-built state of ``plan`` (its step ``placed - 1``) with
+        whether its verdict hangs on the contact tolerance, asked now if it was not (the
+        state checked again: it is the first of every walk, from a new checker)."""
+        step = sequence_step(plan, self.placed - 1)
+        if (step.present, step.held) in self._unasked:
+            self._unasked.discard((step.present, step.held))
+            self._check(plan, step, StepChecker(self.options, local=not self.options.full_solve),
+                        True)
+        return self.report(plan, self.placed - 1, self.checker)
 
     def ahead(self, plan: Scene, k: int, checker: StepChecker) -> StepAhead:
         """Step ``k`` of ``plan`` as a look-ahead step."""
@@ -301,11 +358,14 @@ class StepRunner:
         return step if self.extra is None else self.extra(plan, step)
 
     def scan(self, plan: Scene, start: int, stop: int, checker: StepChecker,
-             until_failure: bool = True) -> list[StepAhead]:
+             until_failure: bool = True, forks: list | None = None) -> list[StepAhead]:
         """Steps ``start`` .. ``stop - 1`` of ``plan``, in order (up to the first that fails
-        with ``until_failure``); ``checker`` is advanced through them."""
+        with ``until_failure``); ``checker`` is advanced through them (``forks``: given, a
+        copy of it before each step appended)."""
         out = []
         for k in range(start, stop):
+            if forks is not None:
+                forks.append(self.fork(checker))
             out.append(self.ahead(plan, k, checker))
             if until_failure and not out[-1].passes:
                 break
@@ -315,6 +375,39 @@ class StepRunner:
         """A copy of ``checker`` to go on from where it is (its kept state is shared, never
         changed in place)."""
         return copy.copy(checker)
+
+    def _key(self, plan: Scene, k: int) -> tuple:
+        step = sequence_step(plan, k)
+        return step.present, step.held
+
+    def walker(self, plan: Scene) -> StepChecker:
+        """The checker to walk ``plan``'s steps with from the as-built state: where the
+        handed-over walk stopped when its states are ``plan``'s first ones (each of them
+        known: the walk goes on as if it had made them), else :attr:`checker`."""
+        walk = self.handed.walk if self.handed is not None else ()
+        first = max(self.placed - 1, 0)
+        if self.handed is not None and all(self._key(plan, first + i) == key
+                                           for i, key in enumerate(walk)):
+            return self.fork(self.handed.checker)
+        return self.checker
+
+    def handover(self, plan: Scene, steps: list[StepAhead], forks: list[StepChecker],
+                 checker: StepChecker, fresh: StepChecker) -> Checked:
+        """What this runner checked, for a runner on the same as-built state: the walk of
+        ``plan`` from the as-built state through ``steps`` (scanned with ``forks``, from
+        ``fresh``: the checker before the as-built state; ``checker`` after them) up to the
+        first state whose own check fails (a cell's failing action is not its state's)."""
+        first = max(self.placed - 1, 0)
+        walk = []
+        for k in range(first, first + len(steps) + bool(self.placed)):
+            key = self._key(plan, k)
+            report = self.memo[key]
+            # the as-built state fails a walk when it does not stand (the repair's test)
+            if not report.stable if k < self.placed else failure(report, self.min_margin_g):
+                at = fresh if k < self.placed else forks[k - self.placed]
+                return Checked(self.basis, dict(self.memo), tuple(walk), self.fork(at))
+            walk.append(key)
+        return Checked(self.basis, dict(self.memo), tuple(walk), self.fork(checker))
 
 
 def look_ahead(plan: Scene, built: Scene, options: CheckOptions = CheckOptions(), *,
@@ -338,10 +431,12 @@ def look_ahead(plan: Scene, built: Scene, options: CheckOptions = CheckOptions()
     if cell is not None:
         runner.extra = cell.ahead(runner)
     checker = runner.checker
+    fresh = runner.fork(checker)
     total = step_count(scene)
     as_built = runner.report(scene, placed - 1, checker) if placed else None
     stop = total if lookahead_steps == 0 else min(total, placed + lookahead_steps)
-    steps = runner.scan(scene, placed, stop, checker, until_failure)
+    forks: list[StepChecker] = []
+    steps = runner.scan(scene, placed, stop, checker, until_failure, forks)
     failing = next((s for s in steps if not s.passes), None)
     message = ""
     if as_built is not None and not as_built.stable:
@@ -354,7 +449,8 @@ def look_ahead(plan: Scene, built: Scene, options: CheckOptions = CheckOptions()
         runner.extra.timeline(scene, range(placed - 1, placed), known_only=True)
     return Lookahead(placed, total, as_built, steps,
                      -1 if failing is None else failing.step, message,
-                     time.perf_counter() - start, timeline)
+                     time.perf_counter() - start, timeline,
+                     runner.handover(scene, steps, forks, checker, fresh))
 
 
 def held_by_step(plan: Scene) -> list[tuple[str, ...]]:
@@ -401,7 +497,7 @@ def with_plan(scene: Scene, order, held: list[tuple[str, ...]]) -> Scene:
                       holds_of(scene, order, held), scene.pose_uncertainty, approach)
 
 
-__all__ = ["DEFAULT_LOOKAHEAD", "Lookahead", "StepAhead", "StepRunner", "as_built_plan",
+__all__ = ["Checked", "DEFAULT_LOOKAHEAD", "Lookahead", "StepAhead", "StepRunner", "as_built_plan",
            "as_built_state",
            "check_plan_design", "failure", "held_by_step", "holds_of", "look_ahead",
            "placed_count", "plan_order", "where", "with_plan"]

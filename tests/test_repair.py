@@ -247,7 +247,8 @@ def test_a_window_checks_and_repairs_the_next_steps_only(files, capsys):
 def test_the_repair_checks_no_state_its_look_ahead_checked(monkeypatch):
     """The node's repair follows its look-ahead on the same as-built state: handed the
     states the look-ahead checked (pickled, as to the node's repair process), it checks
-    none of them again, and repairs as it does without them."""
+    none of them again, and repairs as it does without them; the look-ahead of the
+    repaired plan checks none the repair checked."""
     scene = counterweight()
     measured = pose(SHIFT, YAW)
     built = scene_at_poses(scene, {"a": (measured["position"], measured["orientation"])})
@@ -293,9 +294,11 @@ def test_the_repair_checks_no_state_its_look_ahead_checked(monkeypatch):
     assert out[1][1]["order"] == ["a", "c", "b"]
     assert handed[0].reports.keys() == ahead.checked.reports.keys()
     # the look-ahead's 3 states, then the repair's 2 (K 0: the swap): step 1 with c, step 2
-    # with b placed last (its insertion is b's, not c's)
-    assert set(states[:3]) == looked and states[3:5] == [
+    # with b placed last (its insertion is b's, not c's); the look-ahead of the repaired
+    # plan checks none
+    assert set(states[:3]) == looked and states[3:] == [
         ({"ground", "a", "c"}, {"ground"}), ({"ground", "a", "b", "c"}, {"ground"})]
+    assert [s["stable"] for s in out[2][1]["lookahead"]] == [True, True]
     other = scene_at_poses(scene, {"a": (pose()["position"], pose()["orientation"])})
     with pytest.raises(ValueError, match="another as-built state"):
         repair_plan(scene, other, checked=ahead.checked)

@@ -31,8 +31,8 @@ from ..rbe.result import Report
 from ..scene import Scene, make_scene
 from .assembly import Assembly
 from .grips import GripFrame, robot_grip
-from .lookahead import (Checked, StepAhead, StepRunner, held_by_step, plan_order, where,
-                        with_plan)
+from .lookahead import (Checked, StepAhead, StepRunner, held_by_step, plan_order,
+                        state_key, where, with_plan)
 from .options import CheckOptions
 from .planning import plan_sequence
 from .repair import Repair, repair_plan
@@ -118,7 +118,7 @@ class CellAhead:
         if k < 0 or k >= step_count(plan):
             return None, False
         step = sequence_step(plan, k)
-        report = self.memo.get((step.present, step.held))
+        report = self.memo.get(state_key(plan, step))
         if report is None or set(step.present) != set(
                 action_present(self.plan.base, plan.sequence, a)):
             return None, False

@@ -192,14 +192,24 @@ def where(step: int, block: str) -> str:
 
 
 def _basis(scene: Scene, options: CheckOptions, placed: int, min_margin_g: float) -> tuple:
-    """What the reports of a :class:`StepRunner` are of: the blocks at their poses (the placed
-    ones measured), the holds' grips and capacities, the approaches, the options, the steps
-    done and the margin asked for."""
+    """What the reports of a :class:`StepRunner` are of, whichever plan: the blocks at
+    their poses (the placed ones measured), the options, the steps done and the margin
+    asked for (a plan's part is in each state's key: :func:`state_key`)."""
     poses = tuple((b.id, b.support, b.position.tobytes(), b.orientation.tobytes())
                   for b in scene.blocks)
-    approach = tuple(sorted((b, None if a is None else np.asarray(a, float).tobytes())
-                            for b, a in zip(scene.sequence, scene.approach)))
-    return poses, scene.holds, approach, options, placed, min_margin_g
+    return poses, options, placed, min_margin_g
+
+
+def _bytes(a) -> bytes | None:
+    return None if a is None else np.asarray(a, dtype=float).tobytes()
+
+
+def state_key(plan: Scene, step: Step) -> tuple:
+    """The key of the state of ``step`` of ``plan`` (a plan over a runner's blocks): all of
+    the plan its report depends on: the blocks present and held, the held blocks' grips
+    and capacities, the block placed and its approach."""
+    grips = tuple((g.block, _bytes(g.point), g.max_force, g.max_torque) for g in step.grips)
+    return step.present, step.held, grips, step.block, _bytes(plan.approach_of(step.block))
 
 
 @dataclass(frozen=True)
@@ -209,7 +219,7 @@ class Checked:
     its first failing step (not included), with the incremental checker there."""
 
     basis: tuple                        # :func:`_basis` of the runner's scene
-    reports: dict[tuple, Report]        # (blocks present, blocks held) -> report, slim
+    reports: dict[tuple, Report]        # :func:`state_key` -> report, slim
     walk: tuple[tuple, ...]             # the states walked, from the as-built one, in order
     checker: StepChecker                # the checker after the walk
 
@@ -240,8 +250,8 @@ class StepRunner:
         self.should_stop = should_stop
         self.basis = _basis(scene, options, placed, min_margin_g)
         if checked is not None and checked.basis != self.basis:
-            raise ValueError("the states handed over were checked on another as-built state, "
-                             "plan or options")
+            raise ValueError("the states handed over were checked on another as-built state "
+                             "or with other options")
         self.handed = checked
         order = plan_order(scene)
         built = {*order[:placed]} | {b.id for b in scene.blocks if b.support}
@@ -265,7 +275,7 @@ class StepRunner:
 
     def _task(self, plan: Scene, step: Step) -> tuple[tuple, tuple]:
         """(state, the arguments of its whole check in a worker) of ``step`` of ``plan``."""
-        return (step.present, step.held), (step.present, step.held, step.grips, step.block,
+        return state_key(plan, step), (step.present, step.held, step.grips, step.block,
                                            plan.approach_of(step.block),
                                            step.index < self.placed)
 
@@ -310,8 +320,7 @@ class StepRunner:
         """The report of step ``k`` of ``plan`` (a scene over these blocks: sequence and
         holds), slim; ``checker`` is advanced when the state is new."""
         step = sequence_step(plan, k)
-        key = (step.present, step.held)
-        found = self.memo.get(key)
+        found = self.memo.get(state_key(plan, step))
         if found is None and self.pool is not None:
             found = self._pooled(plan, step)
         if found is None:
@@ -330,9 +339,10 @@ class StepRunner:
                            Placed(self.full, step.present, step.block,
                                   plan.approach_of(step.block)),
                            tolerance=tolerance and step.index < self.placed)
+        key = state_key(plan, step)
         if not tolerance and step.index < self.placed:
-            self._unasked.add((step.present, step.held))
-        found = self.memo[(step.present, step.held)] = slim(found)
+            self._unasked.add(key)
+        found = self.memo[key] = slim(found)
         self.checks += 1
         return found
 
@@ -341,8 +351,8 @@ class StepRunner:
         whether its verdict hangs on the contact tolerance, asked now if it was not (the
         state checked again: it is the first of every walk, from a new checker)."""
         step = sequence_step(plan, self.placed - 1)
-        if (step.present, step.held) in self._unasked:
-            self._unasked.discard((step.present, step.held))
+        if state_key(plan, step) in self._unasked:
+            self._unasked.discard(state_key(plan, step))
             self._check(plan, step, StepChecker(self.options, local=not self.options.full_solve),
                         True)
         return self.report(plan, self.placed - 1, self.checker)
@@ -377,8 +387,7 @@ class StepRunner:
         return copy.copy(checker)
 
     def _key(self, plan: Scene, k: int) -> tuple:
-        step = sequence_step(plan, k)
-        return step.present, step.held
+        return state_key(plan, sequence_step(plan, k))
 
     def walker(self, plan: Scene) -> StepChecker:
         """The checker to walk ``plan``'s steps with from the as-built state: where the
@@ -386,8 +395,8 @@ class StepRunner:
         known: the walk goes on as if it had made them), else :attr:`checker`."""
         walk = self.handed.walk if self.handed is not None else ()
         first = max(self.placed - 1, 0)
-        if self.handed is not None and all(self._key(plan, first + i) == key
-                                           for i, key in enumerate(walk)):
+        if self.handed is not None and first + len(walk) <= step_count(plan) and all(
+                self._key(plan, first + i) == key for i, key in enumerate(walk)):
             return self.fork(self.handed.checker)
         return self.checker
 
@@ -409,16 +418,27 @@ class StepRunner:
             walk.append(key)
         return Checked(self.basis, dict(self.memo), tuple(walk), self.fork(checker))
 
+    def known(self) -> Checked:
+        """The states this runner checked, for a look-ahead on the same as-built state (of
+        another plan: the repaired one), no walk handed over (those whose tolerance
+        question was not asked left out: a look-ahead's as-built report has it)."""
+        return Checked(self.basis, {k: r for k, r in self.memo.items() if k not in self._unasked},
+                       (), StepChecker(self.options, local=not self.options.full_solve))
+
 
 def look_ahead(plan: Scene, built: Scene, options: CheckOptions = CheckOptions(), *,
                lookahead_steps: int = DEFAULT_LOOKAHEAD, min_margin_g: float = 0.0,
-               until_failure: bool = False, cell=None) -> Lookahead:
+               until_failure: bool = False, cell=None, checked: Checked | None = None
+               ) -> Lookahead:
     """Check the as-built state of ``plan`` (the free blocks of the as-built scene ``built``
     placed, a prefix of its order, at their measured poses) and its next ``lookahead_steps``
     steps (0: to the end) with the rest at design and the plan's holds, under ``options`` and
     the plan's declared pose uncertainty. ``until_failure``: stop at the first step that fails.
     ``cell``: the plan's cell (a :class:`rbe_ros.analysis.cell_execution.CellPlan`): each
     step's states between the robots' actions checked too, and the timeline kept.
+    ``checked``: states known on the same as-built state (the repair's, for the look-ahead
+    of the repaired plan), not checked again; such a look-ahead hands none on
+    (:attr:`Lookahead.checked` None).
 
     Raises SceneError for bad input: measured blocks not in the plan, or not a prefix of its
     order, a plan that is not one (no whole sequence), measured blocks that interpenetrate."""
@@ -427,10 +447,10 @@ def look_ahead(plan: Scene, built: Scene, options: CheckOptions = CheckOptions()
         raise SceneError(f"lookahead_steps must be >= 0, not {lookahead_steps}")
     scene = as_built_plan(plan, built)
     placed = placed_count(plan, built)
-    runner = StepRunner(scene, options, placed, min_margin_g)
+    runner = StepRunner(scene, options, placed, min_margin_g, checked=checked)
     if cell is not None:
         runner.extra = cell.ahead(runner)
-    checker = runner.checker
+    checker = runner.walker(scene)
     fresh = runner.fork(checker)
     total = step_count(scene)
     as_built = runner.report(scene, placed - 1, checker) if placed else None
@@ -450,7 +470,7 @@ def look_ahead(plan: Scene, built: Scene, options: CheckOptions = CheckOptions()
     return Lookahead(placed, total, as_built, steps,
                      -1 if failing is None else failing.step, message,
                      time.perf_counter() - start, timeline,
-                     runner.handover(scene, steps, forks, checker, fresh))
+                     None if checked else runner.handover(scene, steps, forks, checker, fresh))
 
 
 def held_by_step(plan: Scene) -> list[tuple[str, ...]]:
@@ -500,4 +520,4 @@ def with_plan(scene: Scene, order, held: list[tuple[str, ...]]) -> Scene:
 __all__ = ["Checked", "DEFAULT_LOOKAHEAD", "Lookahead", "StepAhead", "StepRunner", "as_built_plan",
            "as_built_state",
            "check_plan_design", "failure", "held_by_step", "holds_of", "look_ahead",
-           "placed_count", "plan_order", "where", "with_plan"]
+           "placed_count", "plan_order", "state_key", "where", "with_plan"]

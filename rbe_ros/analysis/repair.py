@@ -63,6 +63,9 @@ class Repair:
     placed: int = 0                        # steps done (the as-built state)
     checks: int = 0                        # states checked
     time: float = 0.0                      # s
+    #: the states checked (the look-ahead's handed over included), for the look-ahead of
+    #: the repaired plan (:func:`rbe_ros.analysis.lookahead.look_ahead`'s ``checked``)
+    checked: Checked | None = field(default=None, repr=False)
 
 
 class _Stop(Exception):
@@ -123,6 +126,7 @@ def repair_plan(plan: Scene, built: Scene, options: CheckOptions = CheckOptions(
     finally:
         runner.close()
     result.checks, result.time = runner.checks, time.perf_counter() - start
+    result.checked = runner.known()
     return result
 
 

@@ -201,7 +201,9 @@ class Execution:
         if found.feasible and found.changed:
             self.plan = replace(self.plan, sequence=tuple(found.order),
                                 holds=tuple(found.holds))
-            emit(EXECUTION, self._state(built, as_built, header, options, settings))
+            # the repair's states (the look-ahead's with them) not checked again
+            emit(EXECUTION, self._state(built, as_built, header, options, settings,
+                                        found.checked))
         return None
 
     def _cell(self, options: CheckOptions) -> CellPlan | None:
@@ -213,9 +215,11 @@ class Execution:
             self._cell_plan = CellPlan(self.cell, self.plan, options)
         return self._cell_plan
 
-    def _state(self, built: Scene, as_built, header, options, settings) -> dict:
+    def _state(self, built: Scene, as_built, header, options, settings,
+               checked: Checked | None = None) -> dict:
         ahead = look_ahead(self.plan, built, options, lookahead_steps=settings.lookahead_steps,
-                           min_margin_g=settings.min_margin_g, cell=self._cell(options))
+                           min_margin_g=settings.min_margin_g, cell=self._cell(options),
+                           checked=checked)
         self._checked = ahead.checked
         if ahead.timeline is not None:
             self.timeline = timeline_to_dicts(ahead.timeline, header)

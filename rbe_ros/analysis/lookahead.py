@@ -11,14 +11,16 @@ insertable: a deviated block may be in its way), or when its margin is below
 
 :class:`StepRunner` checks steps of plans over one as-built geometry: contacts are detected
 once, each step through the incremental checker (:class:`StepChecker`), and each state
-(blocks present, blocks held) is checked once, whichever plan it belongs to: a repair's
-candidates share most of their states with the plan (:mod:`rbe_ros.analysis.repair`). With
+(blocks present, blocks held with their grips, the block placed: :func:`state_key`) is
+checked once, whichever plan it belongs to: a repair's candidates share most of their states
+with the plan (:mod:`rbe_ros.analysis.repair`). With
 workers, each state is checked whole in a worker process (:class:`StepPool`), the states
 asked for first, then those queued ahead (:meth:`StepRunner.prefetch`): the verdicts are
 those of the whole steps, as the incremental checker's are. A look-ahead hands what it checked
 to the repair that follows it on the same as-built state (:class:`Checked`; the node's repair
 runs in a process of its own): the repair checks none of those states again and walks on from
-the look-ahead's first failing step with the look-ahead's checker there.
+the look-ahead's first failing step with the look-ahead's checker there, as it would have
+walked to it; the repair hands its states back to the look-ahead of the repaired plan.
 """
 from __future__ import annotations
 

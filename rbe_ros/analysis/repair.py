@@ -18,7 +18,9 @@ capacities. The remaining steps are checked in order (the look-ahead's rules,
 
 and the check goes on from that step. A change only alters that step and later ones, and
 every state (blocks present, blocks held) is checked once, so a repair costs about one check
-of the steps it changes beyond the look-ahead of the remainder. When neither saves a step,
+of the steps it changes beyond the look-ahead of the remainder; after the look-ahead that
+found the failure (the node's) it checks none of the look-ahead's states again. When neither
+saves a step,
 3. **replan**: the remainder is planned again (:func:`plan_sequence` with the placed blocks
 as a fixed prefix, the same K) and re-checked at the measured poses.
 

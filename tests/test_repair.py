@@ -6,17 +6,21 @@ from __future__ import annotations
 
 import json
 import math
+import pickle
 
 import pytest
 
 from rbe_ros import generators
 from rbe_ros.analysis.asbuilt import declared
 from rbe_ros.analysis.assembly import Assembly
+from rbe_ros.analysis.incremental import StepChecker
 from rbe_ros.analysis.lookahead import check_plan_design, look_ahead
 from rbe_ros.analysis.options import CheckOptions
+from rbe_ros.analysis.repair import repair_plan
 from rbe_ros.analysis.steps import sequence_step, step_count
 from rbe_ros.analysis.verdict import check
 from rbe_ros.cli import main
+from rbe_ros.io.execution import Execution, Settings, repair
 from rbe_ros.io.poses import scene_at_poses
 from rbe_ros.io.scene_json import load_scene, scene_to_dict
 from rbe_ros.scene import SceneError, box_block, make_scene
@@ -238,3 +242,78 @@ def test_a_window_checks_and_repairs_the_next_steps_only(files, capsys):
     assert code == 0 and result["repair"] == "swap" and result["order"] == ["a", "c", "b"]
     assert [s["step"] for s in result["steps"]] == [1]
     assert "steps 1 to 1 (the look-ahead) pass" in result["message"]
+
+
+def test_the_repair_checks_no_state_its_look_ahead_checked(monkeypatch):
+    """The node's repair follows its look-ahead on the same as-built state: handed the
+    states the look-ahead checked (pickled, as to the node's repair process), it checks
+    none of them again, and repairs as it does without them; the look-ahead of the
+    repaired plan checks none the repair checked."""
+    scene = counterweight()
+    measured = pose(SHIFT, YAW)
+    built = scene_at_poses(scene, {"a": (measured["position"], measured["orientation"])})
+    states = []         # (blocks, supports: the held ones too) of each state checked
+    real = StepChecker.check
+
+    def counted(self, assembly):
+        states.append((frozenset(b.id for b in assembly.blocks),
+                       frozenset(b.id for b in assembly.blocks if b.support)))
+        return real(self, assembly)
+
+    monkeypatch.setattr(StepChecker, "check", counted)
+    alone = repair_plan(scene, built, max_held=1)
+    assert alone.kind == "hold" and alone.checks == len(states) == 4
+    states.clear()
+    ahead = look_ahead(scene, built, lookahead_steps=0)
+    looked = set(states)
+    # the as-built state, step 1 (b tips a and b over the edge), step 2
+    assert ahead.first_failing_step == 1 and len(looked) == len(states) == 3
+    states.clear()
+    after = repair_plan(scene, built, max_held=1,
+                        checked=pickle.loads(pickle.dumps(ahead.checked)))
+    # one new state: step 1 with a held; step 2 as the look-ahead checked it
+    assert after.checks == len(states) == 1 and not set(states) & looked
+    assert states[0] == ({"ground", "a", "b"}, {"ground", *after.held[1]})
+    assert [(r.kind, r.order, r.held, r.changed_step, r.message, [s.stable for s in r.steps])
+            for r in (alone, after)] == [(after.kind, after.order, after.held,
+                                          after.changed_step, after.message,
+                                          [True, True])] * 2
+    # the node's execution hands them over (its repair in a process of its own)
+    handed = []
+
+    def repairer(plan, built, options, settings, cell, checked):
+        handed.append(checked)
+        return repair(plan, built, options, settings, cell, checked)
+
+    execution = Execution()
+    execution.set_design(scene)
+    states.clear()
+    out = execution.advance(built, None, {}, CheckOptions(), Settings(lookahead_steps=0),
+                            repairer)
+    assert [kind for kind, _ in out] == ["execution", "plan_update", "execution"]
+    assert out[1][1]["order"] == ["a", "c", "b"]
+    assert handed[0].reports.keys() == ahead.checked.reports.keys()
+    # the look-ahead's 3 states, then the repair's 2 (K 0: the swap): step 1 with c, step 2
+    # with b placed last (its insertion is b's, not c's); the look-ahead of the repaired
+    # plan checks none
+    assert set(states[:3]) == looked and states[3:] == [
+        ({"ground", "a", "c"}, {"ground"}), ({"ground", "a", "b", "c"}, {"ground"})]
+    assert [s["stable"] for s in out[2][1]["lookahead"]] == [True, True]
+    other = scene_at_poses(scene, {"a": (pose()["position"], pose()["orientation"])})
+    with pytest.raises(ValueError, match="another as-built state"):
+        repair_plan(scene, other, checked=ahead.checked)
+
+
+def test_an_as_built_state_that_does_not_stand_says_why_as_the_look_ahead(capsys):
+    # a 150 mm out: its centre of mass 50 mm beyond the edge (the closed form), it tips
+    assert com_x(A, shift=0.15) > 0.04
+    scene = counterweight()
+    measured = pose(0.15)
+    built = scene_at_poses(scene, {"a": (measured["position"], measured["orientation"])})
+    ahead = look_ahead(scene, built)
+    assert not ahead.as_built.stable
+    # the repair asks the tolerance question of the as-built state only now: the same
+    # report as the look-ahead's, whose near contacts were asked of at once
+    found = repair_plan(scene, built)
+    assert not found.feasible and found.message == \
+        f"step 0 (a) does not stand as built: {ahead.as_built.message}"

@@ -31,7 +31,8 @@ from ..rbe.result import Report
 from ..scene import Scene, make_scene
 from .assembly import Assembly
 from .grips import GripFrame, robot_grip
-from .lookahead import StepAhead, StepRunner, held_by_step, plan_order, where, with_plan
+from .lookahead import (Checked, StepAhead, StepRunner, held_by_step, plan_order,
+                        state_key, where, with_plan)
 from .options import CheckOptions
 from .planning import plan_sequence
 from .repair import Repair, repair_plan
@@ -117,7 +118,7 @@ class CellAhead:
         if k < 0 or k >= step_count(plan):
             return None, False
         step = sequence_step(plan, k)
-        report = self.memo.get((step.present, step.held))
+        report = self.memo.get(state_key(plan, step))
         if report is None or set(step.present) != set(
                 action_present(self.plan.base, plan.sequence, a)):
             return None, False
@@ -182,19 +183,21 @@ class CellAhead:
 def repair_cell(plan: Scene, built: Scene, options: CheckOptions, cell: CellPlan, *,
                 min_margin_g: float = 0.0, lookahead_steps: int = 0,
                 max_held: int | None = None, replan: bool = True,
-                time_limit: float = REPLAN_TIME_LIMIT) -> tuple[Repair, Timeline | None]:
+                time_limit: float = REPLAN_TIME_LIMIT, checked: Checked | None = None
+                ) -> tuple[Repair, Timeline | None]:
     """Repair ``plan`` from the as-built scene ``built`` for ``cell`` (see the module
     docstring): the repair, its holds at the robots' grips, and the repaired plan's timeline
     at the measured poses (None when no repair was found). When the hold, swap or re-plan
     of :func:`repair_plan` (blind to the states between actions) leaves a state of the
     timeline falling, the remainder is planned again for the cell (within ``time_limit``
     s; not with ``replan`` False) and checked the same way. ``max_held``: K, at most the
-    cell's robots less one (None: that)."""
+    cell's robots less one (None: that). ``checked``: as :func:`repair_plan`'s."""
     robots = len(cell.cell.robots) - 1
     k_max = robots if max_held is None else min(max_held, robots)
     start = time.perf_counter()
     found = repair_plan(plan, built, options, max_held=k_max, min_margin_g=min_margin_g,
-                        lookahead_steps=lookahead_steps, replan=replan, time_limit=time_limit)
+                        lookahead_steps=lookahead_steps, replan=replan, time_limit=time_limit,
+                        checked=checked)
     if not found.feasible or found.scene is None:
         return found, None
     runner = StepRunner(found.scene, options, found.placed, min_margin_g)

@@ -11,11 +11,16 @@ insertable: a deviated block may be in its way), or when its margin is below
 
 :class:`StepRunner` checks steps of plans over one as-built geometry: contacts are detected
 once, each step through the incremental checker (:class:`StepChecker`), and each state
-(blocks present, blocks held) is checked once, whichever plan it belongs to: a repair's
-candidates share most of their states with the plan (:mod:`rbe_ros.analysis.repair`). With
+(blocks present, blocks held with their grips, the block placed: :func:`state_key`) is
+checked once, whichever plan it belongs to: a repair's candidates share most of their states
+with the plan (:mod:`rbe_ros.analysis.repair`). With
 workers, each state is checked whole in a worker process (:class:`StepPool`), the states
 asked for first, then those queued ahead (:meth:`StepRunner.prefetch`): the verdicts are
-those of the whole steps, as the incremental checker's are.
+those of the whole steps, as the incremental checker's are. A look-ahead hands what it checked
+to the repair that follows it on the same as-built state (:class:`Checked`; the node's repair
+runs in a process of its own): the repair checks none of those states again and walks on from
+the look-ahead's first failing step with the look-ahead's checker there, as it would have
+walked to it; the repair hands its states back to the look-ahead of the repaired plan.
 """
 from __future__ import annotations
 
@@ -161,6 +166,9 @@ class Lookahead:
     #: last whose state is the as-built one with its check (:meth:`rbe_ros.analysis.
     #: cell_execution.CellAhead.timeline`)
     timeline: object = None
+    #: the states checked, for the repair that follows (:func:`rbe_ros.analysis.repair.
+    #: repair_plan`'s ``checked``)
+    checked: Checked | None = field(default=None, repr=False)
 
     @property
     def failing(self) -> StepAhead | None:
@@ -185,6 +193,39 @@ def where(step: int, block: str) -> str:
     return f"step {step} ({block or 'release'})"
 
 
+def _basis(scene: Scene, options: CheckOptions, placed: int, min_margin_g: float) -> tuple:
+    """What the reports of a :class:`StepRunner` are of, whichever plan: the blocks at
+    their poses (the placed ones measured), the options, the steps done and the margin
+    asked for (a plan's part is in each state's key: :func:`state_key`)."""
+    poses = tuple((b.id, b.support, b.position.tobytes(), b.orientation.tobytes())
+                  for b in scene.blocks)
+    return poses, options, placed, min_margin_g
+
+
+def _bytes(a) -> bytes | None:
+    return None if a is None else np.asarray(a, dtype=float).tobytes()
+
+
+def state_key(plan: Scene, step: Step) -> tuple:
+    """The key of the state of ``step`` of ``plan`` (a plan over a runner's blocks): all of
+    the plan its report depends on: the blocks present and held, the held blocks' grips
+    and capacities, the block placed and its approach."""
+    grips = tuple((g.block, _bytes(g.point), g.max_force, g.max_torque) for g in step.grips)
+    return step.present, step.held, grips, step.block, _bytes(plan.approach_of(step.block))
+
+
+@dataclass(frozen=True)
+class Checked:
+    """What a :class:`StepRunner` checked (a look-ahead's), for another on the same as-built
+    state (the repair that follows it): each state's report, and the walk of the plan up to
+    its first failing step (not included), with the incremental checker there."""
+
+    basis: tuple                        # :func:`_basis` of the runner's scene
+    reports: dict[tuple, Report]        # :func:`state_key` -> report, slim
+    walk: tuple[tuple, ...]             # the states walked, from the as-built one, in order
+    checker: StepChecker                # the checker after the walk
+
+
 class StepRunner:
     """Checks steps of plans on one as-built scene (the blocks at their poses; a plan is a
     sequence and holds over these blocks), each state once.
@@ -194,22 +235,32 @@ class StepRunner:
     the placed blocks) is validated as a check validates a scene; blocks not placed are at
     design and may overlap a deviated one: their step is then not insertable. ``workers``
     >= 1: states checked whole on that many processes (:meth:`close` them), not by
-    ``checker``."""
+    ``checker``. ``tolerance`` False: whether the as-built state's verdict hangs on the
+    contact tolerance is not asked (a repair needs only whether it stands: :meth:`explained`
+    asks it of a state that does not). ``checked``: a look-ahead's states on the same
+    as-built state, known (ValueError when they are of another)."""
 
     def __init__(self, scene: Scene, options: CheckOptions, placed: int,
                  min_margin_g: float = 0.0,
-                 should_stop: Callable[[], bool] | None = None, workers: int = 0):
+                 should_stop: Callable[[], bool] | None = None, workers: int = 0, *,
+                 tolerance: bool = True, checked: Checked | None = None):
         options = declared(options, scene)
         if min_margin_g > 0 and not options.margin_directions:
             options = replace(options, margin_directions=DEFAULT_DIRECTIONS)
         self.scene, self.options, self.min_margin_g = scene, options, min_margin_g
-        self.placed = placed
+        self.placed, self.tolerance = placed, tolerance
         self.should_stop = should_stop
+        self.basis = _basis(scene, options, placed, min_margin_g)
+        if checked is not None and checked.basis != self.basis:
+            raise ValueError("the states handed over were checked on another as-built state "
+                             "or with other options")
+        self.handed = checked
         order = plan_order(scene)
         built = {*order[:placed]} | {b.id for b in scene.blocks if b.support}
         validated_assembly(scene.subset(built), options.limits, options.contact)
         self.full = Assembly.from_scene(scene, options.contact)
-        self.memo: dict[tuple, Report] = {}
+        self.memo: dict[tuple, Report] = dict(checked.reports) if checked else {}
+        self._unasked: set[tuple] = set()      # as-built states the tolerance was not asked of
         self.checks = 0
         self.checker = StepChecker(options, local=not options.full_solve)
         #: further checks of each step ahead (a cell's: :mod:`rbe_ros.analysis.
@@ -226,7 +277,7 @@ class StepRunner:
 
     def _task(self, plan: Scene, step: Step) -> tuple[tuple, tuple]:
         """(state, the arguments of its whole check in a worker) of ``step`` of ``plan``."""
-        return (step.present, step.held), (step.present, step.held, step.grips, step.block,
+        return state_key(plan, step), (step.present, step.held, step.grips, step.block,
                                            plan.approach_of(step.block),
                                            step.index < self.placed)
 
@@ -271,24 +322,42 @@ class StepRunner:
         """The report of step ``k`` of ``plan`` (a scene over these blocks: sequence and
         holds), slim; ``checker`` is advanced when the state is new."""
         step = sequence_step(plan, k)
-        key = (step.present, step.held)
-        found = self.memo.get(key)
+        found = self.memo.get(state_key(plan, step))
         if found is None and self.pool is not None:
             found = self._pooled(plan, step)
         if found is None:
-            if self.should_stop is not None and self.should_stop():
-                raise TimeoutError(f"stopped before {where(k, step.block)}")
-            assembly = self.full.subset(step.present, step.held, step.grips)
-            found = checker.check(assembly)
-            # whether a verdict hangs on the contact tolerance is asked of the state built
-            # (placed blocks only), not of the steps ahead: one or two solves each
-            found = _completed(found, assembly, step.held, self.options,
-                               Placed(self.full, step.present, step.block,
-                                      plan.approach_of(step.block)),
-                               tolerance=k < self.placed)
-            found = self.memo[key] = slim(found)
-            self.checks += 1
+            found = self._check(plan, step, checker, self.tolerance)
         return replace(found, step_index=k, block_placed=step.block)
+
+    def _check(self, plan: Scene, step: Step, checker: StepChecker, tolerance: bool) -> Report:
+        """The check of ``step`` of ``plan`` by ``checker``, kept (slim)."""
+        if self.should_stop is not None and self.should_stop():
+            raise TimeoutError(f"stopped before {where(step.index, step.block)}")
+        assembly = self.full.subset(step.present, step.held, step.grips)
+        found = checker.check(assembly)
+        # whether a verdict hangs on the contact tolerance is asked of the state built
+        # (placed blocks only), not of the steps ahead: one or two solves each
+        found = _completed(found, assembly, step.held, self.options,
+                           Placed(self.full, step.present, step.block,
+                                  plan.approach_of(step.block)),
+                           tolerance=tolerance and step.index < self.placed)
+        key = state_key(plan, step)
+        if not tolerance and step.index < self.placed:
+            self._unasked.add(key)
+        found = self.memo[key] = slim(found)
+        self.checks += 1
+        return found
+
+    def explained(self, plan: Scene) -> Report:
+        """The report of the as-built state of ``plan`` (its step ``placed - 1``) with
+        whether its verdict hangs on the contact tolerance, asked now if it was not (the
+        state checked again: it is the first of every walk, from a new checker)."""
+        step = sequence_step(plan, self.placed - 1)
+        if state_key(plan, step) in self._unasked:
+            self._unasked.discard(state_key(plan, step))
+            self._check(plan, step, StepChecker(self.options, local=not self.options.full_solve),
+                        True)
+        return self.report(plan, self.placed - 1, self.checker)
 
     def ahead(self, plan: Scene, k: int, checker: StepChecker) -> StepAhead:
         """Step ``k`` of ``plan`` as a look-ahead step."""
@@ -301,11 +370,14 @@ class StepRunner:
         return step if self.extra is None else self.extra(plan, step)
 
     def scan(self, plan: Scene, start: int, stop: int, checker: StepChecker,
-             until_failure: bool = True) -> list[StepAhead]:
+             until_failure: bool = True, forks: list | None = None) -> list[StepAhead]:
         """Steps ``start`` .. ``stop - 1`` of ``plan``, in order (up to the first that fails
-        with ``until_failure``); ``checker`` is advanced through them."""
+        with ``until_failure``); ``checker`` is advanced through them (``forks``: given, a
+        copy of it before each step appended)."""
         out = []
         for k in range(start, stop):
+            if forks is not None:
+                forks.append(self.fork(checker))
             out.append(self.ahead(plan, k, checker))
             if until_failure and not out[-1].passes:
                 break
@@ -316,16 +388,59 @@ class StepRunner:
         changed in place)."""
         return copy.copy(checker)
 
+    def _key(self, plan: Scene, k: int) -> tuple:
+        return state_key(plan, sequence_step(plan, k))
+
+    def walker(self, plan: Scene) -> StepChecker:
+        """The checker to walk ``plan``'s steps with from the as-built state: where the
+        handed-over walk stopped when its states are ``plan``'s first ones (each of them
+        known: the walk goes on as if it had made them), else :attr:`checker`."""
+        walk = self.handed.walk if self.handed is not None else ()
+        first = max(self.placed - 1, 0)
+        if self.handed is not None and first + len(walk) <= step_count(plan) and all(
+                self._key(plan, first + i) == key for i, key in enumerate(walk)):
+            return self.fork(self.handed.checker)
+        return self.checker
+
+    def handover(self, plan: Scene, steps: list[StepAhead], forks: list[StepChecker],
+                 checker: StepChecker, fresh: StepChecker) -> Checked:
+        """What this runner checked, for a runner on the same as-built state: the walk of
+        ``plan`` from the as-built state through ``steps`` (scanned with ``forks``, from
+        ``fresh``: the checker before the as-built state; ``checker`` after them) up to the
+        first state whose own check fails (a cell's failing action is not its state's)."""
+        first = max(self.placed - 1, 0)
+        walk = []
+        for k in range(first, first + len(steps) + bool(self.placed)):
+            key = self._key(plan, k)
+            report = self.memo[key]
+            # the as-built state fails a walk when it does not stand (the repair's test)
+            if not report.stable if k < self.placed else failure(report, self.min_margin_g):
+                at = fresh if k < self.placed else forks[k - self.placed]
+                return Checked(self.basis, dict(self.memo), tuple(walk), self.fork(at))
+            walk.append(key)
+        return Checked(self.basis, dict(self.memo), tuple(walk), self.fork(checker))
+
+    def known(self) -> Checked:
+        """The states this runner checked, for a look-ahead on the same as-built state (of
+        another plan: the repaired one), no walk handed over (those whose tolerance
+        question was not asked left out: a look-ahead's as-built report has it)."""
+        return Checked(self.basis, {k: r for k, r in self.memo.items() if k not in self._unasked},
+                       (), StepChecker(self.options, local=not self.options.full_solve))
+
 
 def look_ahead(plan: Scene, built: Scene, options: CheckOptions = CheckOptions(), *,
                lookahead_steps: int = DEFAULT_LOOKAHEAD, min_margin_g: float = 0.0,
-               until_failure: bool = False, cell=None) -> Lookahead:
+               until_failure: bool = False, cell=None, checked: Checked | None = None
+               ) -> Lookahead:
     """Check the as-built state of ``plan`` (the free blocks of the as-built scene ``built``
     placed, a prefix of its order, at their measured poses) and its next ``lookahead_steps``
     steps (0: to the end) with the rest at design and the plan's holds, under ``options`` and
     the plan's declared pose uncertainty. ``until_failure``: stop at the first step that fails.
     ``cell``: the plan's cell (a :class:`rbe_ros.analysis.cell_execution.CellPlan`): each
     step's states between the robots' actions checked too, and the timeline kept.
+    ``checked``: states known on the same as-built state (the repair's, for the look-ahead
+    of the repaired plan), not checked again; such a look-ahead hands none on
+    (:attr:`Lookahead.checked` None).
 
     Raises SceneError for bad input: measured blocks not in the plan, or not a prefix of its
     order, a plan that is not one (no whole sequence), measured blocks that interpenetrate."""
@@ -334,14 +449,16 @@ def look_ahead(plan: Scene, built: Scene, options: CheckOptions = CheckOptions()
         raise SceneError(f"lookahead_steps must be >= 0, not {lookahead_steps}")
     scene = as_built_plan(plan, built)
     placed = placed_count(plan, built)
-    runner = StepRunner(scene, options, placed, min_margin_g)
+    runner = StepRunner(scene, options, placed, min_margin_g, checked=checked)
     if cell is not None:
         runner.extra = cell.ahead(runner)
-    checker = runner.checker
+    checker = runner.walker(scene)
+    fresh = runner.fork(checker)
     total = step_count(scene)
     as_built = runner.report(scene, placed - 1, checker) if placed else None
     stop = total if lookahead_steps == 0 else min(total, placed + lookahead_steps)
-    steps = runner.scan(scene, placed, stop, checker, until_failure)
+    forks: list[StepChecker] = []
+    steps = runner.scan(scene, placed, stop, checker, until_failure, forks)
     failing = next((s for s in steps if not s.passes), None)
     message = ""
     if as_built is not None and not as_built.stable:
@@ -354,7 +471,8 @@ def look_ahead(plan: Scene, built: Scene, options: CheckOptions = CheckOptions()
         runner.extra.timeline(scene, range(placed - 1, placed), known_only=True)
     return Lookahead(placed, total, as_built, steps,
                      -1 if failing is None else failing.step, message,
-                     time.perf_counter() - start, timeline)
+                     time.perf_counter() - start, timeline,
+                     None if checked else runner.handover(scene, steps, forks, checker, fresh))
 
 
 def held_by_step(plan: Scene) -> list[tuple[str, ...]]:
@@ -401,7 +519,7 @@ def with_plan(scene: Scene, order, held: list[tuple[str, ...]]) -> Scene:
                       holds_of(scene, order, held), scene.pose_uncertainty, approach)
 
 
-__all__ = ["DEFAULT_LOOKAHEAD", "Lookahead", "StepAhead", "StepRunner", "as_built_plan",
+__all__ = ["Checked", "DEFAULT_LOOKAHEAD", "Lookahead", "StepAhead", "StepRunner", "as_built_plan",
            "as_built_state",
            "check_plan_design", "failure", "held_by_step", "holds_of", "look_ahead",
-           "placed_count", "plan_order", "where", "with_plan"]
+           "placed_count", "plan_order", "state_key", "where", "with_plan"]

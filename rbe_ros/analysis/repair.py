@@ -6,16 +6,21 @@ poses, the holds of the steps done as the plan had them, the robots' count K and
 capacities. The remaining steps are checked in order (the look-ahead's rules,
 :mod:`rbe_ros.analysis.lookahead`); at the first step that fails:
 
-1. **hold**: one more block held at that step (within K): first a block the robot held at
-   the step before (it keeps its grip), then those the failed check suggests holding or names
-   as moving, then the block placed there; the hold lasts that step (a later step that
-   needs it fails without it and is repaired the same way, so holds last as long as needed);
+1. **hold**: one more block held at that step (within K): first a block a robot held at
+   the step before (it keeps its grip), then those the failed check suggests holding (the
+   hold search found them to stand), then the block placed there (the robot that placed it
+   keeps its grip; when the step releases no hold, its state is then the one before, which
+   stood, with a block held still against it), then the others it names as moving; the
+   hold lasts that step (a later step that needs it fails without it and is repaired the
+   same way, so holds last as long as needed);
 2. **swap**: the block of that step exchanged with one of the next few (holds stay with the
    steps: a robot holding the block placed at step k holds the one placed there now);
 
 and the check goes on from that step. A change only alters that step and later ones, and
 every state (blocks present, blocks held) is checked once, so a repair costs about one check
-of the steps it changes beyond the look-ahead of the remainder. When neither saves a step,
+of the steps it changes beyond the look-ahead of the remainder; after the look-ahead that
+found the failure (the node's) it checks none of the look-ahead's states again. When neither
+saves a step,
 3. **replan**: the remainder is planned again (:func:`plan_sequence` with the placed blocks
 as a fixed prefix, the same K) and re-checked at the measured poses.
 
@@ -29,8 +34,8 @@ from dataclasses import dataclass, field
 
 from ..rbe.result import Report
 from ..scene import Hold, Scene, SceneError
-from .lookahead import (StepAhead, StepRunner, as_built_plan, held_by_step, placed_count,
-                        plan_order, where, with_plan)
+from .lookahead import (Checked, StepAhead, StepRunner, as_built_plan, held_by_step,
+                        placed_count, plan_order, where, with_plan)
 from .options import CheckOptions
 from .planning import plan_sequence
 
@@ -60,6 +65,9 @@ class Repair:
     placed: int = 0                        # steps done (the as-built state)
     checks: int = 0                        # states checked
     time: float = 0.0                      # s
+    #: the states checked (the look-ahead's handed over included), for the look-ahead of
+    #: the repaired plan (:func:`rbe_ros.analysis.lookahead.look_ahead`'s ``checked``)
+    checked: Checked | None = field(default=None, repr=False)
 
 
 class _Stop(Exception):
@@ -69,7 +77,8 @@ class _Stop(Exception):
 def repair_plan(plan: Scene, built: Scene, options: CheckOptions = CheckOptions(), *,
                 max_held: int | None = None, min_margin_g: float = 0.0,
                 time_limit: float = math.inf, replan: bool = True,
-                lookahead_steps: int = 0, workers: int = 0) -> Repair:
+                lookahead_steps: int = 0, workers: int = 0,
+                checked: Checked | None = None) -> Repair:
     """Repair the rest of ``plan`` from the as-built scene ``built`` (the design's supports
     and the measured blocks, a prefix of the plan's order; :func:`rbe_ros.io.poses.
     scene_at_poses`), see the module docstring. ``max_held``: K (None: the plan's largest
@@ -81,7 +90,10 @@ def repair_plan(plan: Scene, built: Scene, options: CheckOptions = CheckOptions(
     ``workers`` >= 1: the states checked whole on that many processes, the plan's remaining
     states queued ahead of the scan and a failing step's hold candidates before them: the
     same verdicts, and the same repair for any number of workers (without, a failing
-    step's incremental report may rank its hold candidates otherwise).
+    step's incremental report may rank its hold candidates otherwise). ``checked``: the
+    states the look-ahead that found the failure checked on the same as-built state
+    (:attr:`rbe_ros.analysis.lookahead.Lookahead.checked`), none checked again: the scan
+    goes on from its first failing step, the same repair as without.
 
     Raises SceneError for bad input (as :func:`rbe_ros.analysis.lookahead.look_ahead`)."""
     start = time.perf_counter()
@@ -98,7 +110,9 @@ def repair_plan(plan: Scene, built: Scene, options: CheckOptions = CheckOptions(
 
     if lookahead_steps < 0:
         raise SceneError(f"lookahead_steps must be >= 0, not {lookahead_steps}")
-    runner = StepRunner(scene, options, placed, min_margin_g, out_of_time, workers)
+    # the as-built state's tolerance question only when it does not stand (the message)
+    runner = StepRunner(scene, options, placed, min_margin_g, out_of_time, workers,
+                        tolerance=False, checked=checked)
     fixer = _Fixer(runner, scene, placed, k_max, order, held, lookahead_steps)
     try:
         try:
@@ -114,6 +128,7 @@ def repair_plan(plan: Scene, built: Scene, options: CheckOptions = CheckOptions(
     finally:
         runner.close()
     result.checks, result.time = runner.checks, time.perf_counter() - start
+    result.checked = runner.known()
     return result
 
 
@@ -135,14 +150,14 @@ class _Fixer:
 
     def run(self) -> Repair:
         runner = self.runner
-        checker = runner.checker
         current = self.plan()
+        checker = runner.walker(current)
         runner.prefetch(current, range(max(self.placed - 1, 0), self.stop()))
         if self.placed:
             state = runner.ahead(current, self.placed - 1, checker)
             if not state.stable:
                 self.why = (f"{where(state.step, state.block)} does not stand as built: "
-                            f"{state.report.message}")
+                            f"{runner.explained(current).message}")
                 return self.failed(self.why, reason=self.why, replan=False)
         steps: list[StepAhead] = []
         k = self.placed
@@ -187,7 +202,7 @@ class _Fixer:
         present = set(self.order[:k + 1])
         kept = [b for b in (self.held[k - 1] if k else ()) if b not in now]
         report: Report = step.report
-        ranked = [*kept, *report.suggested_holds, *report.unstable_blocks, step.block]
+        ranked = [*kept, *report.suggested_holds, step.block, *report.unstable_blocks]
         tried = []
         for b in dict.fromkeys(ranked):
             if b and b in present and b not in now and len(tried) < HOLD_CANDIDATES:

@@ -23,8 +23,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 from ..analysis.cell_execution import CellPlan, repair_cell
-from ..analysis.lookahead import (DEFAULT_LOOKAHEAD, as_built_state, check_plan_design,
-                                  look_ahead)
+from ..analysis.lookahead import (DEFAULT_LOOKAHEAD, Checked, as_built_state,
+                                  check_plan_design, look_ahead)
 from ..analysis.options import CheckOptions
 from ..analysis.repair import Repair, repair_plan
 from ..analysis.timeline import Timeline
@@ -54,23 +54,24 @@ class Settings:
                    float(recorded.get("min_margin_g", MIN_MARGIN_G)))
 
 
-#: How a repair is made: ``repair(plan, built, options, settings, cell)`` -> the repair
-#: and, for a cell, the repaired plan's timeline.
-Repairer = Callable[[Scene, Scene, CheckOptions, Settings, Cell | None],
+#: How a repair is made: ``repair(plan, built, options, settings, cell, checked)`` -> the
+#: repair and, for a cell, the repaired plan's timeline.
+Repairer = Callable[[Scene, Scene, CheckOptions, Settings, Cell | None, Checked | None],
                     tuple[Repair, Timeline | None]]
 
 
 def repair(plan: Scene, built: Scene, options: CheckOptions, settings: Settings,
-           cell: Cell | None = None) -> tuple[Repair, Timeline | None]:
+           cell: Cell | None = None, checked: Checked | None = None
+           ) -> tuple[Repair, Timeline | None]:
     """The core's repair with the node's settings: within its look-ahead window, its
-    minimum margin, the plan's cell (a function of its own: the node runs it in another
-    process)."""
+    minimum margin, the plan's cell, the states its look-ahead ``checked`` not checked
+    again (a function of its own: the node runs it in another process)."""
     if cell is not None:
         return repair_cell(plan, built, options, CellPlan(cell, plan, options),
                            min_margin_g=settings.min_margin_g,
-                           lookahead_steps=settings.lookahead_steps)
+                           lookahead_steps=settings.lookahead_steps, checked=checked)
     return repair_plan(plan, built, options, min_margin_g=settings.min_margin_g,
-                       lookahead_steps=settings.lookahead_steps), None
+                       lookahead_steps=settings.lookahead_steps, checked=checked), None
 
 
 NO_PLAN = "no plan: set design_file to a planned scene, or send a design with a sequence"
@@ -94,6 +95,7 @@ class Execution:
         self._outputs: list[tuple[str, dict]] = []
         self._repaired = None               # the as-built scene a repair was last tried at
         self._held: tuple = (None, None, None)  # the last (built, plan, holding(built))
+        self._checked: Checked | None = None  # the states the last look-ahead checked
 
     def set_design(self, design: Scene | None, cell: Cell | None = None) -> None:
         """A new design: its sequence (and holds) is the plan, for ``cell``'s robots when
@@ -189,7 +191,9 @@ class Execution:
         if state["first_failing_step"] < 0 or self._repaired is built:
             return None
         self._repaired = built          # tried once per as-built state
-        found, timeline = repairer(self.plan, built, options, settings, self.cell)
+        # the look-ahead's states handed over: the repair checks none of them again
+        found, timeline = repairer(self.plan, built, options, settings, self.cell,
+                                   self._checked)
         emit(PLAN_UPDATE, plan_update_to_dict(
             header, reason=found.reason or state["message"], changed_step=found.changed_step,
             feasible=found.feasible, repair=found.kind, order=found.order, holds=found.holds,
@@ -197,7 +201,9 @@ class Execution:
         if found.feasible and found.changed:
             self.plan = replace(self.plan, sequence=tuple(found.order),
                                 holds=tuple(found.holds))
-            emit(EXECUTION, self._state(built, as_built, header, options, settings))
+            # the repair's states (the look-ahead's with them) not checked again
+            emit(EXECUTION, self._state(built, as_built, header, options, settings,
+                                        found.checked))
         return None
 
     def _cell(self, options: CheckOptions) -> CellPlan | None:
@@ -209,9 +215,12 @@ class Execution:
             self._cell_plan = CellPlan(self.cell, self.plan, options)
         return self._cell_plan
 
-    def _state(self, built: Scene, as_built, header, options, settings) -> dict:
+    def _state(self, built: Scene, as_built, header, options, settings,
+               checked: Checked | None = None) -> dict:
         ahead = look_ahead(self.plan, built, options, lookahead_steps=settings.lookahead_steps,
-                           min_margin_g=settings.min_margin_g, cell=self._cell(options))
+                           min_margin_g=settings.min_margin_g, cell=self._cell(options),
+                           checked=checked)
+        self._checked = ahead.checked
         if ahead.timeline is not None:
             self.timeline = timeline_to_dicts(ahead.timeline, header)
             self.timeline_done = max((i for i, a in enumerate(ahead.timeline.actions)

@@ -980,9 +980,10 @@ class RbeChecks:
         self._publish_markers(markers)
 
     def _repair(self, plan: Scene, built: Scene, options: CheckOptions, settings: Settings,
-                cell):
-        """The repair in a worker process (:mod:`rbe_ros.ros.workers`)."""
-        return self._pool().repair(plan, built, options, settings, cell)
+                cell, checked):
+        """The repair in a worker process (:mod:`rbe_ros.ros.workers`), the look-ahead's
+        ``checked`` states sent with it."""
+        return self._pool().repair(plan, built, options, settings, cell, checked)
 
     def _pool(self) -> Workers:
         """The worker processes (each spawned at its first use)."""

@@ -24,6 +24,7 @@ from multiprocessing import get_context
 from rbe_msgs.msg import AssemblyState
 from rclpy.serialization import deserialize_message
 
+from ..analysis.lookahead import Checked
 from ..analysis.options import CheckOptions
 from ..analysis.planning import Plan, PlanProgress
 from ..analysis.repair import Repair
@@ -115,9 +116,10 @@ class Workers:
         self._submit(time.sleep, 0.0)
 
     def repair(self, plan: Scene, built: Scene, options: CheckOptions, settings: Settings,
-               cell: Cell | None = None) -> tuple[Repair, Timeline | None]:
+               cell: Cell | None = None, checked: Checked | None = None
+               ) -> tuple[Repair, Timeline | None]:
         """:func:`rbe_ros.io.execution.repair` in a worker."""
-        return self._submit(repair, plan, built, options, settings, cell).result()
+        return self._submit(repair, plan, built, options, settings, cell, checked).result()
 
     def close(self) -> None:
         """Stop the processes now (a plan or repair running is not waited for) and the

@@ -7,7 +7,9 @@ from __future__ import annotations
 import json
 import math
 import pickle
+from dataclasses import replace
 
+import numpy as np
 import pytest
 
 from rbe_ros import generators
@@ -317,3 +319,20 @@ def test_an_as_built_state_that_does_not_stand_says_why_as_the_look_ahead(capsys
     found = repair_plan(scene, built)
     assert not found.feasible and found.message == \
         f"step 0 (a) does not stand as built: {ahead.as_built.message}"
+
+
+def test_a_reordered_plan_keeps_each_blocks_approach():
+    """A repair that swaps steps moves each block's given approach with it (the node's
+    plan under execution pairs approaches with steps by index)."""
+    down, b_way, c_way = (0.0, 0.0, -1.0), (0.0, 0.6, -0.8), (0.0, -0.6, -0.8)
+    scene = replace(counterweight(), approach=tuple(np.array(d) for d in (down, b_way, c_way)))
+    measured = pose(SHIFT, YAW)
+    built = scene_at_poses(scene, {"a": (measured["position"], measured["orientation"])})
+    execution = Execution()
+    execution.set_design(scene)
+    out = execution.advance(built, None, {}, CheckOptions(), Settings(lookahead_steps=0),
+                            repair)
+    assert out[1][1]["order"] == ["a", "c", "b"]
+    assert execution.plan.sequence == ("a", "c", "b")
+    assert np.allclose(execution.plan.approach_of("b"), b_way)
+    assert np.allclose(execution.plan.approach_of("c"), c_way)

@@ -199,8 +199,12 @@ class Execution:
             feasible=found.feasible, repair=found.kind, order=found.order, holds=found.holds,
             message=found.message, timeline=timeline_to_dicts(timeline, header)))
         if found.feasible and found.changed:
+            # a block's approach stays its own when the repair reorders the steps
+            approach = dict(zip(self.plan.sequence, self.plan.approach))
             self.plan = replace(self.plan, sequence=tuple(found.order),
-                                holds=tuple(found.holds))
+                                holds=tuple(found.holds),
+                                approach=tuple(approach[b] for b in found.order)
+                                if approach else ())
             # the repair's states (the look-ahead's with them) not checked again
             emit(EXECUTION, self._state(built, as_built, header, options, settings,
                                         found.checked))

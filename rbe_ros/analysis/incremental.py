@@ -205,7 +205,6 @@ class StepChecker:
         local = assembly.subset(ids)
         if no_caps is not None and not no_caps[1] <= {_key(local, it) for it in local.interfaces}:
             return None                       # kept friction outside R: kept in the whole
-        index = {b.id: k for k, b in enumerate(local.blocks)}
         wrenches: dict[int, np.ndarray] = {}
         for it in assembly.interfaces:
             inside_a, inside_b = it.a in region, it.b in region
@@ -215,7 +214,7 @@ class StepChecker:
             if kept is None:
                 return None                   # a new contact to the outside: not this region
             j, sign = (it.b, 1.0) if inside_b else (it.a, -1.0)
-            wrench = wrenches.setdefault(index[assembly.blocks[j].id], np.zeros(6))
+            wrench = wrenches.setdefault(local.index[assembly.blocks[j].id], np.zeros(6))
             forces = sign * (kept.normal_forces[:, None] * kept.normal + kept.tangential_forces)
             wrench[:3] += forces.sum(axis=0)
             wrench[3:] += cross(kept.polygon - assembly.blocks[j].centroid, forces).sum(axis=0)

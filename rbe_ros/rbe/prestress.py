@@ -672,7 +672,7 @@ def _motion_of(model: EquilibriumModel, step: Solution):
     linear, angular = accelerations(model, step)
     sizes = np.array([model.blocks[j].size for j in model.free])
     rate = np.linalg.norm(linear, axis=1) + np.linalg.norm(angular, axis=1) * sizes
-    g = model.force_scale / sum(model.blocks[j].mass for j in model.free)
+    g = float(np.linalg.norm(model.gravity))
     moving = np.flatnonzero((rate > MOVING_SHARE * rate.max(initial=0.0))
                             & (rate > MOVING_G * g))
     order = moving[np.argsort(-_tied(rate[moving]), kind="stable")]

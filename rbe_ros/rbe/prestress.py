@@ -112,6 +112,9 @@ LEAST_TOL = 1e-10
 #: Clarabel's iterations on one of them, then HiGHS: a partial dome's take 31-33; those it
 #: does not solve (a shelf's, with caps at the solver's tolerance) it fails after some 170.
 LEAST_MAX_ITER = 50
+#: More rubbing interfaces than this: the least of their sum first (_least_normals); with
+#: fewer, its program costs as much as theirs.
+SUM_FIRST = 2
 #: The least hold within the settled caps (the wrench needed beyond the capacities): the
 #: check's objective scaled by this against the robots' wrenches, so that
 #: solver.HOLD_WEIGHT's bound on how far the wrench is from the least, O(g / w), is this
@@ -424,8 +427,14 @@ def _least_normals(model: EquilibriumModel, options: SolveOptions, load, caps: n
     solver whose cost alone changes from one interface to the next, its least the lower of
     its primal and dual objectives (HiGHS' simplex took 7 times the time on a partial dome);
     by HiGHS where Clarabel does not solve it (a cap of the solver's tolerance makes the
-    program nearly infeasible for an interior point: type-b turned about y). None when a
-    grip or a failed program leaves it open."""
+    program nearly infeasible for an interior point: type-b turned about y). With more
+    than SUM_FIRST interfaces, the least of their sum first: a point of the program (as
+    :func:`_satisfies` accepts it) whose normal resultant at an interface is within
+    SHARE_TOL W of 0 gives it 0 without its own program, a lower bound of any least
+    (fn >= 0) and, within the point's accuracy of it, as far below the noise floor as the
+    least (the caps _own_caps makes are the same). A partial dome's open course: most of its
+    rubbing interfaces need no normal force at all. None when a grip or a failed program
+    leaves it open."""
     if model.grips:
         return None
     from scipy.optimize import linprog
@@ -457,9 +466,9 @@ def _least_normals(model: EquilibriumModel, options: SolveOptions, load, caps: n
     settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = LEAST_TOL
     settings.max_iter = LEAST_MAX_ITER
     solver = None
-    out = np.zeros(len(model.interfaces))
-    for k in interfaces:
-        cost = np.concatenate([(model.vertex_interface == k).astype(float), np.zeros(2 * nv)])
+
+    def least_of(cost: np.ndarray):
+        nonlocal solver
         if solver is None:
             solver = clarabel.DefaultSolver(sp.csc_matrix((3 * nv, 3 * nv)), cost, matrix,
                                             np.concatenate([rhs, up, np.zeros(nv)]), cones,
@@ -467,7 +476,23 @@ def _least_normals(model: EquilibriumModel, options: SolveOptions, load, caps: n
         else:
             solver.update(q=cost)
         result = solver.solve()
-        if str(result.status) == "Solved" and _satisfies(matrix, rhs, up, np.array(result.x)):
+        x = np.array(result.x)
+        return result if str(result.status) == "Solved" and _satisfies(matrix, rhs, up, x) \
+            else None, x
+
+    out = np.zeros(len(model.interfaces))
+    free = np.zeros(len(model.interfaces), dtype=bool)     # 0 in a point of the program
+    if len(interfaces) > SUM_FIRST:
+        result, x = least_of(np.concatenate([np.isin(model.vertex_interface, interfaces)
+                                             .astype(float), np.zeros(2 * nv)]))
+        if result is not None:
+            free = _sums(model, x[:nv]) <= SHARE_TOL
+    for k in interfaces:
+        if free[k]:
+            continue
+        cost = np.concatenate([(model.vertex_interface == k).astype(float), np.zeros(2 * nv)])
+        result, _ = least_of(cost)
+        if result is not None:
             least = min(result.obj_val, result.obj_val_dual)
         else:
             res = linprog(cost, A_ub=upper, b_ub=up if rows else None, A_eq=equal, b_eq=rhs,

@@ -112,9 +112,10 @@ LEAST_TOL = 1e-10
 #: Clarabel's iterations on one of them, then HiGHS: a partial dome's take 31-33; those it
 #: does not solve (a shelf's, with caps at the solver's tolerance) it fails after some 170.
 LEAST_MAX_ITER = 50
-#: More rubbing interfaces than this: the least of their sum first (_least_normals); with
-#: fewer, its program costs as much as theirs.
-SUM_FIRST = 2
+#: More rubbing interfaces than this: the least of their sum first (_least_normals). It
+#: pays where it spares at least one program: a few rubbing interfaces mostly each need a
+#: normal force, a partial dome's open course mostly none (docs/METHOD.md, Sequences).
+SUM_FIRST = 5
 #: The least hold within the settled caps (the wrench needed beyond the capacities): the
 #: check's objective scaled by this against the robots' wrenches, so that
 #: solver.HOLD_WEIGHT's bound on how far the wrench is from the least, O(g / w), is this
@@ -425,16 +426,17 @@ def _least_normals(model: EquilibriumModel, options: SolveOptions, load, caps: n
     them). A linear program each, in cones relaxed to their circumscribed octagon (the soc)
     and caps likewise: the least is never above the exact one. Solved by Clarabel, one
     solver whose cost alone changes from one interface to the next, its least the lower of
-    its primal and dual objectives (HiGHS' simplex took 7 times the time on a partial dome);
-    by HiGHS where Clarabel does not solve it (a cap of the solver's tolerance makes the
-    program nearly infeasible for an interior point: type-b turned about y). With more
-    than SUM_FIRST interfaces, the least of their sum first: a point of the program (as
-    :func:`_satisfies` accepts it) whose normal resultant at an interface is within
-    SHARE_TOL W of 0 gives it 0 without its own program, a lower bound of any least
-    (fn >= 0) and, within the point's accuracy of it, as far below the noise floor as the
-    least (the caps _own_caps makes are the same). A partial dome's open course: most of its
-    rubbing interfaces need no normal force at all. None when a grip or a failed program
-    leaves it open."""
+    its primal and dual objectives (HiGHS' simplex, even kept warm from one interface's
+    optimal basis to the next, takes thousands of iterations each: docs/METHOD.md); by HiGHS
+    where Clarabel does not solve it (a cap of the solver's tolerance makes the program
+    nearly infeasible for an interior point: type-b turned about y). With more than
+    SUM_FIRST interfaces, the least sum of their normal resultants first: an interface
+    whose normal resultant is within SHARE_TOL W of 0 at that point (one that
+    :func:`_satisfies` accepts) gets 0 without a program of its own: a lower bound of its
+    least (fn >= 0), and the least is within the point's accuracy of 0, far below the
+    noise floor under which _own_caps takes any least as none, so the caps are the same (a
+    partial dome's open course: most of its rubbing interfaces need no normal force).
+    None when a grip or a failed program leaves it open."""
     if model.grips:
         return None
     from scipy.optimize import linprog

@@ -114,6 +114,10 @@ LEAST_TOL = 1e-10
 #: Clarabel's iterations on one of them, then HiGHS: a partial dome's take 31-33; those it
 #: does not solve (a shelf's, with caps at the solver's tolerance) it fails after some 170.
 LEAST_MAX_ITER = 50
+#: More rubbing interfaces than this: the least of their sum first (_least_normals). It
+#: pays where it spares at least one program: a few rubbing interfaces mostly each need a
+#: normal force, a partial dome's open course mostly none (docs/METHOD.md, Sequences).
+SUM_FIRST = 5
 #: The least hold within the settled caps (the wrench needed beyond the capacities): the
 #: check's objective scaled by this against the robots' wrenches, so that
 #: solver.HOLD_WEIGHT's bound on how far the wrench is from the least, O(g / w), is this
@@ -439,10 +443,17 @@ def _least_normals(model: EquilibriumModel, options: SolveOptions, load, caps: n
     them). A linear program each, in cones relaxed to their circumscribed octagon (the soc)
     and caps likewise: the least is never above the exact one. Solved by Clarabel, one
     solver whose cost alone changes from one interface to the next, its least the lower of
-    its primal and dual objectives (HiGHS' simplex took 7 times the time on a partial dome);
-    by HiGHS where Clarabel does not solve it (a cap of the solver's tolerance makes the
-    program nearly infeasible for an interior point: type-b turned about y). None when a
-    grip or a failed program leaves it open."""
+    its primal and dual objectives (HiGHS' simplex, even kept warm from one interface's
+    optimal basis to the next, takes thousands of iterations each: docs/METHOD.md); by HiGHS
+    where Clarabel does not solve it (a cap of the solver's tolerance makes the program
+    nearly infeasible for an interior point: type-b turned about y). With more than
+    SUM_FIRST interfaces, the least sum of their normal resultants first: an interface
+    whose normal resultant is within SHARE_TOL W of 0 at that point (one that
+    :func:`_satisfies` accepts) gets 0 without a program of its own: a lower bound of its
+    least (fn >= 0), and the least is within the point's accuracy of 0, far below the
+    noise floor under which _own_caps takes any least as none, so the caps are the same (a
+    partial dome's open course: most of its rubbing interfaces need no normal force).
+    None when a grip or a failed program leaves it open."""
     if model.grips:
         return None
     from scipy.optimize import linprog
@@ -474,9 +485,9 @@ def _least_normals(model: EquilibriumModel, options: SolveOptions, load, caps: n
     settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = LEAST_TOL
     settings.max_iter = LEAST_MAX_ITER
     solver = None
-    out = np.zeros(len(model.interfaces))
-    for k in interfaces:
-        cost = np.concatenate([(model.vertex_interface == k).astype(float), np.zeros(2 * nv)])
+
+    def least_of(cost: np.ndarray):
+        nonlocal solver
         if solver is None:
             solver = clarabel.DefaultSolver(sp.csc_matrix((3 * nv, 3 * nv)), cost, matrix,
                                             np.concatenate([rhs, up, np.zeros(nv)]), cones,
@@ -484,7 +495,23 @@ def _least_normals(model: EquilibriumModel, options: SolveOptions, load, caps: n
         else:
             solver.update(q=cost)
         result = solver.solve()
-        if str(result.status) == "Solved" and _satisfies(matrix, rhs, up, np.array(result.x)):
+        x = np.array(result.x)
+        return result if str(result.status) == "Solved" and _satisfies(matrix, rhs, up, x) \
+            else None, x
+
+    out = np.zeros(len(model.interfaces))
+    free = np.zeros(len(model.interfaces), dtype=bool)     # 0 in a point of the program
+    if len(interfaces) > SUM_FIRST:
+        result, x = least_of(np.concatenate([np.isin(model.vertex_interface, interfaces)
+                                             .astype(float), np.zeros(2 * nv)]))
+        if result is not None:
+            free = _sums(model, x[:nv]) <= SHARE_TOL
+    for k in interfaces:
+        if free[k]:
+            continue
+        cost = np.concatenate([(model.vertex_interface == k).astype(float), np.zeros(2 * nv)])
+        result, _ = least_of(cost)
+        if result is not None:
             least = min(result.obj_val, result.obj_val_dual)
         else:
             res = linprog(cost, A_ub=upper, b_ub=up if rows else None, A_eq=equal, b_eq=rhs,

@@ -262,13 +262,17 @@ class StepRunner:
         self.memo: dict[tuple, Report] = dict(checked.reports) if checked else {}
         self._unasked: set[tuple] = set()      # as-built states the tolerance was not asked of
         self.checks = 0
-        self.checker = StepChecker(options, local=not options.full_solve)
+        self.checker = self._new_checker()
         #: further checks of each step ahead (a cell's: :mod:`rbe_ros.analysis.
         #: cell_execution`): ``extra(plan, step)`` -> the step, failing or not
         self.extra: Callable[[Scene, StepAhead], StepAhead] | None = None
         self.pool = StepPool(self.full, options, workers) if workers else None
         self._pending: dict[tuple, object] = {}        # state -> its future, running
         self._queue: collections.deque = collections.deque()    # (state, task) to run next
+
+    def _new_checker(self) -> StepChecker:
+        """A checker that has walked no step yet (the options' full solve: no regions)."""
+        return StepChecker(self.options, local=not self.options.full_solve)
 
     def close(self) -> None:
         """Stop the workers (a check under way is dropped)."""
@@ -355,8 +359,7 @@ class StepRunner:
         step = sequence_step(plan, self.placed - 1)
         if state_key(plan, step) in self._unasked:
             self._unasked.discard(state_key(plan, step))
-            self._check(plan, step, StepChecker(self.options, local=not self.options.full_solve),
-                        True)
+            self._check(plan, step, self._new_checker(), True)
         return self.report(plan, self.placed - 1, self.checker)
 
     def ahead(self, plan: Scene, k: int, checker: StepChecker) -> StepAhead:
@@ -425,7 +428,7 @@ class StepRunner:
         another plan: the repaired one), no walk handed over (those whose tolerance
         question was not asked left out: a look-ahead's as-built report has it)."""
         return Checked(self.basis, {k: r for k, r in self.memo.items() if k not in self._unasked},
-                       (), StepChecker(self.options, local=not self.options.full_solve))
+                       (), self._new_checker())
 
 
 def look_ahead(plan: Scene, built: Scene, options: CheckOptions = CheckOptions(), *,
@@ -511,15 +514,21 @@ def with_plan(scene: Scene, order, held: list[tuple[str, ...]]) -> Scene:
     held = list(held[:len(order)])
     if held and held[-1]:
         held.append(())
-    approach = ()
-    if scene.approach:
-        given = dict(zip(scene.sequence, scene.approach))
-        approach = tuple(given.get(b) for b in order)
     return make_scene(scene.name, scene.blocks, scene.gravity, order,
-                      holds_of(scene, order, held), scene.pose_uncertainty, approach)
+                      holds_of(scene, order, held), scene.pose_uncertainty,
+                      approaches(scene, order))
 
 
-__all__ = ["Checked", "DEFAULT_LOOKAHEAD", "Lookahead", "StepAhead", "StepRunner", "as_built_plan",
-           "as_built_state",
-           "check_plan_design", "failure", "held_by_step", "holds_of", "look_ahead",
-           "placed_count", "plan_order", "state_key", "where", "with_plan"]
+def approaches(scene: Scene, order) -> tuple:
+    """The approaches of ``scene`` (one per step of its sequence) for the steps of
+    ``order``: each block's its own, whatever its step (none given: none)."""
+    if not scene.approach:
+        return ()
+    given = dict(zip(scene.sequence, scene.approach))
+    return tuple(given.get(b) for b in order)
+
+
+__all__ = ["Checked", "DEFAULT_LOOKAHEAD", "Lookahead", "StepAhead", "StepRunner", "approaches",
+           "as_built_plan", "as_built_state", "check_plan_design", "failure", "held_by_step",
+           "holds_of", "look_ahead", "placed_count", "plan_order", "state_key", "where",
+           "with_plan"]

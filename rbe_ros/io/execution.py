@@ -23,7 +23,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 from ..analysis.cell_execution import CellPlan, repair_cell
-from ..analysis.lookahead import (DEFAULT_LOOKAHEAD, Checked, as_built_state,
+from ..analysis.lookahead import (DEFAULT_LOOKAHEAD, Checked, approaches, as_built_state,
                                   check_plan_design, look_ahead)
 from ..analysis.options import CheckOptions
 from ..analysis.repair import Repair, repair_plan
@@ -200,11 +200,9 @@ class Execution:
             message=found.message, timeline=timeline_to_dicts(timeline, header)))
         if found.feasible and found.changed:
             # a block's approach stays its own when the repair reorders the steps
-            approach = dict(zip(self.plan.sequence, self.plan.approach))
             self.plan = replace(self.plan, sequence=tuple(found.order),
                                 holds=tuple(found.holds),
-                                approach=tuple(approach[b] for b in found.order)
-                                if approach else ())
+                                approach=approaches(self.plan, found.order))
             # the repair's states (the look-ahead's with them) not checked again
             emit(EXECUTION, self._state(built, as_built, header, options, settings,
                                         found.checked))

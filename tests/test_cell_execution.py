@@ -207,3 +207,42 @@ def test_repair_cli_on_a_cell_plan(tmp_path, capsys):
     assert result["repair"] == "hold" and len(result["timeline"]) == 10
     assert [r["name"] for r in result["cell"]["robots"]] == ["r1", "r2"]
     assert main(["check", str(out), "--timeline", "--strict"]) == 0
+
+
+def test_a_cell_repair_checks_no_step_state_twice(monkeypatch):
+    """The timeline of a cell's repaired plan is checked with the repair's states known: a
+    state after an action that is a step state the repair checked (the same blocks, held at
+    the same grips) is not checked again, and every state after an action of the remaining
+    steps stands."""
+    from rbe_ros.analysis import cell_execution, timeline
+    from rbe_ros.analysis.incremental import StepChecker
+
+    design = overhang_stack()
+    cell = cell_from_dict(TWO_ROBOTS)
+    plan = plan_sequence(design, 1, CheckOptions(), cell=cell, keep_sequence=True)
+    built = scene_at_poses(plan.scene, at(design, ["s1", "s2"], {"s2": ((0.01, 0.0, 0.0), 2.0)}))
+    states = {"repair": [], "timeline": []}
+    step_check, state_check = StepChecker.check, timeline.check
+
+    def key(assembly):
+        return (frozenset(b.id for b in assembly.blocks),
+                frozenset((g.block, g.point if g.point is None else tuple(np.round(g.point, 9)),
+                           g.max_force, g.max_torque)
+                          for g in assembly.grips))
+
+    def stepped(self, assembly):
+        states["repair"].append(key(assembly))
+        return step_check(self, assembly)
+
+    def checked(assembly, options):
+        states["timeline"].append(key(assembly))
+        return state_check(assembly, options)
+
+    monkeypatch.setattr(StepChecker, "check", stepped)
+    monkeypatch.setattr(timeline, "check", checked)
+    found, line = cell_execution.repair_cell(plan.scene, built, CheckOptions(),
+                                             CellPlan(cell, plan.scene, CheckOptions()))
+    assert found.kind == "hold" and found.order == ["s1", "s2", "s3", "c"]
+    assert found.checks == len(states["repair"]) == 4
+    assert states["timeline"] and not set(states["timeline"]) & set(states["repair"])
+    assert line.feasible and all(a.report.stable for a in line.actions if a.step >= 2)

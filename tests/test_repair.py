@@ -18,6 +18,7 @@ from rbe_ros.analysis.assembly import Assembly
 from rbe_ros.analysis.incremental import StepChecker
 from rbe_ros.analysis.lookahead import check_plan_design, look_ahead
 from rbe_ros.analysis.options import CheckOptions
+from rbe_ros.analysis import repair as repair_module
 from rbe_ros.analysis.repair import repair_plan
 from rbe_ros.analysis.steps import sequence_step, step_count
 from rbe_ros.analysis.verdict import check
@@ -336,3 +337,47 @@ def test_a_reordered_plan_keeps_each_blocks_approach():
     assert execution.plan.sequence == ("a", "c", "b")
     assert np.allclose(execution.plan.approach_of("b"), b_way)
     assert np.allclose(execution.plan.approach_of("c"), c_way)
+
+
+def test_the_re_plan_path_checks_no_state_the_planner_checked(monkeypatch):
+    """With no hold (K 0) and no swap (a window of none) the counterweight's repair re-plans
+    (c before b): the planner checks each state of its plan at the measured poses, and the
+    repair takes its steps from those checks, none checked again; the plan is the one the
+    re-check of every step made (a, c, b), and each remaining state stands when checked
+    whole on its own."""
+    scene = counterweight()
+    measured = pose(SHIFT, YAW)
+    built = scene_at_poses(scene, {"a": (measured["position"], measured["orientation"])})
+    monkeypatch.setattr(repair_module, "SWAP_WINDOW", 0)
+    events = []         # ("runner", state) of each state the repair's runner checks, then
+    real, plan = StepChecker.check, repair_module.plan_sequence
+
+    def counted(self, assembly):
+        events.append(("runner", frozenset(b.id for b in assembly.blocks)))
+        return real(self, assembly)
+
+    def planned(*args, **kwargs):
+        found = plan(*args, **kwargs)
+        events.append(("planned", found.order))
+        return found
+
+    monkeypatch.setattr(StepChecker, "check", counted)
+    monkeypatch.setattr(repair_module, "plan_sequence", planned)
+    found = repair_plan(scene, built, max_held=0)
+    assert found.kind == "replan" and found.feasible and found.order == ["a", "c", "b"]
+    # the as-built state and step 1 (b tips a and b over the edge), then the planner's
+    assert events == [("runner", {"ground", "a"}), ("runner", {"ground", "a", "b"}),
+                      ("planned", ["a", "c", "b"])] and found.checks == 2
+    assert [(s.step, s.block, s.stable, s.passes) for s in found.steps] == [
+        (1, "c", True, True), (2, "b", True, True)]
+    assert stands_whole(found.scene, 1) == [True, True]
+    assert com_x(A, B, shift=SHIFT) > 0 > com_x(A, B, C, shift=SHIFT)
+    # given approaches other than the planner's choice (down): its checks are not those
+    # states' (another path), which the repair checks
+    events.clear()
+    sideways = (0.0, 0.6, -0.8), (0.0, -0.6, -0.8)
+    scene = replace(scene, approach=tuple(np.array(d) for d in ((0, 0, -1.0), *sideways)))
+    built = scene_at_poses(scene, {"a": (measured["position"], measured["orientation"])})
+    again = repair_plan(scene, built, max_held=0)
+    assert again.order == found.order and again.checks == 4
+    assert events[-2:] == [("runner", {"ground", "a", "c"}), ("runner", {"ground", "a", "b", "c"})]

@@ -200,7 +200,10 @@ def repair_cell(plan: Scene, built: Scene, options: CheckOptions, cell: CellPlan
                         checked=checked)
     if not found.feasible or found.scene is None:
         return found, None
-    runner = StepRunner(found.scene, options, found.placed, min_margin_g)
+    # the repair's states known: a state after an action that is a step state it checked
+    # is not checked again
+    runner = StepRunner(found.scene, options, found.placed, min_margin_g,
+                        checked=found.checked)
     total = len(held_by_step(found.scene))
     stop = total if not lookahead_steps else min(total, found.placed + lookahead_steps)
     timeline = cell.ahead(runner).timeline(found.scene, range(found.placed, stop))

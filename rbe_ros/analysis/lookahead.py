@@ -352,6 +352,26 @@ class StepRunner:
         self.checks += 1
         return found
 
+    def adopt(self, plan: Scene, k: int, report: Report) -> None:
+        """Keep ``report``, the planner's of step ``k`` (past the as-built state) of
+        ``plan`` on these blocks (:attr:`rbe_ros.analysis.planning.Plan.reports`: slim, each
+        held block gripped at its centroid within the check's capacities, the placed block's
+        approach its own choice, a margin when one is asked for), as that state's, which is
+        then not checked again: when it is that state's check, i.e. the same blocks held
+        with those grips, no approach given or the one the planner chose, and the margin
+        made when these options ask for it. Else the state is checked when it is asked for."""
+        step = sequence_step(plan, k)
+        given = plan.approach_of(step.block)
+        if (k < self.placed or set(report.held_blocks) != set(step.held)
+                or any(g.point is not None or g.max_force is not None
+                       or g.max_torque is not None for g in step.grips)
+                or (given is not None and self.options.insertion.enabled
+                    and not (report.insertable
+                             and np.array_equal(given, report.insertion_direction)))
+                or (self.options.margin_directions and report.margin_g == NOT_COMPUTED)):
+            return
+        self.memo.setdefault(state_key(plan, step), replace(report, held_blocks=step.held))
+
     def explained(self, plan: Scene) -> Report:
         """The report of the as-built state of ``plan`` (its step ``placed - 1``) with
         whether its verdict hangs on the contact tolerance, asked now if it was not (the

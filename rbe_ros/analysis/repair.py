@@ -22,7 +22,8 @@ of the steps it changes beyond the look-ahead of the remainder; after the look-a
 found the failure (the node's) it checks none of the look-ahead's states again. When neither
 saves a step,
 3. **replan**: the remainder is planned again (:func:`plan_sequence` with the placed blocks
-as a fixed prefix, the same K) and re-checked at the measured poses.
+at their measured poses a fixed prefix, the same K); its steps are the planner's checks
+there, none checked again (:meth:`rbe_ros.analysis.lookahead.StepRunner.adopt`).
 
 Nothing saves it: not feasible, and the message names the step and block that cannot stand.
 """
@@ -268,7 +269,9 @@ class _Fixer:
                       None, [], self.placed)
 
     def replan(self, options: CheckOptions, min_margin_g: float, time_limit: float) -> Repair:
-        """The remainder planned again from the as-built state, re-checked step by step."""
+        """The remainder planned again from the as-built state, its steps taken from the
+        planner's checks there (a state the planner's check is not of, by its grips or
+        approach, checked step by step)."""
         n = len(self.original[0])
         prefix = self.original[0][:self.placed]
         base = with_plan(self.scene, self.original[0], self.original[1])
@@ -289,6 +292,9 @@ class _Fixer:
         plan = self.plan()
         self.held = held_by_step(plan)
         self.window = 0                 # a new remainder: every step of it checked
+        # the planner checked each state of its plan at the measured poses: none again
+        for k in range(self.placed, len(self.held)):
+            runner.adopt(plan, k, found.reports[k])
         runner.prefetch(plan, range(self.placed, len(self.held)), first=True)
         steps = runner.scan(plan, self.placed, len(self.held), checker)
         if steps and not steps[-1].passes:

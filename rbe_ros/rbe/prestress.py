@@ -570,6 +570,10 @@ class LeastNormals:
         settings.verbose = False
         settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = LEAST_TOL
         settings.max_iter = LEAST_MAX_ITER
+        # no iterative refinement of the KKT solves (as solver.py's first attempt): Clarabel
+        # ends on its iterates' residuals, so the least stays within LEAST_TOL (moved by
+        # 1.2e-10 W at most on a partial dome's, for half the time: docs/METHOD.md)
+        settings.iterative_refinement_enable = False
         self.settings, self.equal, self.upper = settings, equal, upper
         self.model, self.mu, self.cone, self.capped = model, options.mu, options.cone, capped
         self.h, self.facets, self.facet_rows = h, len(angles), facet_rows

@@ -4,10 +4,12 @@ suite and the generators.
 
 The savings: the least forces of a step's motion re-solved by the motion's own Clarabel
 solver, and the steps' problems under new caps by the solver of the step before (only the
-load and the caps differ: solver.Kept); after a step whose motion was near rest, the RBE
-problem with the caps tried before the motion (it has a field exactly when the step leaves
-no motion), and so in the own-caps rule by the kept solver of that problem. The oracle
-undoes them through the module's own names: no solver kept, the motion always first.
+load and the caps differ: solver.Kept), also after it proved its problem infeasible; after
+a step whose motion was near rest, the RBE problem with the caps tried before the motion
+(it has a field exactly when the step leaves no motion), and so in the own-caps rule by the
+kept solver of that problem; the own-caps rule's field within the caps alone and its least
+normal forces' program kept from one of its calls to the next. The oracle undoes them
+through the module's own names: no solver kept, no program kept, the motion always first.
 """
 import json
 from dataclasses import replace
@@ -37,9 +39,18 @@ class _NoneKept(Kept):
         return None
 
 
+class _FreshLeast(prestress.LeastNormals):
+    """Rule 4's least normal forces with their program made anew at every call."""
+
+    def __call__(self, *args):
+        self.model = None
+        return super().__call__(*args)
+
+
 def _plain(monkeypatch):
     """The placement test with every solve made the plain way."""
     monkeypatch.setattr(prestress, "Kept", _NoneKept)
+    monkeypatch.setattr(prestress, "LeastNormals", _FreshLeast)
     monkeypatch.setattr(prestress, "NEAR_STILL", -1.0)
 
 
@@ -122,3 +133,22 @@ def test_a_kept_solver_solves_a_step_under_new_caps_as_a_fresh_one(cone):
     assert np.abs(again.forces - fresh.forces).max() <= 1e-9 * model.force_scale
     assert np.abs(again.unbalanced - fresh.unbalanced).max() <= 1e-9 * model.force_scale
     assert np.abs(again.unbalanced - before.unbalanced).max() > 1e-3 * model.force_scale
+
+
+def test_a_kept_solver_proves_infeasible_as_a_fresh_one_and_then_solves():
+    """The arch within friction caps of 0.1 W per interface has no field (it needs more,
+    at 1 W it has one): the solver kept from that proof says so again under half the caps,
+    as a fresh solve does, and then solves the problem under 1 W as a fresh one."""
+    model = model_of(Assembly.from_scene(generators.semicircular_arch()), CheckOptions())
+    options = SolveOptions(mu=0.6)
+    caps = np.full(len(model.interfaces), 0.1 * model.force_scale)
+    kept = Kept()
+    first = solve(model, options, friction_cap=caps, keep=kept)
+    assert first.status == "infeasible" and kept.solver is not None
+    again = kept.solve(model, options, model.dead_load, caps / 2 / model.force_scale)
+    assert again.status == "infeasible"
+    assert solve(model, options, friction_cap=caps / 2).status == "infeasible"
+    wide = solve(model, options, friction_cap=caps * 10, keep=kept)
+    fresh = solve(model, options, friction_cap=caps * 10)
+    assert wide.solved and fresh.solved
+    assert np.abs(wide.forces - fresh.forces).max() <= 1e-9 * model.force_scale

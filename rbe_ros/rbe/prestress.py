@@ -114,7 +114,7 @@ LEAST_TOL = 1e-10
 #: Clarabel's iterations on one of them, then HiGHS: a partial dome's take 31-33; those it
 #: does not solve (a shelf's, with caps at the solver's tolerance) it fails after some 170.
 LEAST_MAX_ITER = 50
-#: More rubbing interfaces than this: the least of their sum first (_least_normals). It
+#: More rubbing interfaces than this: the least of their sum first (LeastNormals). It
 #: pays where it spares at least one program: a few rubbing interfaces mostly each need a
 #: normal force, a partial dome's open course mostly none (docs/METHOD.md, Sequences).
 SUM_FIRST = 5
@@ -188,13 +188,14 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
     # the solvers kept for the steps' problems, which differ only in load and caps: the
     # motion's with and without friction, and the RBE problem within the caps
     motions, within = {True: Kept(), False: Kept()}, Kept()
+    own_solvers = _OwnSolvers(motions[False], within)
     for count in range(1, MAX_STEPS + 1):
         bound = caps * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
         kept = bound if caps.any() else bound + floor
         if solution is not None and solution.solved and _within(
                 model, solution, kept, options.cone):
             own = _own_caps(model, rigid, options, load, caps, floor, metric,
-                            solution if least else None, motions[False], within)
+                            solution if least else None, own_solvers)
             if own is None:
                 return (Placement(solution, steps=count - 1, caps=kept)
                         if _held(model, solution)
@@ -220,7 +221,7 @@ def placed(model: EquilibriumModel, options: SolveOptions, load=None,
                 settled = _settled(model, rigid, options, load, caps, within)
         if settled is not None:     # no motion left: stands, unless it rubs on caps it lacks
             own = _own_caps(model, rigid, options, load, caps, floor, metric,
-                            None if model.grips else settled.field, motions[False], within)
+                            None if model.grips else settled.field, own_solvers)
             if own is None:
                 return replace(settled, steps=count)
             caps, motion = own
@@ -376,9 +377,19 @@ def _with_wrenches(model: EquilibriumModel, field: Solution, load: np.ndarray) -
     return replace(field, wrenches=wrenches, unbalanced=np.zeros(0))
 
 
+class _OwnSolvers:
+    """The solvers :func:`_own_caps` keeps across one test's calls, whose problems differ
+    only in load and caps (its least normal forces' programs also in their costs): the
+    step's motion and the RBE problem within caps (shared with the steps), the field within
+    the caps alone, and the least normal forces' program (:class:`LeastNormals`)."""
+
+    def __init__(self, motion: Kept, within: Kept):
+        self.motion, self.within, self.alone, self.least = motion, within, Kept(), LeastNormals()
+
+
 def _own_caps(model: EquilibriumModel, rigid: EquilibriumModel, options: SolveOptions, load,
               caps: np.ndarray, floor: np.ndarray, metric, field: Solution | None,
-              motion: Kept, within: Kept):
+              solvers: _OwnSolvers):
     """None when the blocks, still under ``caps``, get their friction from normal forces
     the loads make; else lower caps for the next step and the motion they leave. The caps
     came from a step's motion, the frictionless one above all, and a normal force there can
@@ -390,15 +401,16 @@ def _own_caps(model: EquilibriumModel, rigid: EquilibriumModel, options: SolveOp
     it, or the least normal forces of its motion there (those the loads press there: type-b
     turned about y, whose load's moment presses the upper face) give at least the caps, or
     those become the caps. ``field``: the least field within the caps and the cones, if
-    known (skips the solves when no cone binds it). ``motion``, ``within``: the solvers
-    kept for the step's motion and the RBE problem within caps (that problem, when one was
-    kept, is tried first: the step leaves no motion exactly when it has a field)."""
+    known (skips the solves when no cone binds it). ``solvers``: those kept (the RBE problem
+    within caps, when its solver was kept, tried first: the step leaves no motion exactly
+    when it has a field)."""
     if not caps.any():          # friction within the noise floor: nothing leans on caps
         return None
     if field is not None and not _at_cone(model, field, options):
         return None             # the least field within the caps alone: the same one
     bound = caps * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
-    field = solve(rigid, replace(options, mu=math.inf), load=load, friction_cap=bound)
+    field = solve(rigid, replace(options, mu=math.inf), load=load, friction_cap=bound,
+                  keep=solvers.alone)
     if not field.solved:
         return None
     friction = _tangential(*(_sums(model, field.forces[k]) for k in (2, 3)), options.cone)
@@ -409,15 +421,17 @@ def _own_caps(model: EquilibriumModel, rigid: EquilibriumModel, options: SolveOp
     if not rubbing.any():
         return None
     without = np.where(rubbing, 0.0, caps) * (1.0 + CONE_TOL) + SHARE_TOL * model.force_scale
-    if within.solve(rigid, options, load, without / model.force_scale) is not None:
+    field = solvers.within.solve(rigid, options, load, without / model.force_scale)
+    if field is not None and field.solved:
         return None             # by the kept solver only: a fresh one costs the motion's
-    step = solve(rigid, options, load=load, friction_cap=without, inertia=metric, keep=motion)
+    step = solve(rigid, options, load=load, friction_cap=without, inertia=metric,
+                 keep=solvers.motion)
     if not step.solved:
         return np.where(rubbing, 0.0, caps), None
     if _still(model, step):
         return None
-    least = _least_normals(rigid, options, load - _scaled(model, step.unbalanced),
-                           without, np.flatnonzero(rubbing))
+    least = solvers.least(rigid, options, load - _scaled(model, step.unbalanced),
+                          without, np.flatnonzero(rubbing))
     if least is None:
         return np.where(rubbing, 0.0, caps), step
     pressed = np.where(rubbing, options.mu * _above_noise(least, floor), caps)
@@ -434,93 +448,136 @@ def _at_cone(model: EquilibriumModel, field: Solution, options: SolveOptions) ->
                        & (friction > SHARE_TOL * model.force_scale)))
 
 
-def _least_normals(model: EquilibriumModel, options: SolveOptions, load, caps: np.ndarray,
-                   interfaces: np.ndarray) -> np.ndarray | None:
-    """Per interface of ``interfaces`` (N, per interface of the model, 0 elsewhere) the
-    least normal resultant of the forces that leave the net wrenches of ``load`` (a step's
-    motion taken out of it): the normal force the motion makes there, not a share of one
-    that friction elsewhere could make as well (the least |f|^2 splits a force between
-    them). A linear program each, in cones relaxed to their circumscribed octagon (the soc)
-    and caps likewise: the least is never above the exact one. Solved by Clarabel, one
-    solver whose cost alone changes from one interface to the next, its least the lower of
-    its primal and dual objectives (HiGHS' simplex, even kept warm from one interface's
-    optimal basis to the next, takes thousands of iterations each: docs/METHOD.md); by HiGHS
-    where Clarabel does not solve it (a cap of the solver's tolerance makes the program
-    nearly infeasible for an interior point: type-b turned about y). With more than
-    SUM_FIRST interfaces, the least sum of their normal resultants first: an interface
-    whose normal resultant is within SHARE_TOL W of 0 at that point (one that
-    :func:`_satisfies` accepts) gets 0 without a program of its own: a lower bound of its
-    least (fn >= 0), and the least is within the point's accuracy of 0, far below the
-    noise floor under which _own_caps takes any least as none, so the caps are the same (a
-    partial dome's open course: most of its rubbing interfaces need no normal force).
-    None when a grip or a failed program leaves it open."""
-    if model.grips:
-        return None
-    from scipy.optimize import linprog
-    nv = model.num_vertices
-    angles, h = pyramid_facets("pyramid8-outer" if options.cone == "soc" else options.cone)
-    c, s = np.cos(angles), np.sin(angles)
-    rows = []
-    if math.isfinite(options.mu):       # c fu + s fv - h mu fn <= 0 per vertex and facet
-        eye = sp.identity(nv, format="csr")
-        rows += [sp.hstack([-h * options.mu * eye, ck * eye, sk * eye]) for ck, sk in zip(c, s)]
-    capped = np.flatnonzero(np.isfinite(caps))
-    bounds_up = [np.zeros(len(rows) * nv)]
-    if len(capped):                     # c sum fu + s sum fv <= h cap per capped interface
-        member = sp.csr_matrix((np.ones(nv), (model.vertex_interface, np.arange(nv))),
-                               shape=(len(model.interfaces), nv))[capped]
-        zero = sp.csr_matrix((len(capped), nv))
-        rows += [sp.hstack([zero, ck * member, sk * member]) for ck, sk in zip(c, s)]
-        bounds_up += [np.tile(h * caps[capped] / model.force_scale, len(angles))]
-    a = model.a_eq
-    equal = sp.hstack([a[:, :nv], a[:, 2 * nv:4 * nv]]).tocsc()
-    upper = sp.vstack(rows).tocsc() if rows else None
-    up, rhs = np.concatenate(bounds_up), -np.asarray(load, dtype=float)
-    # Clarabel's rows: the equilibrium, then G x <= g: the rows above and -fn <= 0
-    signs = sp.hstack([-sp.identity(nv), sp.csr_matrix((nv, 2 * nv))])
-    matrix = sp.vstack([equal] + ([upper] if rows else []) + [signs]).tocsc()
-    cones = [clarabel.ZeroConeT(equal.shape[0]), clarabel.NonnegativeConeT(len(up) + nv)]
-    settings = clarabel.DefaultSettings()
-    settings.verbose = False
-    settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = LEAST_TOL
-    settings.max_iter = LEAST_MAX_ITER
-    solver = None
+class LeastNormals:
+    """The least normal forces of _own_caps, one instance per placement test (its calls'
+    programs kept: :meth:`__call__`)."""
 
-    def least_of(cost: np.ndarray):
-        nonlocal solver
-        if solver is None:
-            solver = clarabel.DefaultSolver(sp.csc_matrix((3 * nv, 3 * nv)), cost, matrix,
-                                            np.concatenate([rhs, up, np.zeros(nv)]), cones,
-                                            settings)
-        else:
-            solver.update(q=cost)
-        result = solver.solve()
-        x = np.array(result.x)
-        return result if str(result.status) == "Solved" and _satisfies(matrix, rhs, up, x) \
-            else None, x
+    def __init__(self):
+        self.model = self.solver = None
 
-    out = np.zeros(len(model.interfaces))
-    free = np.zeros(len(model.interfaces), dtype=bool)     # 0 in a point of the program
-    if len(interfaces) > SUM_FIRST:
-        result, x = least_of(np.concatenate([np.isin(model.vertex_interface, interfaces)
-                                             .astype(float), np.zeros(2 * nv)]))
-        if result is not None:
-            free = _sums(model, x[:nv]) <= SHARE_TOL
-    for k in interfaces:
-        if free[k]:
-            continue
-        cost = np.concatenate([(model.vertex_interface == k).astype(float), np.zeros(2 * nv)])
-        result, _ = least_of(cost)
-        if result is not None:
-            least = min(result.obj_val, result.obj_val_dual)
-        else:
-            res = linprog(cost, A_ub=upper, b_ub=up if rows else None, A_eq=equal, b_eq=rhs,
-                          bounds=[(0, None)] * nv + [(None, None)] * (2 * nv), method="highs")
-            if res.status != 0:
-                return None
-            least = res.fun
-        out[k] = max(least, 0.0) * model.force_scale
-    return out
+    def __call__(self, model: EquilibriumModel, options: SolveOptions, load, caps: np.ndarray,
+                 interfaces: np.ndarray) -> np.ndarray | None:
+        """Per interface of ``interfaces`` (N, per interface of the model, 0 elsewhere) the
+        least normal resultant of the forces that leave the net wrenches of ``load`` (a step's
+        motion taken out of it): the normal force the motion makes there, not a share of one
+        that friction elsewhere could make as well (the least |f|^2 splits a force between
+        them). A linear program each, in cones relaxed to their circumscribed octagon (the soc)
+        and caps likewise: the least is never above the exact one. Solved by Clarabel, one
+        solver whose cost alone changes from one interface to the next, its least the lower of
+        its primal and dual objectives (HiGHS' simplex, even kept warm from one interface's
+        optimal basis to the next, takes thousands of iterations each: docs/METHOD.md); by HiGHS
+        where Clarabel does not solve it (a cap of the solver's tolerance makes the program
+        nearly infeasible for an interior point: type-b turned about y). With more than
+        SUM_FIRST interfaces, the least sum of their normal resultants first: an interface
+        whose normal resultant is within SHARE_TOL W of 0 at that point (one that
+        :func:`_satisfies` accepts) gets 0 without a program of its own: a lower bound of its
+        least (fn >= 0), and the least is within the point's accuracy of 0, far below the
+        noise floor under which _own_caps takes any least as none, so the caps are the same (a
+        partial dome's open course: most of its rubbing interfaces need no normal force).
+        None when a grip or a failed program leaves it open.
+
+        The program's matrix and its Clarabel solver are kept from one call to the next on the
+        same model, friction and capped interfaces (one test's calls): only the costs and the
+        right-hand side (load, caps) differ, which Clarabel's data update takes as solver.Kept
+        does (the cost's scale stays the first cost's, as between one call's interfaces)."""
+        if model.grips:
+            return None
+        from scipy.optimize import linprog
+        nv = model.num_vertices
+        capped = np.flatnonzero(np.isfinite(caps))
+        if self.model is not model or (self.mu, self.cone) != (options.mu, options.cone) \
+                or not np.array_equal(capped, self.capped):
+            self._program(model, options, capped)
+        up = np.concatenate([np.zeros(self.facet_rows)]
+                            + ([np.tile(self.h * caps[capped] / model.force_scale,
+                                        self.facets)] if len(capped) else []))
+        rhs = -np.asarray(load, dtype=float)
+        b = np.concatenate([rhs, up, np.zeros(nv)])
+        matrix, solver = self.matrix, None      # this call's solver
+
+        def least_of(cost: np.ndarray):
+            nonlocal solver
+            if solver is None and self.solver is not None:
+                solver = self.solver
+                solver.update(q=cost, b=b)
+            elif solver is None:
+                solver = clarabel.DefaultSolver(sp.csc_matrix((3 * nv, 3 * nv)), cost, matrix,
+                                                b, self.cones, self.settings)
+                if solver.is_data_update_allowed():
+                    self.solver = solver
+            else:
+                solver.update(q=cost)
+            return _solved(solver.solve())
+
+        def _solved(result):
+            x = np.array(result.x)
+            return result if str(result.status) == "Solved" and _satisfies(matrix, rhs, up, x) \
+                else None, x
+
+        out = np.zeros(len(model.interfaces))
+        free = np.zeros(len(model.interfaces), dtype=bool)     # 0 in a point of the program
+        if len(interfaces) > SUM_FIRST:
+            result, x = least_of(np.concatenate([np.isin(model.vertex_interface, interfaces)
+                                                 .astype(float), np.zeros(2 * nv)]))
+            if result is not None:
+                free = _sums(model, x[:nv]) <= SHARE_TOL
+        for k in interfaces:
+            if free[k]:
+                continue
+            cost = np.concatenate([(model.vertex_interface == k).astype(float),
+                                   np.zeros(2 * nv)])
+            result, _ = least_of(cost)
+            if result is not None:
+                least = min(result.obj_val, result.obj_val_dual)
+            else:
+                res = linprog(cost, A_ub=self.upper, b_ub=up if self.upper is not None else None,
+                              A_eq=self.equal, b_eq=rhs,
+                              bounds=[(0, None)] * nv + [(None, None)] * (2 * nv),
+                              method="highs")
+                if res.status != 0:
+                    return None
+                least = res.fun
+            out[k] = max(least, 0.0) * model.force_scale
+        return out
+
+    def _program(self, model: EquilibriumModel, options: SolveOptions, capped: np.ndarray):
+        """The program's matrix, cones and settings for ``model``, the friction of
+        ``options`` and caps on ``capped``; no solver yet."""
+        nv = model.num_vertices
+        angles, h = pyramid_facets("pyramid8-outer" if options.cone == "soc" else options.cone)
+        c, s = np.cos(angles), np.sin(angles)
+        rows = []
+        if math.isfinite(options.mu):       # c fu + s fv - h mu fn <= 0 per vertex and facet
+            eye = sp.identity(nv, format="csr")
+            rows += [sp.hstack([-h * options.mu * eye, ck * eye, sk * eye])
+                     for ck, sk in zip(c, s)]
+        facet_rows = len(rows) * nv
+        if len(capped):                     # c sum fu + s sum fv <= h cap per capped interface
+            member = sp.csr_matrix((np.ones(nv), (model.vertex_interface, np.arange(nv))),
+                                   shape=(len(model.interfaces), nv))[capped]
+            zero = sp.csr_matrix((len(capped), nv))
+            rows += [sp.hstack([zero, ck * member, sk * member]) for ck, sk in zip(c, s)]
+        a = model.a_eq
+        equal = sp.hstack([a[:, :nv], a[:, 2 * nv:4 * nv]]).tocsc()
+        upper = sp.vstack(rows).tocsc() if rows else None
+        # Clarabel's rows: the equilibrium, then G x <= g: the rows above and -fn <= 0
+        signs = sp.hstack([-sp.identity(nv), sp.csr_matrix((nv, 2 * nv))])
+        self.matrix = sp.vstack([equal] + ([upper] if rows else []) + [signs]).tocsc()
+        rows_up = facet_rows + len(capped) * len(angles)
+        self.cones = [clarabel.ZeroConeT(equal.shape[0]),
+                      clarabel.NonnegativeConeT(rows_up + nv)]
+        settings = clarabel.DefaultSettings()
+        settings.verbose = False
+        settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = LEAST_TOL
+        settings.max_iter = LEAST_MAX_ITER
+        # no iterative refinement of the KKT solves (as solver.py's first attempt): Clarabel
+        # ends on its iterates' residuals, so the least stays within LEAST_TOL (moved by
+        # 1.2e-10 W at most on a partial dome's, for half the time: docs/METHOD.md)
+        settings.iterative_refinement_enable = False
+        self.settings, self.equal, self.upper = settings, equal, upper
+        self.model, self.mu, self.cone, self.capped = model, options.mu, options.cone, capped
+        self.h, self.facets, self.facet_rows = h, len(angles), facet_rows
+        self.solver = None
 
 
 def _satisfies(matrix, rhs: np.ndarray, up: np.ndarray, x: np.ndarray) -> bool:

@@ -197,7 +197,9 @@ class Kept:
     problem's matrices, not b: a kept solve is a fresh one's to rounding,
     tests/test_placement_solves.py), KKT ordering and symbolic factorisation, and
     none of the problem's arrays is built again (the placement test's least forces of a
-    motion, whose problem is the motion's with p - e; its steps under new caps)."""
+    motion, whose problem is the motion's with p - e; its steps under new caps). A solver is
+    kept from a first attempt that solves or proves the problem infeasible (the placement
+    test's RBE problem within caps is, step after step, before it has a field)."""
 
     def __init__(self):
         self.solver = self.v = None
@@ -208,8 +210,9 @@ class Kept:
     def solve(self, model: EquilibriumModel, options: SolveOptions, p: np.ndarray,
               cap: np.ndarray | None = None) -> Solution | None:
         """The solution under ``p`` and ``cap`` (both scaled), or None if there is no solver
-        kept, its caps are not on the same interfaces, or its first attempt is not accepted
-        (solve() then makes the problem anew)."""
+        kept, its caps are not on the same interfaces, or its first attempt is neither
+        accepted nor infeasible (solve() then makes the problem anew; infeasible, a fresh
+        solve's first attempt would end there too, and no other attempt follows it)."""
         if self.solver is None or not np.array_equal(_capped(cap), self.capped):
             return None
         start = time.perf_counter()
@@ -225,6 +228,8 @@ class Kept:
         accepted = _accept(model, self.v, np.array(result.x), b, None, status) \
             if status in _SOLVED else None
         elapsed = _spent_since(start)
+        if status in _INFEASIBLE:   # where a fresh solve's first attempt ends too (no retry)
+            return Solution("infeasible", status, np.full((4, self.v.nv), np.nan), elapsed)
         return None if accepted is None else replace(accepted, time=elapsed)
 
 
@@ -302,13 +307,14 @@ def solve(model: EquilibriumModel, options: SolveOptions = SolveOptions(), *,
         status = str(result.status)
         if status in _SOLVED:
             accepted = _accept(model, v, np.array(result.x), p, live_load, status)
-            if accepted is not None:
-                if keep is not None and not k and not multiplier and not tension and \
-                        keep.solver is None and solver.is_data_update_allowed():
-                    keep.solver, keep.v, keep.size = solver, v, a.shape[0] + v.count
-                    keep.capped = _capped(cap)
-                    keep.cap_rows, keep.cap_factors = at_caps
-                break
+        if keep is not None and not k and not multiplier and not tension and \
+                keep.solver is None and (accepted is not None or status in _INFEASIBLE) \
+                and solver.is_data_update_allowed():
+            keep.solver, keep.v, keep.size = solver, v, a.shape[0] + v.count
+            keep.capped = _capped(cap)
+            keep.cap_rows, keep.cap_factors = at_caps
+        if accepted is not None:
+            break
     elapsed = _spent_since(start)
     if accepted is not None:
         return replace(accepted, time=elapsed)

@@ -5,14 +5,14 @@ The plan is a planned scene (the design with a sequence and holds: ``design_file
 design sent with a sequence on ``~/design``). After each as-built state the node checked,
 :meth:`Execution.advance` looks ahead (:func:`rbe_ros.analysis.lookahead.look_ahead`: the
 placed blocks, a prefix of the plan's order, at their measured poses, the next
-``lookahead_steps`` steps with the rest at design) step by step, in stages, what the robot
-needs first first: the ExecutionState goes out at the first step that fails (its
-look-ahead the steps up to it), the repair of that step follows at once
+``lookahead_steps`` steps with the rest at design) step by step and sends in stages, what
+the robot needs first first: the ExecutionState at the first step that fails (its
+look-ahead the steps up to it), then the repair of that step
 (:func:`rbe_ros.analysis.repair.repair_plan` with a window that ends there, in the node a
-process of its own) and goes out, then the look-ahead of the repaired plan over the whole
-window, which repairs again at a later failing step the same way. Poses that do not fit the plan (a
-block out of the plan's order, a block not in the design, a design that is not the plan's)
-make the state inactive with the reason, the step reached and its look-ahead kept.
+process of its own), then the look-ahead of the repaired plan over the whole window, which
+repairs again at a later failing step the same way. Poses that do not fit the plan (a block
+out of the plan's order, a block not in the design, a design that is not the plan's) make
+the state inactive with the reason, the step reached and its look-ahead kept.
 
 A plan for a robot cell (a ``~/plan`` goal with a cell, a planned scene that ``rbe-ros plan
 --cell -o`` wrote) is executed as its timeline: each step ahead also checks the states

@@ -355,6 +355,29 @@ class StepRunner:
         self.checks += 1
         return found
 
+    def take(self, plan: Scene, checker: StepChecker, report: Report,
+             options: CheckOptions) -> bool:
+        """Take ``report`` as the as-built state's of ``plan`` (its step ``placed - 1``),
+        checked elsewhere as a whole under ``options`` with its tolerance question asked
+        and its interfaces (the node's ~/report): kept as this runner's check of it, and
+        ``checker`` advanced by it as by that check, so that the steps ahead get the same
+        reports. False (nothing taken) when the state is known already, or the report is
+        not of a check this runner would make: other options (a margin asked for by
+        ``min_margin_g``), no verdict, other interfaces."""
+        step = sequence_step(plan, self.placed - 1)
+        key = state_key(plan, step)
+        if key in self.memo or declared(options, self.scene) != self.options \
+                or report.status in (Status.SOLVER_FAILED, Status.INVALID_INPUT):
+            return False
+        assembly = self.full.subset(step.present, step.held, step.grips)
+        ids = [b.id for b in assembly.blocks]
+        if [(ids[it.a], ids[it.b]) for it in assembly.interfaces] != \
+                [(r.block_a, r.block_b) for r in report.interfaces]:
+            return False
+        checker.advance(assembly, report)
+        self.memo[key] = slim(report)
+        return True
+
     def explained(self, plan: Scene) -> Report:
         """The report of the as-built state of ``plan`` (its step ``placed - 1``) with
         whether its verdict hangs on the contact tolerance, asked now if it was not (of
@@ -437,8 +460,8 @@ class StepRunner:
 
 def look_ahead(plan: Scene, built: Scene, options: CheckOptions = CheckOptions(), *,
                lookahead_steps: int = DEFAULT_LOOKAHEAD, min_margin_g: float = 0.0,
-               until_failure: bool = False, cell=None, checked: Checked | None = None
-               ) -> Lookahead:
+               until_failure: bool = False, cell=None, checked: Checked | None = None,
+               as_built: Report | None = None) -> Lookahead:
     """Check the as-built state of ``plan`` (the free blocks of the as-built scene ``built``
     placed, a prefix of its order, at their measured poses) and its next ``lookahead_steps``
     steps (0: to the end) with the rest at design and the plan's holds, under ``options`` and
@@ -447,7 +470,11 @@ def look_ahead(plan: Scene, built: Scene, options: CheckOptions = CheckOptions()
     step's states between the robots' actions checked too, and the timeline kept.
     ``checked``: states known on the same as-built state (the repair's, for the look-ahead
     of the repaired plan), not checked again; the states known and checked are handed on
-    (:attr:`Lookahead.checked`: to a repair of the repaired plan).
+    (:attr:`Lookahead.checked`: to a repair of the repaired plan). ``as_built``: the
+    report of the as-built state (:func:`as_built_state`) checked as a whole under
+    ``options``, with its interfaces (the node's ~/report): neither checked nor asked its
+    tolerance question again (:meth:`StepRunner.take`; checked when it is not of the same
+    check).
 
     Raises SceneError for bad input: measured blocks not in the plan, or not a prefix of its
     order, a plan that is not one (no whole sequence), measured blocks that interpenetrate."""
@@ -465,7 +492,7 @@ def look_ahead(plan: Scene, built: Scene, options: CheckOptions = CheckOptions()
     checker = runner.walker(scene)
     fresh = runner.fork(checker)
     total = step_count(scene)
-    if placed:
+    if placed and (as_built is None or not runner.take(scene, checker, as_built, options)):
         runner.report(scene, placed - 1, checker)
     stop = total if lookahead_steps == 0 else min(total, placed + lookahead_steps)
     forks: list[StepChecker] = []

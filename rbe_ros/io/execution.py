@@ -35,8 +35,9 @@ from ..analysis.repair import Repair, repair_plan
 from ..analysis.timeline import Timeline
 from ..cell import Cell
 from ..scene import Scene, SceneError
+from ..rbe.result import Report
 from .messages import (execution_to_dict, lookahead_step_to_dict, plan_update_to_dict,
-                       report_to_dict, timeline_to_dicts)
+                       report_from_dict, report_to_dict, timeline_to_dicts)
 
 #: The node's parameter defaults (and a bag's recorded before them).
 LOOKAHEAD_STEPS = DEFAULT_LOOKAHEAD
@@ -77,6 +78,14 @@ def repair(plan: Scene, built: Scene, options: CheckOptions, settings: Settings,
                            lookahead_steps=settings.lookahead_steps, checked=checked)
     return repair_plan(plan, built, options, min_margin_g=settings.min_margin_g,
                        lookahead_steps=settings.lookahead_steps, checked=checked), None
+
+
+def planned_note(scene: Scene, report: Report) -> str:
+    """What ~/report adds to the message of its check of an as-built state under a plan
+    (``scene``: :meth:`Execution.holding`'s, with the plan's holds): the step and the blocks
+    held."""
+    held = ", ".join(report.held_blocks) or "nothing"
+    return f" | as the plan has it at step {len(scene.sequence) - 1}: held {held}"
 
 
 NO_PLAN = "no plan: set design_file to a planned scene, or send a design with a sequence"
@@ -144,7 +153,8 @@ class Execution:
                 on_output: Callable[[str, dict], None] | None = None
                 ) -> list[tuple[str, dict]]:
         """The outputs of one as-built state (``built``, or why the poses were refused;
-        ``as_built``: the node's report of it): an ExecutionState, and when a step ahead
+        ``as_built``: the node's report of it, with its interfaces: of :meth:`holding`'s
+        state, the look-ahead checks it not again): an ExecutionState, and when a step ahead
         fails a PlanUpdate and the ExecutionState of the repaired plan, again while a later
         step of the window fails (in stages: see the module docstring); each passed to
         ``on_output(kind, message)`` as soon as it is made (the failing step goes out
@@ -166,8 +176,12 @@ class Execution:
             for kind, message in self._outputs:
                 emit(kind, {**message, "header": header})
             return out
+        # the node's report of the as-built state, for the look-ahead; slim in the outputs
+        known = self._known(built, as_built)
+        if as_built is not None:
+            as_built = {**as_built, "interfaces": [], "near_contacts": []}
         try:
-            self._advance(built, as_built, header, options, settings, repairer, emit)
+            self._advance(built, as_built, known, header, options, settings, repairer, emit)
         except Exception as exc:        # an answer, never a crash
             emit(EXECUTION, self._refused(header, as_built,
                                           f"execution failed: {type(exc).__name__}: {exc}"))
@@ -184,7 +198,22 @@ class Execution:
         return {**kept, "header": header, "active": False, "message": why,
                 **({"as_built": as_built} if as_built is not None else {})}
 
-    def _advance(self, built, as_built, header, options, settings, repairer, emit) -> None:
+    def _known(self, built: Scene | SceneError, as_built: dict | None) -> Report | None:
+        """The node's report ``as_built`` as the look-ahead's check of the as-built state
+        makes it (the note of the plan's step taken off) when it is of :meth:`holding`'s
+        state of ``built`` under the plan now (not one a repair has replaced since); else
+        None (the look-ahead checks the state)."""
+        last_built, last_plan, held = self._held
+        if as_built is None or last_built is not built or last_plan is not self.plan:
+            return None
+        report = report_from_dict(as_built)
+        note = planned_note(held, report) if held.holds else ""
+        if not report.message.endswith(note):
+            return None
+        return replace(report, message=report.message[:len(report.message) - len(note)])
+
+    def _advance(self, built, as_built, known, header, options, settings, repairer,
+                 emit) -> None:
         if self.plan is None or self.error:
             return emit(EXECUTION, self._refused(header, as_built, self.error))
         if isinstance(built, SceneError):
@@ -195,7 +224,7 @@ class Execution:
         staged = self.cell is None
         try:
             state = self._state(built, as_built, header, options, settings,
-                                until_failure=staged)
+                                until_failure=staged, known=known)
         except SceneError as exc:       # out of the plan's order, not of the plan
             return emit(EXECUTION, self._refused(header, as_built, str(exc)))
         emit(EXECUTION, state)
@@ -242,10 +271,11 @@ class Execution:
         return self._cell_plan
 
     def _state(self, built: Scene, as_built, header, options, settings,
-               checked: Checked | None = None, until_failure: bool = False) -> dict:
+               checked: Checked | None = None, until_failure: bool = False,
+               known: Report | None = None) -> dict:
         ahead = look_ahead(self.plan, built, options, lookahead_steps=settings.lookahead_steps,
                            min_margin_g=settings.min_margin_g, cell=self._cell(options),
-                           until_failure=until_failure, checked=checked)
+                           until_failure=until_failure, checked=checked, as_built=known)
         self._checked = ahead.checked
         if ahead.timeline is not None:
             self.timeline = timeline_to_dicts(ahead.timeline, header)
@@ -263,4 +293,4 @@ class Execution:
 
 
 __all__ = ["EXECUTION", "Execution", "LOOKAHEAD_STEPS", "MIN_MARGIN_G", "NO_PLAN",
-           "PLAN_UPDATE", "Repairer", "Settings", "repair"]
+           "PLAN_UPDATE", "Repairer", "Settings", "planned_note", "repair"]

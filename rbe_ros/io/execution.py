@@ -24,6 +24,7 @@ repair re-plans for the cell when a state between actions falls, over the steps 
 """
 from __future__ import annotations
 
+import collections
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
@@ -108,7 +109,9 @@ class Execution:
         self._seen: tuple = ()
         self._outputs: list[tuple[str, dict]] = []
         self._repaired = None               # the as-built scene a repair was last tried at
-        self._held: tuple = (None, None, None)  # the last (built, plan, holding(built))
+        #: the last few (built, plan, holding(built)): the node checks the next state while
+        #: the execution advances one it checked before
+        self._held: collections.deque = collections.deque(maxlen=4)
         self._checked: Checked | None = None  # the states the last look-ahead checked
 
     def set_design(self, design: Scene | None, cell: Cell | None = None) -> None:
@@ -138,15 +141,20 @@ class Execution:
         plan = self.plan
         if plan is None or self.error or isinstance(built, SceneError):
             return built
-        last_built, last_plan, held = self._held
-        if last_built is built and last_plan is plan:
+        held = self._held_of(built, plan)
+        if held is not None:
             return held
         try:
             held = as_built_state(plan, built)
         except SceneError:
             held = built
-        self._held = (built, plan, held)
+        self._held.append((built, plan, held))
         return held
+
+    def _held_of(self, built: Scene, plan: Scene) -> Scene | None:
+        """:meth:`holding`'s scene of ``built`` under ``plan`` if it made one lately (of a
+        copy: the node's check thread appends while its execution thread reads)."""
+        return next((h for b, p, h in tuple(self._held) if b is built and p is plan), None)
 
     def advance(self, built: Scene | SceneError, as_built: dict | None, header: dict,
                 options: CheckOptions, settings: Settings, repairer: Repairer = repair,
@@ -203,8 +211,8 @@ class Execution:
         makes it (the note of the plan's step taken off) when it is of :meth:`holding`'s
         state of ``built`` under the plan now (not one a repair has replaced since); else
         None (the look-ahead checks the state)."""
-        last_built, last_plan, held = self._held
-        if as_built is None or last_built is not built or last_plan is not self.plan:
+        held = self._held_of(built, self.plan)
+        if as_built is None or held is None:
             return None
         report = report_from_dict(as_built)
         note = planned_note(held, report) if held.holds else ""

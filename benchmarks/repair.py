@@ -162,8 +162,8 @@ def staged(plan_scene, built, window: int) -> list[tuple[str, float, str]]:
     check of the as-built state with the plan's holds (~/report, ``asbuilt_check``), then
     ``Execution.advance`` given that report (the look-ahead checks the state not again):
     the time from the pose message to each output, in stages: the ExecutionState with the
-    failing step, the PlanUpdate, the verified window; and the PlanUpdate of ``advance``
-    not given the report (the state checked twice), for the ratio."""
+    failing step, the PlanUpdate, the verified window; and the PlanUpdate when ``advance``
+    is not given the report (the state checked twice, as before), for the ratio."""
     options, settings = CheckOptions(), Settings(lookahead_steps=window)
 
     def advance(given: bool) -> tuple[float, list]:
@@ -171,10 +171,9 @@ def staged(plan_scene, built, window: int) -> list[tuple[str, float, str]]:
         execution.set_design(plan_scene)
         sent = []
         start = time.perf_counter()
-        report = asbuilt_check(execution.holding(built), options).reports[0] if given \
-            else None
+        report = asbuilt_check(execution.holding(built), options).reports[0]
         checked = time.perf_counter() - start
-        execution.advance(built, report and report_to_dict(report, {}), {}, options,
+        execution.advance(built, report_to_dict(report, {}) if given else None, {}, options,
                           settings, on_output=lambda kind, message: sent.append(
                               (kind, message, time.perf_counter() - start)))
         return checked, sent
@@ -211,7 +210,8 @@ def staged(plan_scene, built, window: int) -> list[tuple[str, float, str]]:
     if updates:
         took = next(t for k, _, t in again if k != EXECUTION)
         rows.append((f"{which}, `Execution.advance` not given ~/report (the as-built state "
-                     "checked again): pose -> the PlanUpdate, without ~/report", took,
+                     "checked again, as before): pose -> ~/report -> ... -> the PlanUpdate",
+                     took,
                      "the same outputs (but the as-built check's time)"
                      if outputs(sent) == outputs(again) else "OTHER OUTPUTS"))
     return rows
@@ -394,8 +394,8 @@ def main() -> int:
              "the ExecutionState as soon as a step of the window fails (the steps up to it), "
              "the PlanUpdate of the repair of the steps up to it, then the ExecutionState "
              "of the repaired plan over the whole window (repairing again at a later "
-             "failing step); the last row is `Execution.advance` not given the report (the "
-             "state checked twice), from its call.", ""]
+             "failing step); the last row is the same answer with `Execution.advance` not given "
+             "the report (the state checked twice, as before).", ""]
     if "--dome527" in sys.argv:
         # its re-check to the end costs many minutes (docs/SCALING.md): a node's window only
         scene, _ = load_design(DOME527)

@@ -3,15 +3,26 @@ the state ExecutionState's ``as_built`` checks (one definition: ``as_built_state
 as ``check --sequence`` checks the plan's step."""
 from __future__ import annotations
 
+from dataclasses import replace
+
+import numpy as np
+
 from rbe_ros import generators as gen
-from rbe_ros.analysis.lookahead import as_built_state, look_ahead
-from rbe_ros.analysis.pipeline import check_sequence
+from rbe_ros.analysis.asbuilt import declared
+from rbe_ros.analysis.assembly import Assembly
+from rbe_ros.analysis.lookahead import (StepRunner, as_built_plan, as_built_state, look_ahead,
+                                        state_key)
+from rbe_ros.analysis.options import CheckOptions
+from rbe_ros.analysis.pipeline import check_sequence, slim
 from rbe_ros.analysis.planning import plan_sequence
 from rbe_ros.analysis.steps import final_state, sequence_step
-from rbe_ros.io.execution import Execution
+from rbe_ros.analysis.verdict import check
+from rbe_ros.io.execution import EXECUTION, Execution, Settings, planned_note
+from rbe_ros.io.messages import report_to_dict
 from rbe_ros.io.poses import scene_at_poses
 from rbe_ros.io.replay import asbuilt_check
 from rbe_ros.rbe.result import Status
+from test_repair import SHIFT, YAW, pose, twin_counterweights
 
 
 def _built(plan, placed: int):
@@ -60,3 +71,82 @@ def test_without_a_plan_or_with_poses_off_the_plan_the_measured_blocks_alone():
                                        at[late].orientation.tolist())})
     assert execution.holding(off) is off
     assert execution.holding(_built(plan, 0)).holds == ()   # nothing placed: the supports
+
+
+def _cases():
+    """Small plans at measured poses: the 7-voussoir arch with two holds at the steps that
+    hold a block (the note of the plan's step in ~/report), and the twin counterweights
+    measured 4 mm out (two failing steps ahead, each repaired)."""
+    plan = plan_sequence(gen.semicircular_arch(7), max_held=2).scene
+    yield from ((plan, _built(plan, k)) for k in (3, 5))
+    twin = twin_counterweights()
+    measured = pose(SHIFT, YAW)
+    yield twin, scene_at_poses(twin, {a: ([measured["position"][0], y,
+                                           measured["position"][2]], measured["orientation"])
+                                      for a, y in (("a", 0.0), ("a2", 1.0))})
+
+
+def _no_time(out):
+    return [(kind, {**m, "as_built": {**m["as_built"], "solve_time": 0.0}} if kind == EXECUTION
+             else m) for kind, m in out]
+
+
+def test_the_look_ahead_takes_the_nodes_report_of_the_as_built_state(monkeypatch):
+    """~/report's check of the as-built state (``asbuilt_check`` of ``Execution.holding``)
+    is the look-ahead's check of it, field by field (the second computation): handed to
+    ``Execution.advance``, the look-ahead checks it not again, every other state once, and
+    the outputs are those of a look-ahead that checks it; with other options (a margin
+    asked for by ``min_margin_g``) the state is checked."""
+    keys = []
+    real = StepRunner._check
+
+    def counted(self, plan, step, checker):
+        keys.append(state_key(plan, step))
+        return real(self, plan, step, checker)
+
+    for plan, built in _cases():
+        execution = Execution()
+        execution.set_design(plan)
+        held = execution.holding(built)
+        node = asbuilt_check(held).reports[0]
+        ahead = look_ahead(plan, built, lookahead_steps=0)
+        k = ahead.current_step - 1
+        note = planned_note(held, node) if held.holds else ""
+        assert note.startswith(" | as the plan has it at step") or plan.name == "twin"
+        mine = replace(ahead.as_built, step_index=-1, block_placed="",
+                       message=ahead.as_built.message + note, solve_time=node.solve_time)
+        assert report_to_dict(mine, {}) == report_to_dict(slim(node), {})
+        # its interfaces are those of the look-ahead's state, checked whole
+        scene = as_built_plan(plan, built)
+        step = sequence_step(scene, k)
+        state = Assembly.from_scene(scene, declared(CheckOptions(), scene).contact).subset(
+            step.present, step.held, step.grips)
+        alone = check(state, declared(CheckOptions(), scene))
+        assert [(i.block_a, i.block_b) for i in node.interfaces] == \
+            [(i.block_a, i.block_b) for i in alone.interfaces]
+        assert np.allclose([i.normal_resultant for i in node.interfaces],
+                           [i.normal_resultant for i in alone.interfaces], atol=1e-9)
+
+        settings = Settings(lookahead_steps=0)
+        out = {}
+        for given in (True, False):
+            monkeypatch.setattr(StepRunner, "_check", counted)
+            keys.clear()
+            execution = Execution()
+            execution.set_design(plan)
+            report = asbuilt_check(execution.holding(built)).reports[0]
+            out[given] = execution.advance(built, report_to_dict(report, {}) if given
+                                           else None, {}, CheckOptions(), settings)
+            monkeypatch.undo()
+            assert len(keys) == len(set(keys))          # no state checked twice
+            assert (state_key(scene, step) in keys) is not given
+        assert _no_time(out[True]) == _no_time(out[False])
+    # other options than the node's: the look-ahead checks the state itself
+    execution = Execution()
+    execution.set_design(plan)
+    report = asbuilt_check(execution.holding(built)).reports[0]
+    keys.clear()
+    monkeypatch.setattr(StepRunner, "_check", counted)
+    execution.advance(built, report_to_dict(report, {}), {}, CheckOptions(),
+                      Settings(lookahead_steps=1, min_margin_g=0.01))
+    assert keys[0] == state_key(scene, step)

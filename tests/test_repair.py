@@ -16,7 +16,7 @@ from rbe_ros import generators
 from rbe_ros.analysis.asbuilt import declared
 from rbe_ros.analysis.assembly import Assembly
 from rbe_ros.analysis.incremental import StepChecker
-from rbe_ros.analysis.lookahead import check_plan_design, look_ahead
+from rbe_ros.analysis.lookahead import StepRunner, check_plan_design, look_ahead, state_key
 from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.analysis import repair as repair_module
 from rbe_ros.analysis.repair import repair_plan
@@ -24,6 +24,7 @@ from rbe_ros.analysis.steps import sequence_step, step_count
 from rbe_ros.analysis.verdict import check
 from rbe_ros.cli import main
 from rbe_ros.io.execution import Execution, Settings, repair
+from rbe_ros.io.messages import lookahead_step_to_dict
 from rbe_ros.io.poses import scene_at_poses
 from rbe_ros.io.scene_json import load_scene, scene_to_dict
 from rbe_ros.scene import SceneError, box_block, make_scene
@@ -290,21 +291,86 @@ def test_the_repair_checks_no_state_its_look_ahead_checked(monkeypatch):
 
     execution = Execution()
     execution.set_design(scene)
+    first = look_ahead(scene, built, lookahead_steps=0, until_failure=True).checked
     states.clear()
     out = execution.advance(built, None, {}, CheckOptions(), Settings(lookahead_steps=0),
                             repairer)
     assert [kind for kind, _ in out] == ["execution", "plan_update", "execution"]
     assert out[1][1]["order"] == ["a", "c", "b"]
-    assert handed[0].reports.keys() == ahead.checked.reports.keys()
-    # the look-ahead's 3 states, then the repair's 2 (K 0: the swap): step 1 with c, step 2
-    # with b placed last (its insertion is b's, not c's); the look-ahead of the repaired
-    # plan checks none
-    assert set(states[:3]) == looked and states[3:] == [
-        ({"ground", "a", "c"}, {"ground"}), ({"ground", "a", "b", "c"}, {"ground"})]
+    assert handed[0].reports.keys() == first.reports.keys()
+    # the look-ahead's states up to the failing step 1, then the repair's 1 (K 0: the
+    # swap): step 1 with c; then the look-ahead of the repaired plan: step 2 with b
+    # placed last (its insertion is b's, not c's)
+    assert states == [({"ground", "a"}, {"ground"}), ({"ground", "a", "b"}, {"ground"}),
+                      ({"ground", "a", "c"}, {"ground"}),
+                      ({"ground", "a", "b", "c"}, {"ground"})]
     assert [s["stable"] for s in out[2][1]["lookahead"]] == [True, True]
     other = scene_at_poses(scene, {"a": (pose()["position"], pose()["orientation"])})
     with pytest.raises(ValueError, match="another as-built state"):
         repair_plan(scene, other, checked=ahead.checked)
+
+
+def twin_counterweights():
+    """Two counterweighted cantilevers side by side (y 0 and 1 m), a and a2 placed first:
+    with both measured 4 mm out, the plan's steps 2 (b) and 4 (b2) tip them (the closed
+    form of each), the others stand."""
+    blocks = [box_block("ground", (1.5, 1.4, 0.2), (-0.75, 0.5, -0.1), density=RHO,
+                        support=True)]
+    for tag, y in (("", 0.0), ("2", 1.0)):
+        blocks += [replace(b, id=b.id + tag, position=b.position + [0.0, y, 0.0])
+                   for b in counterweight().blocks if not b.support]
+    return make_scene("twin", blocks, sequence=("a", "a2", "b", "c", "b2", "c2"),
+                      pose_uncertainty=(0.005, 3.5))
+
+
+def test_execution_sends_the_failing_step_then_its_repair_then_the_window(monkeypatch):
+    """Staged outputs: the look-ahead goes out at its first failing step, the repair of
+    that step follows, then the look-ahead of the repaired plan goes on (a second failing
+    step: repaired the same way); no state is checked twice, and the final plan and
+    ExecutionState are those of one repair of the whole window (the second computation)."""
+    scene = twin_counterweights()
+    measured = pose(SHIFT, YAW)
+    built = scene_at_poses(scene, {a: ([measured["position"][0], y, measured["position"][2]],
+                                       measured["orientation"]) for a, y in (("a", 0.0),
+                                                                             ("a2", 1.0))})
+    # the second computation: the look-ahead of the window, one repair of it, the
+    # look-ahead of the repaired plan
+    ahead = look_ahead(scene, built, lookahead_steps=0)
+    assert [s.passes for s in ahead.steps] == [False, True, False, True]
+    whole = repair_plan(scene, built, lookahead_steps=0, checked=ahead.checked)
+    assert whole.kind == "swap" and whole.order == ["a", "a2", "c", "b", "c2", "b2"]
+    repaired = replace(scene, sequence=tuple(whole.order), holds=whole.holds)
+    final = look_ahead(repaired, built, lookahead_steps=0, checked=whole.checked)
+    assert final.first_failing_step == -1
+    keys = []
+    real = StepRunner._check
+
+    def counted(self, plan, step, checker):
+        keys.append(state_key(plan, step))
+        return real(self, plan, step, checker)
+
+    monkeypatch.setattr(StepRunner, "_check", counted)
+    sent = []
+    execution = Execution()
+    execution.set_design(scene)
+    out = execution.advance(built, None, {}, CheckOptions(), Settings(lookahead_steps=0),
+                            on_output=lambda kind, message: sent.append(kind))
+    assert sent == [k for k, _ in out] == ["execution", "plan_update"] * 2 + ["execution"]
+    looked = [[(s["step"], s["block"], s["stable"]) for s in m["lookahead"]]
+              for k, m in out if k == "execution"]
+    assert looked[:2] == [[(2, "b", False)], [(2, "c", True), (3, "b", True), (4, "b2", False)]]
+    assert [m["first_failing_step"] for k, m in out if k == "execution"] == [2, 4, -1]
+    assert [(m["changed_step"], m["repair"]) for k, m in out if k == "plan_update"] == \
+        [(2, "swap"), (4, "swap")]
+    assert len(keys) == len(set(keys))              # each state checked once
+    assert list(execution.plan.sequence) == whole.order and execution.plan.holds == whole.holds
+    last = out[-1][1]
+    assert last["lookahead"] == [lookahead_step_to_dict(s) for s in final.steps]
+    assert last["as_built"]["message"] == final.as_built.message
+    assert stands_whole(execution.plan, 2) == [True] * 4     # the oracle
+    # the same state again: the same outputs
+    assert execution.advance(built, None, {}, CheckOptions(), Settings(lookahead_steps=0)) \
+        == out
 
 
 def test_an_as_built_state_that_does_not_stand_says_why_as_the_look_ahead(capsys):

@@ -42,7 +42,7 @@ from .executors import StepPool
 from .incremental import StepChecker
 from .margin import DEFAULT_DIRECTIONS
 from .options import CheckOptions
-from .pipeline import Placed, _completed, slim
+from .pipeline import Placed, _completed, slim, tolerance_asked
 from .steps import Step, sequence_step, step_count, step_state
 from .validate import validated_assembly
 
@@ -236,9 +236,11 @@ class StepRunner:
     design and may overlap a deviated one: their step is then not insertable. ``workers``
     >= 1: states checked whole on that many processes (:meth:`close` them), not by
     ``checker``. ``tolerance`` False: whether the as-built state's verdict hangs on the
-    contact tolerance is not asked (a repair needs only whether it stands: :meth:`explained`
-    asks it of a state that does not). ``checked``: a look-ahead's states on the same
-    as-built state, known (ValueError when they are of another)."""
+    contact tolerance is not asked with its check but when :meth:`explained` asks it (a
+    repair needs only whether it stands: it asks it of a state that does not; a
+    look-ahead after the steps ahead, which the robot needs first). ``checked``: a
+    look-ahead's states on the same as-built state, known (ValueError when they are of
+    another)."""
 
     def __init__(self, scene: Scene, options: CheckOptions, placed: int,
                  min_margin_g: float = 0.0,
@@ -260,7 +262,8 @@ class StepRunner:
         validated_assembly(scene.subset(built), options.limits, options.contact)
         self.full = Assembly.from_scene(scene, options.contact)
         self.memo: dict[tuple, Report] = dict(checked.reports) if checked else {}
-        self._unasked: set[tuple] = set()      # as-built states the tolerance was not asked of
+        #: as-built states the tolerance was not asked of: their check (whole) and assembly
+        self._unasked: dict[tuple, tuple[Report, Assembly]] = {}
         self.checks = 0
         self.checker = self._new_checker()
         #: further checks of each step ahead (a cell's: :mod:`rbe_ros.analysis.
@@ -330,24 +333,24 @@ class StepRunner:
         if found is None and self.pool is not None:
             found = self._pooled(plan, step)
         if found is None:
-            found = self._check(plan, step, checker, self.tolerance)
+            found = self._check(plan, step, checker)
         return replace(found, step_index=k, block_placed=step.block)
 
-    def _check(self, plan: Scene, step: Step, checker: StepChecker, tolerance: bool) -> Report:
+    def _check(self, plan: Scene, step: Step, checker: StepChecker) -> Report:
         """The check of ``step`` of ``plan`` by ``checker``, kept (slim)."""
         if self.should_stop is not None and self.should_stop():
             raise TimeoutError(f"stopped before {where(step.index, step.block)}")
         assembly = self.full.subset(step.present, step.held, step.grips)
-        found = checker.check(assembly)
+        raw = checker.check(assembly)
         # whether a verdict hangs on the contact tolerance is asked of the state built
         # (placed blocks only), not of the steps ahead: one or two solves each
-        found = _completed(found, assembly, step.held, self.options,
+        found = _completed(raw, assembly, step.held, self.options,
                            Placed(self.full, step.present, step.block,
                                   plan.approach_of(step.block)),
-                           tolerance=tolerance and step.index < self.placed)
+                           tolerance=self.tolerance and step.index < self.placed)
         key = state_key(plan, step)
-        if not tolerance and step.index < self.placed:
-            self._unasked.add(key)
+        if not self.tolerance and step.index < self.placed:
+            self._unasked[key] = (raw, assembly)
         found = self.memo[key] = slim(found)
         self.checks += 1
         return found
@@ -372,14 +375,38 @@ class StepRunner:
             return
         self.memo.setdefault(state_key(plan, step), replace(report, held_blocks=step.held))
 
+    def take(self, plan: Scene, checker: StepChecker, report: Report,
+             options: CheckOptions) -> bool:
+        """Take ``report`` as the as-built state's of ``plan`` (its step ``placed - 1``),
+        checked elsewhere as a whole under ``options`` with its tolerance question asked
+        and its interfaces (the node's ~/report): kept as this runner's check of it, and
+        ``checker`` advanced by it as by that check, so that the steps ahead get the same
+        reports. False (nothing taken) when the state is known already, or the report is
+        not of a check this runner would make: other options (a margin asked for by
+        ``min_margin_g``), no verdict, other interfaces."""
+        step = sequence_step(plan, self.placed - 1)
+        key = state_key(plan, step)
+        if key in self.memo or declared(options, self.scene) != self.options \
+                or report.status in (Status.SOLVER_FAILED, Status.INVALID_INPUT):
+            return False
+        assembly = self.full.subset(step.present, step.held, step.grips)
+        ids = [b.id for b in assembly.blocks]
+        if [(ids[it.a], ids[it.b]) for it in assembly.interfaces] != \
+                [(r.block_a, r.block_b) for r in report.interfaces]:
+            return False
+        checker.advance(assembly, report)
+        self.memo[key] = slim(report)
+        return True
+
     def explained(self, plan: Scene) -> Report:
         """The report of the as-built state of ``plan`` (its step ``placed - 1``) with
-        whether its verdict hangs on the contact tolerance, asked now if it was not (the
-        state checked again: it is the first of every walk, from a new checker)."""
-        step = sequence_step(plan, self.placed - 1)
-        if state_key(plan, step) in self._unasked:
-            self._unasked.discard(state_key(plan, step))
-            self._check(plan, step, self._new_checker(), True)
+        whether its verdict hangs on the contact tolerance, asked now if it was not (of
+        the state's check: the same report as a check that asked it)."""
+        key = self._key(plan, self.placed - 1)
+        if key in self._unasked:
+            raw, assembly = self._unasked.pop(key)
+            self.memo[key] = slim(tolerance_asked(self.memo[key], raw, assembly,
+                                                  self.options))
         return self.report(plan, self.placed - 1, self.checker)
 
     def ahead(self, plan: Scene, k: int, checker: StepChecker) -> StepAhead:
@@ -453,8 +480,8 @@ class StepRunner:
 
 def look_ahead(plan: Scene, built: Scene, options: CheckOptions = CheckOptions(), *,
                lookahead_steps: int = DEFAULT_LOOKAHEAD, min_margin_g: float = 0.0,
-               until_failure: bool = False, cell=None, checked: Checked | None = None
-               ) -> Lookahead:
+               until_failure: bool = False, cell=None, checked: Checked | None = None,
+               as_built: Report | None = None) -> Lookahead:
     """Check the as-built state of ``plan`` (the free blocks of the as-built scene ``built``
     placed, a prefix of its order, at their measured poses) and its next ``lookahead_steps``
     steps (0: to the end) with the rest at design and the plan's holds, under ``options`` and
@@ -462,8 +489,12 @@ def look_ahead(plan: Scene, built: Scene, options: CheckOptions = CheckOptions()
     ``cell``: the plan's cell (a :class:`rbe_ros.analysis.cell_execution.CellPlan`): each
     step's states between the robots' actions checked too, and the timeline kept.
     ``checked``: states known on the same as-built state (the repair's, for the look-ahead
-    of the repaired plan), not checked again; such a look-ahead hands none on
-    (:attr:`Lookahead.checked` None).
+    of the repaired plan), not checked again; the states known and checked are handed on
+    (:attr:`Lookahead.checked`: to a repair of the repaired plan). ``as_built``: the
+    report of the as-built state (:func:`as_built_state`) checked as a whole under
+    ``options``, with its interfaces (the node's ~/report): neither checked nor asked its
+    tolerance question again (:meth:`StepRunner.take`; checked when it is not of the same
+    check).
 
     Raises SceneError for bad input: measured blocks not in the plan, or not a prefix of its
     order, a plan that is not one (no whole sequence), measured blocks that interpenetrate."""
@@ -472,16 +503,21 @@ def look_ahead(plan: Scene, built: Scene, options: CheckOptions = CheckOptions()
         raise SceneError(f"lookahead_steps must be >= 0, not {lookahead_steps}")
     scene = as_built_plan(plan, built)
     placed = placed_count(plan, built)
-    runner = StepRunner(scene, options, placed, min_margin_g, checked=checked)
+    # the as-built state's tolerance question after the steps ahead: whether they stand
+    # is what the robot needs first
+    runner = StepRunner(scene, options, placed, min_margin_g, tolerance=False,
+                        checked=checked)
     if cell is not None:
         runner.extra = cell.ahead(runner)
     checker = runner.walker(scene)
     fresh = runner.fork(checker)
     total = step_count(scene)
-    as_built = runner.report(scene, placed - 1, checker) if placed else None
+    if placed and (as_built is None or not runner.take(scene, checker, as_built, options)):
+        runner.report(scene, placed - 1, checker)
     stop = total if lookahead_steps == 0 else min(total, placed + lookahead_steps)
     forks: list[StepChecker] = []
     steps = runner.scan(scene, placed, stop, checker, until_failure, forks)
+    as_built = runner.explained(scene) if placed else None
     failing = next((s for s in steps if not s.passes), None)
     message = ""
     if as_built is not None and not as_built.stable:
@@ -495,7 +531,7 @@ def look_ahead(plan: Scene, built: Scene, options: CheckOptions = CheckOptions()
     return Lookahead(placed, total, as_built, steps,
                      -1 if failing is None else failing.step, message,
                      time.perf_counter() - start, timeline,
-                     None if checked else runner.handover(scene, steps, forks, checker, fresh))
+                     runner.handover(scene, steps, forks, checker, fresh))
 
 
 def held_by_step(plan: Scene) -> list[tuple[str, ...]]:

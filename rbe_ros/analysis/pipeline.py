@@ -153,10 +153,28 @@ def _completed(report: Report, assembly: Assembly, held, options: CheckOptions,
         extra.update(insertion_fields(placed, options))
     why = extra.pop("insertion_reason", "")
     return replace(report, near_contacts=near, verdict_sensitive=bool(sensitive),
-                   message=report.message + (f" | sensitive: {sensitive}" if sensitive else "")
+                   message=report.message + _sensitive(sensitive)
                    + ("" if extra.get("insertable", True)
                       else f" | not insertable: {placed.block}: {why}"),
                    held_blocks=tuple(held), suggested_holds=suggested, **extra)
+
+
+def _sensitive(why: str) -> str:
+    """The message's part saying why a verdict is sensitive to the contact tolerance."""
+    return f" | sensitive: {why}" if why else ""
+
+
+def tolerance_asked(completed: Report, report: Report, assembly: Assembly,
+                    options: CheckOptions) -> Report:
+    """``completed`` (:func:`_completed` of ``report``, the check of ``assembly``, with
+    ``tolerance`` False) as :func:`_completed` makes it with the tolerance question: asked
+    now, after other work that was wanted first."""
+    with stage("sensitivity"):
+        near, sensitive = sensitivity(report, assembly, options)
+    cut = len(report.message)
+    return replace(completed, near_contacts=near, verdict_sensitive=bool(sensitive),
+                   message=completed.message[:cut] + _sensitive(sensitive)
+                   + completed.message[cut:])
 
 
 def first_failing_step(reports: list[Report]) -> int:

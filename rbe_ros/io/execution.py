@@ -5,20 +5,26 @@ The plan is a planned scene (the design with a sequence and holds: ``design_file
 design sent with a sequence on ``~/design``). After each as-built state the node checked,
 :meth:`Execution.advance` looks ahead (:func:`rbe_ros.analysis.lookahead.look_ahead`: the
 placed blocks, a prefix of the plan's order, at their measured poses, the next
-``lookahead_steps`` steps with the rest at design); when a step ahead fails it repairs the
-rest of the plan (:func:`rbe_ros.analysis.repair.repair_plan`, in the node a process of its
-own), sends the repaired plan and looks ahead again on it. Poses that do not fit the plan (a
-block out of the plan's order, a block not in the design, a design that is not the plan's)
-make the state inactive with the reason, the step reached and its look-ahead kept.
+``lookahead_steps`` steps with the rest at design) step by step and sends in stages, what
+the robot needs first first: the ExecutionState at the first step that fails (its
+look-ahead the steps up to it), then the repair of that step
+(:func:`rbe_ros.analysis.repair.repair_plan` with a window that ends there, in the node a
+process of its own), then the look-ahead of the repaired plan over the whole window, which
+repairs again at a later failing step the same way. Poses that do not fit the plan (a block
+out of the plan's order, a block not in the design, a design that is not the plan's) make
+the state inactive with the reason, the step reached and its look-ahead kept.
 
 A plan for a robot cell (a ``~/plan`` goal with a cell, a planned scene that ``rbe-ros plan
 --cell -o`` wrote) is executed as its timeline: each step ahead also checks the states
 between the robots' actions at the measured poses, a repair keeps within the cell and its
-PlanUpdate carries the repaired timeline (:mod:`rbe_ros.analysis.cell_execution`);
+PlanUpdate carries the repaired timeline (:mod:`rbe_ros.analysis.cell_execution`); not in
+stages: its look-ahead covers the window before it goes out, its repair the window (a cell's
+repair re-plans for the cell when a state between actions falls, over the steps it covers);
 :attr:`Execution.timeline` is the timeline at the last as-built state, for its markers.
 """
 from __future__ import annotations
 
+import collections
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
@@ -30,8 +36,9 @@ from ..analysis.repair import Repair, repair_plan
 from ..analysis.timeline import Timeline
 from ..cell import Cell
 from ..scene import Scene, SceneError
+from ..rbe.result import Report
 from .messages import (execution_to_dict, lookahead_step_to_dict, plan_update_to_dict,
-                       report_to_dict, timeline_to_dicts)
+                       report_from_dict, report_to_dict, timeline_to_dicts)
 
 #: The node's parameter defaults (and a bag's recorded before them).
 LOOKAHEAD_STEPS = DEFAULT_LOOKAHEAD
@@ -74,6 +81,14 @@ def repair(plan: Scene, built: Scene, options: CheckOptions, settings: Settings,
                        lookahead_steps=settings.lookahead_steps, checked=checked), None
 
 
+def planned_note(scene: Scene, report: Report) -> str:
+    """What ~/report adds to the message of its check of an as-built state under a plan
+    (``scene``: :meth:`Execution.holding`'s, with the plan's holds): the step and the blocks
+    held."""
+    held = ", ".join(report.held_blocks) or "nothing"
+    return f" | as the plan has it at step {len(scene.sequence) - 1}: held {held}"
+
+
 NO_PLAN = "no plan: set design_file to a planned scene, or send a design with a sequence"
 
 
@@ -94,7 +109,9 @@ class Execution:
         self._seen: tuple = ()
         self._outputs: list[tuple[str, dict]] = []
         self._repaired = None               # the as-built scene a repair was last tried at
-        self._held: tuple = (None, None, None)  # the last (built, plan, holding(built))
+        #: the last few (built, plan, holding(built)): the node checks the next state while
+        #: the execution advances one it checked before
+        self._held: collections.deque = collections.deque(maxlen=4)
         self._checked: Checked | None = None  # the states the last look-ahead checked
 
     def set_design(self, design: Scene | None, cell: Cell | None = None) -> None:
@@ -124,23 +141,30 @@ class Execution:
         plan = self.plan
         if plan is None or self.error or isinstance(built, SceneError):
             return built
-        last_built, last_plan, held = self._held
-        if last_built is built and last_plan is plan:
+        held = self._held_of(built, plan)
+        if held is not None:
             return held
         try:
             held = as_built_state(plan, built)
         except SceneError:
             held = built
-        self._held = (built, plan, held)
+        self._held.append((built, plan, held))
         return held
+
+    def _held_of(self, built: Scene, plan: Scene) -> Scene | None:
+        """:meth:`holding`'s scene of ``built`` under ``plan`` if it made one lately (of a
+        copy: the node's check thread appends while its execution thread reads)."""
+        return next((h for b, p, h in tuple(self._held) if b is built and p is plan), None)
 
     def advance(self, built: Scene | SceneError, as_built: dict | None, header: dict,
                 options: CheckOptions, settings: Settings, repairer: Repairer = repair,
                 on_output: Callable[[str, dict], None] | None = None
                 ) -> list[tuple[str, dict]]:
         """The outputs of one as-built state (``built``, or why the poses were refused;
-        ``as_built``: the node's report of it): an ExecutionState, and when a step ahead
-        fails a PlanUpdate and the ExecutionState of the repaired plan; each passed to
+        ``as_built``: the node's report of it, with its interfaces: of :meth:`holding`'s
+        state, the look-ahead checks it not again): an ExecutionState, and when a step ahead
+        fails a PlanUpdate and the ExecutionState of the repaired plan, again while a later
+        step of the window fails (in stages: see the module docstring); each passed to
         ``on_output(kind, message)`` as soon as it is made (the failing step goes out
         before the repair starts). The same state again gives the same outputs with the new
         header (a cell sends the same poses at 10 Hz); nothing while no plan was ever given
@@ -160,12 +184,17 @@ class Execution:
             for kind, message in self._outputs:
                 emit(kind, {**message, "header": header})
             return out
+        # the node's report of the as-built state, for the look-ahead; slim in the outputs
+        known = self._known(built, as_built)
+        if as_built is not None:
+            as_built = {**as_built, "interfaces": [], "near_contacts": []}
         try:
-            self._advance(built, as_built, header, options, settings, repairer, emit)
+            self._advance(built, as_built, known, header, options, settings, repairer, emit)
         except Exception as exc:        # an answer, never a crash
             emit(EXECUTION, self._refused(header, as_built,
                                           f"execution failed: {type(exc).__name__}: {exc}"))
-        self._seen, self._outputs = seen, out
+        # the plan a repair made is the one the same state again finds: its outputs again
+        self._seen, self._outputs = (built, self.plan, settings, options), out
         return out
 
     def _refused(self, header: dict, as_built: dict | None, why: str) -> dict:
@@ -177,36 +206,68 @@ class Execution:
         return {**kept, "header": header, "active": False, "message": why,
                 **({"as_built": as_built} if as_built is not None else {})}
 
-    def _advance(self, built, as_built, header, options, settings, repairer, emit) -> None:
+    def _known(self, built: Scene | SceneError, as_built: dict | None) -> Report | None:
+        """The node's report ``as_built`` as the look-ahead's check of the as-built state
+        makes it (the note of the plan's step taken off) when it is of :meth:`holding`'s
+        state of ``built`` under the plan now (not one a repair has replaced since); else
+        None (the look-ahead checks the state)."""
+        held = self._held_of(built, self.plan)
+        if as_built is None or held is None:
+            return None
+        report = report_from_dict(as_built)
+        note = planned_note(held, report) if held.holds else ""
+        if not report.message.endswith(note):
+            return None
+        return replace(report, message=report.message[:len(report.message) - len(note)])
+
+    def _advance(self, built, as_built, known, header, options, settings, repairer,
+                 emit) -> None:
         if self.plan is None or self.error:
             return emit(EXECUTION, self._refused(header, as_built, self.error))
         if isinstance(built, SceneError):
             return emit(EXECUTION, self._refused(header, as_built,
                                                  f"poses not accepted: {built}"))
+        # a plan of K holds is executed in stages: the look-ahead goes out at the first
+        # failing step and its repair right after it (a cell's repair keeps to the window)
+        staged = self.cell is None
         try:
-            state = self._state(built, as_built, header, options, settings)
+            state = self._state(built, as_built, header, options, settings,
+                                until_failure=staged, known=known)
         except SceneError as exc:       # out of the plan's order, not of the plan
             return emit(EXECUTION, self._refused(header, as_built, str(exc)))
         emit(EXECUTION, state)
-        if state["first_failing_step"] < 0 or self._repaired is built:
+        failing = state["first_failing_step"]
+        if failing < 0 or self._repaired is built:
             return None
         self._repaired = built          # tried once per as-built state
-        # the look-ahead's states handed over: the repair checks none of them again
-        found, timeline = repairer(self.plan, built, options, settings, self.cell,
-                                   self._checked)
-        emit(PLAN_UPDATE, plan_update_to_dict(
-            header, reason=found.reason or state["message"], changed_step=found.changed_step,
-            feasible=found.feasible, repair=found.kind, order=found.order, holds=found.holds,
-            message=found.message, timeline=timeline_to_dicts(timeline, header)))
-        if found.feasible and found.changed:
+        while True:
+            # the look-ahead's states handed over: the repair checks none of them again;
+            # staged, it repairs the steps up to the failing one (the look-ahead of the
+            # repaired plan checks the rest of the window, and repairs again from there)
+            window = replace(settings, lookahead_steps=failing - state["current_step"] + 1) \
+                if staged else settings
+            found, timeline = repairer(self.plan, built, options, window, self.cell,
+                                       self._checked)
+            emit(PLAN_UPDATE, plan_update_to_dict(
+                header, reason=found.reason or state["message"],
+                changed_step=found.changed_step, feasible=found.feasible, repair=found.kind,
+                order=found.order, holds=found.holds, message=found.message,
+                timeline=timeline_to_dicts(timeline, header)))
+            if not (found.feasible and found.changed):
+                return None
             # a block's approach stays its own when the repair reorders the steps
             self.plan = replace(self.plan, sequence=tuple(found.order),
                                 holds=tuple(found.holds),
                                 approach=approaches(self.plan, found.order))
             # the repair's states (the look-ahead's with them) not checked again
-            emit(EXECUTION, self._state(built, as_built, header, options, settings,
-                                        found.checked))
-        return None
+            state = self._state(built, as_built, header, options, settings, found.checked,
+                                until_failure=staged)
+            emit(EXECUTION, state)
+            # each round's repair makes the steps up to its failing one pass: the next
+            # failing step is later, or the loop ends (bounded by the window)
+            if not staged or state["first_failing_step"] <= failing:
+                return None
+            failing = state["first_failing_step"]
 
     def _cell(self, options: CheckOptions) -> CellPlan | None:
         """The plan's cell with its design's assembly (made again for other contact
@@ -218,10 +279,11 @@ class Execution:
         return self._cell_plan
 
     def _state(self, built: Scene, as_built, header, options, settings,
-               checked: Checked | None = None) -> dict:
+               checked: Checked | None = None, until_failure: bool = False,
+               known: Report | None = None) -> dict:
         ahead = look_ahead(self.plan, built, options, lookahead_steps=settings.lookahead_steps,
                            min_margin_g=settings.min_margin_g, cell=self._cell(options),
-                           checked=checked)
+                           until_failure=until_failure, checked=checked, as_built=known)
         self._checked = ahead.checked
         if ahead.timeline is not None:
             self.timeline = timeline_to_dicts(ahead.timeline, header)
@@ -239,4 +301,4 @@ class Execution:
 
 
 __all__ = ["EXECUTION", "Execution", "LOOKAHEAD_STEPS", "MIN_MARGIN_G", "NO_PLAN",
-           "PLAN_UPDATE", "Repairer", "Settings", "repair"]
+           "PLAN_UPDATE", "Repairer", "Settings", "planned_note", "repair"]

@@ -66,7 +66,7 @@ from .messages import (header_stamp_ns, plan_goal_from_dict, plan_result_to_dict
                        poses_from_dict, report_header, report_to_dict, scene_from_state_dict,
                        state_to_dict)
 from .plans import plan_state
-from .execution import EXECUTION, PLAN_UPDATE, Execution, Settings
+from .execution import EXECUTION, PLAN_UPDATE, Execution, Settings, planned_note
 from .poses import AsBuilt
 
 OPTIONS_KEY = "rbe_ros.check_options"
@@ -401,9 +401,7 @@ def asbuilt_check(scene: Scene | SceneError, options: CheckOptions = CheckOption
     if result.error is not None or not scene.holds:
         return result
     report = result.reports[0]
-    held = ", ".join(report.held_blocks) or "nothing"
-    report = replace(report, message=f"{report.message} | as the plan has it at step "
-                                     f"{len(scene.sequence) - 1}: held {held}")
+    report = replace(report, message=report.message + planned_note(scene, report))
     return replace(result, reports=[report])
 
 

@@ -86,7 +86,7 @@ from visualization_msgs.msg import MarkerArray
 
 from ..analysis.option_spec import BY_PARAM, OPTIONS, Option, from_outer
 from ..analysis.options import CheckOptions
-from ..analysis.pipeline import StateCheck, check_state, slim
+from ..analysis.pipeline import StateCheck, check_state
 from ..analysis.lookahead import check_plan_design
 from ..analysis.planning import STOPPED, Plan
 from ..analysis.steps import sequence_step
@@ -860,7 +860,8 @@ class RbeChecks:
     def _check_asbuilt(self, header: dict, scene, design: int) -> None:
         """Check an as-built scene (or report why there is none) as a whole, then hand it
         to the plan's execution (``design``: the number of the design it was merged on)."""
-        result = asbuilt_check(self._holding(scene, design), self.check_options())
+        options = self.check_options()
+        result = asbuilt_check(self._holding(scene, design), options)
         if result.error is None:
             report = result.reports[0]
             self._publish(result.scene, report, header)
@@ -871,7 +872,7 @@ class RbeChecks:
             report = result.error
             self._publish(None, report, header, state)
         with self._exec_cond:
-            self._exec_slot["state"] = (header, scene, report, design)
+            self._exec_slot["state"] = (header, scene, report, design, options)
             self._exec_cond.notify()
 
     # --- plan execution (rbe_ros.io.execution) ----------------------------------------------
@@ -929,9 +930,9 @@ class RbeChecks:
                     if self._execution.plan is not None:
                         self._pool().warm()     # a repair may come: its process ready
                 if "state" in slot:
-                    header, scene, report, design = slot["state"]
+                    header, scene, report, design, options = slot["state"]
                     if design == self._exec_design:    # not of a design replaced since
-                        self._advance(header, scene, report)
+                        self._advance(header, scene, report, options)
             except Exception as exc:   # publishing failed (shutdown): say so, go on
                 self.get_logger().error(f"execution not advanced: {type(exc).__name__}: {exc}")
             finally:
@@ -939,11 +940,13 @@ class RbeChecks:
                     self._exec_running = (None, None)
                     self._exec_cond.notify_all()
 
-    def _advance(self, header: dict, scene, report: Report) -> None:
+    def _advance(self, header: dict, scene, report: Report, options: CheckOptions) -> None:
         """Publish (and record) what the as-built state means for the plan: its
-        ExecutionState, and a repaired plan when a step ahead fails (WARN)."""
-        self._execution.advance(scene, report_to_dict(slim(report), header), header,
-                                self.check_options(), self._execution_settings(), self._repair,
+        ExecutionState, and a repaired plan when a step ahead fails (WARN); under the
+        options ``report`` was checked with (whole: the look-ahead takes it as its check
+        of the state, its interfaces too)."""
+        self._execution.advance(scene, report_to_dict(report, header), header, options,
+                                self._execution_settings(), self._repair,
                                 self._send_execution)
 
     def _send_execution(self, kind: str, message: dict) -> None:

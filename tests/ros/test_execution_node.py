@@ -243,6 +243,8 @@ def test_block_lands_off_a_later_step_fails_and_the_plan_is_repaired(
         assert [(s.block, s.stable) for s in failing.lookahead][
             failing_step - failing.current_step] == (c["next_block"], False)
         assert f"step {failing_step} ({c['next_block']})" in failing.message
+        if c["cell"] is None:   # it goes out at the failing step (a cell's: the window)
+            assert failing.lookahead[-1].step == failing_step
         update = wait_until(lambda: camera.updates, 60.0, "the plan update")[0]
         assert update.feasible and update.changed_step == failing_step
         assert list(update.order[:failing_step]) == order[:failing_step]

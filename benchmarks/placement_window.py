@@ -14,30 +14,16 @@ alternating; read the ratios (docs/METHOD.md, "Placement test cost").
 """
 from __future__ import annotations
 
-import argparse
-import json
 import os
-import subprocess
 import sys
-from pathlib import Path
 
-from machine import machine_summary
+from trees import arguments, in_tree, started
 
-HERE = Path(__file__).resolve().parent
-ROOT = HERE.parent
-PYTHON = ROOT / ".venv" / "bin" / "python"
-PLAN = ROOT / "build" / "repair" / "dome14x10.pkl"
 #: Run in a tree: the repair window of deviation argv[3], one JSON line.
 WINDOW = """
-import json, os, pickle, sys, time
-import rbe_ros
 import rbe_ros.analysis.verdict as verdict
 from rbe_ros.analysis.repair import repair_plan
-from rbe_ros.io.poses import scene_at_poses
 from rbe_ros.rbe import prestress
-sys.path.insert(0, sys.argv[1])
-from repair import DEVIATIONS, deviated     # after rbe_ros: it puts its own tree first
-assert rbe_ros.__file__.startswith(os.getcwd()), rbe_ros.__file__
 tests, depth, placed = [], [0], prestress.placed
 
 def timed(model, *args, **kwargs):
@@ -58,24 +44,11 @@ def timed(model, *args, **kwargs):
     return found
 
 verdict.placed = timed
-plan, _ = pickle.load(open(sys.argv[2], "rb"))
 scene = plan.scene
-half = len(plan.order) // 2
-design = {b: (scene.block(b).position.tolist(), scene.block(b).orientation.tolist())
-          for b in plan.order[:half]}
-k, shift, tilt, axis = DEVIATIONS[int(sys.argv[3])]
-block = plan.order[half - k]
-built = scene_at_poses(scene, {**design, block: deviated(scene.block(block), shift, tilt, axis)})
+_, built = half_built(plan, int(sys.argv[3]))
 r = repair_plan(scene, built, lookahead_steps=10)
 print(json.dumps({"outcome": [r.kind, r.changed_step], "tests": tests}))
 """
-
-
-def _window(tree: Path, deviation: int) -> dict:
-    out = subprocess.run([str(PYTHON), "-c", WINDOW, str(HERE), str(PLAN), str(deviation)],
-                         capture_output=True, text=True, cwd=tree,
-                         env=os.environ | {"PYTHONPATH": str(tree)}, check=True)
-    return json.loads(out.stdout.splitlines()[-1])
 
 
 def _differences(a: dict, b: dict, tol: float) -> list[str]:
@@ -94,25 +67,21 @@ def _differences(a: dict, b: dict, tol: float) -> list[str]:
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("trees", nargs="+", type=Path, help="checkouts of rbe_ros")
-    parser.add_argument("--repeats", type=int, default=1)
+    parser = arguments(__doc__)
     parser.add_argument("--deviations", type=int, nargs="*", default=[0],
                         help="indices into benchmarks/repair.py's DEVIATIONS")
     parser.add_argument("--tol", type=float, default=1e-8,
                         help="normal resultants' difference allowed (share of W)")
     args = parser.parse_args()
-    if not PLAN.exists():
-        print(f"no plan at {PLAN}: run make bench-repair first", file=sys.stderr)
+    trees = started(args)
+    if trees is None:
         return 1
-    trees = [t.resolve() for t in args.trees]
-    print(machine_summary(), flush=True)
     differ = 0
     for deviation in args.deviations:
         best = {}
         for _ in range(args.repeats):
             for t in trees:
-                result = _window(t, deviation)
+                result = in_tree(t, WINDOW, deviation)
                 if t not in best:
                     best[t] = result
                     continue

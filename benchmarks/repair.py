@@ -92,6 +92,20 @@ def deviated(block, shift: float, tilt: float, axis: str):
     return (c + shift * radial).tolist(), q.tolist()
 
 
+def half_built(plan, deviation: int) -> tuple[str, object]:
+    """(the block measured off, the as-built scene): ``plan`` (a Plan) built to half at
+    design, then the ``deviation``-th of DEVIATIONS applied to one of its last placed
+    blocks (this bench's state, and that of the benchmarks that time its repair)."""
+    scene = plan.scene
+    half = len(plan.order) // 2
+    k, shift, tilt, axis = DEVIATIONS[deviation]
+    block = plan.order[half - k]
+    design = {b: (scene.block(b).position.tolist(), scene.block(b).orientation.tolist())
+              for b in plan.order[:half]}
+    return block, scene_at_poses(scene, {**design, block: deviated(scene.block(block), shift,
+                                                                   tilt, axis)})
+
+
 def remainder(plan_scene, placed: int):
     """``plan_scene`` from step ``placed`` on: its first ``placed`` blocks present from the
     start, the holds shifted (those ended before dropped); step k of it is step
@@ -235,13 +249,9 @@ def one_dome(name: str, key: str, scene, window: int = 0, whole: bool = True,
              "`DEVIATIONS`, in order).", ""]
     if not plan.feasible:
         return lines + [f"No plan: {plan.message}", ""]
-    design = {b: (planned_scene.block(b).position.tolist(),
-                  planned_scene.block(b).orientation.tolist()) for b in plan.order[:half]}
     chosen, first, tried = None, None, 0
-    for k, shift, tilt, axis in DEVIATIONS:
-        block = plan.order[half - k]
-        built = scene_at_poses(planned_scene, {**design, block: deviated(
-            planned_scene.block(block), shift, tilt, axis)})
+    for deviation, (_, shift, tilt, axis) in enumerate(DEVIATIONS):
+        block, built = half_built(plan, deviation)
         ahead = look_ahead(planned_scene, built, lookahead_steps=window, until_failure=True)
         tried += 1
         what = f"{block} {shift * 1e3:+.0f} mm, {tilt:+.0f} deg about its {axis}"

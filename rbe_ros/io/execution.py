@@ -166,9 +166,10 @@ class Execution:
         fails a PlanUpdate and the ExecutionState of the repaired plan, again while a later
         step of the window fails (in stages: see the module docstring); each passed to
         ``on_output(kind, message)`` as soon as it is made (the failing step goes out
-        before the repair starts). The same state again gives the same outputs with the new
-        header (a cell sends the same poses at 10 Hz); nothing while no plan was ever given
-        (a node that only checks says nothing on ~/execution); never raises."""
+        before the repair starts). The same state again gives its last ExecutionState with
+        the new header (a cell sends the same poses at 10 Hz: a PlanUpdate is an event, sent
+        once per repair); nothing while no plan was ever given (a node that only checks says
+        nothing on ~/execution); never raises."""
         out: list[tuple[str, dict]] = []
 
         def emit(kind: str, message: dict) -> None:
@@ -181,8 +182,9 @@ class Execution:
         seen = (built, self.plan, settings, options)
         if self._seen and all(a is b or a == b for a, b in zip(self._seen[2:], seen[2:])) \
                 and self._seen[0] is built and self._seen[1] is self.plan:
-            for kind, message in self._outputs:
-                emit(kind, {**message, "header": header})
+            last = next((m for k, m in reversed(self._outputs) if k == EXECUTION), None)
+            if last is not None:
+                emit(EXECUTION, {**last, "header": header})
             return out
         # the node's report of the as-built state, for the look-ahead; slim in the outputs
         known = self._known(built, as_built)
@@ -193,7 +195,7 @@ class Execution:
         except Exception as exc:        # an answer, never a crash
             emit(EXECUTION, self._refused(header, as_built,
                                           f"execution failed: {type(exc).__name__}: {exc}"))
-        # the plan a repair made is the one the same state again finds: its outputs again
+        # the plan a repair made is the one the same state again finds: its state again
         self._seen, self._outputs = (built, self.plan, settings, options), out
         return out
 

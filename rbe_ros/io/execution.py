@@ -132,6 +132,12 @@ class Execution:
                 self.error = str(exc)
         self.last, self._seen, self._repaired = None, (), None
 
+    @property
+    def idle(self) -> bool:
+        """Whether no plan was ever given: a state means nothing for one (a node that only
+        checks says nothing on ~/execution)."""
+        return self.plan is None and self.error == NO_PLAN
+
     def holding(self, built: Scene | SceneError) -> Scene | SceneError:
         """The as-built scene ``built`` as ~/report checks it: with the holds the plan under
         execution has at its step (:func:`rbe_ros.analysis.lookahead.as_built_state`, the
@@ -177,7 +183,7 @@ class Execution:
             if on_output is not None:
                 on_output(kind, message)
 
-        if self.plan is None and self.error == NO_PLAN:
+        if self.idle:
             return out
         seen = (built, self.plan, settings, options)
         if self._seen and all(a is b or a == b for a, b in zip(self._seen[2:], seen[2:])) \

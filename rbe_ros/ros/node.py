@@ -944,7 +944,10 @@ class RbeChecks:
         """Publish (and record) what the as-built state means for the plan: its
         ExecutionState, and a repaired plan when a step ahead fails (WARN); under the
         options ``report`` was checked with (whole: the look-ahead takes it as its check
-        of the state, its interfaces too)."""
+        of the state, its interfaces too; without a plan nothing, not even the conversion of
+        a report whose interfaces may number thousands)."""
+        if self._execution.idle:
+            return
         self._execution.advance(scene, report_to_dict(report, header), header, options,
                                 self._execution_settings(), self._repair,
                                 self._send_execution)

@@ -173,6 +173,11 @@ bench-replay: setup
 bench-repair: setup
 	nice -n 10 $(PY) benchmarks/repair.py
 
+# the node's answer to a deviated block over DDS (bench-repair's plan): docs/REPAIR_NODE.md
+.PHONY: bench-node-answer
+bench-node-answer: setup
+	ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST $(PY) benchmarks/node_answer.py
+
 # plan --prefer margin against the default on the 7-voussoir arch and the 8 x 5 and 14 x 10
 # domes (weakest step, hold-steps): docs/PREFER_MARGIN.md (many minutes: every candidate's
 # margin).

@@ -28,6 +28,7 @@ import cProfile
 import pickle
 import pstats
 import sys
+import threading
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -47,9 +48,9 @@ from rbe_ros.analysis.pipeline import check_sequence  # noqa: E402
 from rbe_ros.analysis.planning import plan_sequence  # noqa: E402
 from rbe_ros.analysis.repair import repair_plan  # noqa: E402
 from rbe_ros.analysis.steps import sequence_step, step_count  # noqa: E402
-from rbe_ros.io.execution import EXECUTION, LOOKAHEAD_STEPS, Execution, Settings  # noqa: E402
+from rbe_ros.io.execution import (EXECUTION, LOOKAHEAD_STEPS, Execution,  # noqa: E402
+                                  NodeReport, Settings)
 from rbe_ros.io.inputs import load_design  # noqa: E402
-from rbe_ros.io.messages import report_to_dict  # noqa: E402
 from rbe_ros.io.poses import scene_at_poses  # noqa: E402
 from rbe_ros.io.replay import asbuilt_check  # noqa: E402
 
@@ -172,25 +173,41 @@ def profiled(plan_scene, built, window: int) -> list[str]:
 
 
 def staged(plan_scene, built, window: int) -> list[tuple[str, float, str]]:
-    """Rows of the node's answer to the pose message, in process (the repair too): its
-    check of the as-built state with the plan's holds (~/report, ``asbuilt_check``), then
-    ``Execution.advance`` given that report (the look-ahead checks the state not again):
-    the time from the pose message to each output, in stages: the ExecutionState with the
-    failing step, the PlanUpdate, the verified window; and the PlanUpdate when ``advance``
-    is not given the report (the state checked twice, as before), for the ratio."""
+    """Rows of the node's answer to the pose message, in process (the repair too), as the
+    node makes it: its check of the as-built state with the plan's holds (~/report,
+    ``asbuilt_check``) on a thread of its own, handed to ``Execution.advance`` as it is made
+    (``NodeReport``: the look-ahead solves the first step ahead meanwhile, the repair begins
+    while the state's tolerance question is asked); the time from the pose message to each
+    output, in stages: the ExecutionState with the failing step, the PlanUpdate, the
+    verified window. Then the same answer with ``advance`` given ~/report only once it is
+    made (one after the other, the node before this change), for the ratio."""
     options, settings = CheckOptions(), Settings(lookahead_steps=window)
 
-    def advance(given: bool) -> tuple[float, list]:
+    def advance(beside: bool) -> tuple[float, list]:
         execution = Execution()
         execution.set_design(plan_scene)
-        sent = []
+        sent, made, checked = [], NodeReport(), []
         start = time.perf_counter()
-        report = asbuilt_check(execution.holding(built), options).reports[0]
-        checked = time.perf_counter() - start
-        execution.advance(built, report_to_dict(report, {}) if given else None, {}, options,
-                          settings, on_output=lambda kind, message: sent.append(
+        held = execution.holding(built)
+
+        def check() -> None:
+            report = None
+            try:
+                report = asbuilt_check(held, options, on_verdict=lambda verdict: made.decide(
+                    verdict, {}) if beside else None).reports[0]
+                checked.append(time.perf_counter() - start)
+            finally:
+                made.send(report, {})
+
+        thread = threading.Thread(target=check)
+        thread.start()
+        if not beside:
+            thread.join()
+        execution.advance(built, made, {}, options, settings,
+                          on_output=lambda kind, message: sent.append(
                               (kind, message, time.perf_counter() - start)))
-        return checked, sent
+        thread.join()
+        return checked[0], sent
 
     checked, sent = advance(True)
     which = f"the node's answer to the pose message (the next {window} steps, in process)"
@@ -198,7 +215,7 @@ def staged(plan_scene, built, window: int) -> list[tuple[str, float, str]]:
           + ", ".join(f"{k} {t:.2f} s" for k, _, t in sent), flush=True)
     rows = [("~/report, the node's check of the as-built state with the plan's holds (whole, "
              "its tolerance question asked): pose -> ~/report", checked,
-             "handed to `Execution.advance` with its interfaces")]
+             "handed to `Execution.advance` as it is made, with its interfaces")]
     states = [(m, t) for k, m, t in sent if k == EXECUTION]
     first, took = states[0]
     rows.append((f"{which}: pose -> ~/report -> the ExecutionState with the failing step", took,
@@ -215,19 +232,18 @@ def staged(plan_scene, built, window: int) -> list[tuple[str, float, str]]:
                  "ExecutionState)", took,
                  f"{len(sent)} outputs, first failing step {last['first_failing_step']}, "
                  f"{len(last['lookahead'])} steps looked ahead"))
-    _, again = advance(False)
+    _, after = advance(False)
 
     def outputs(sent: list) -> list:
         return [{**m, "as_built": {**m["as_built"], "solve_time": 0.0}} if k == EXECUTION
                 else m for k, m, _ in sent]
 
     if updates:
-        took = next(t for k, _, t in again if k != EXECUTION)
-        rows.append((f"{which}, `Execution.advance` not given ~/report (the as-built state "
-                     "checked again, as before): pose -> ~/report -> ... -> the PlanUpdate",
-                     took,
+        took = next(t for k, _, t in after if k != EXECUTION)
+        rows.append((f"{which}, `Execution.advance` given ~/report once it is made (one "
+                     "after the other): pose -> ~/report -> ... -> the PlanUpdate", took,
                      "the same outputs (but the as-built check's time)"
-                     if outputs(sent) == outputs(again) else "OTHER OUTPUTS"))
+                     if outputs(sent) == outputs(after) else "OTHER OUTPUTS"))
     return rows
 
 

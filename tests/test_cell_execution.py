@@ -230,9 +230,9 @@ def test_a_cell_repair_checks_no_step_state_twice(monkeypatch):
                            g.max_force, g.max_torque)
                           for g in assembly.grips))
 
-    def stepped(self, assembly):
+    def stepped(self, assembly, *whole):
         states["repair"].append(key(assembly))
-        return step_check(self, assembly)
+        return step_check(self, assembly, *whole)
 
     def checked(assembly, options):
         states["timeline"].append(key(assembly))

@@ -3,6 +3,7 @@ the state ExecutionState's ``as_built`` checks (one definition: ``as_built_state
 as ``check --sequence`` checks the plan's step."""
 from __future__ import annotations
 
+import threading
 from dataclasses import replace
 
 import numpy as np
@@ -10,6 +11,7 @@ import numpy as np
 from rbe_ros import generators as gen
 from rbe_ros.analysis.asbuilt import declared
 from rbe_ros.analysis.assembly import Assembly
+from rbe_ros.analysis import lookahead
 from rbe_ros.analysis.lookahead import (StepRunner, as_built_plan, as_built_state, look_ahead,
                                         state_key)
 from rbe_ros.analysis.options import CheckOptions
@@ -17,7 +19,8 @@ from rbe_ros.analysis.pipeline import check_sequence, slim
 from rbe_ros.analysis.planning import plan_sequence
 from rbe_ros.analysis.steps import final_state, sequence_step
 from rbe_ros.analysis.verdict import check
-from rbe_ros.io.execution import EXECUTION, Execution, Settings, planned_note
+from rbe_ros.io.execution import (EXECUTION, Execution, NodeReport, Settings, planned_note,
+                                  repair)
 from rbe_ros.io.messages import report_to_dict
 from rbe_ros.io.poses import scene_at_poses
 from rbe_ros.io.replay import asbuilt_check
@@ -150,3 +153,73 @@ def test_the_look_ahead_takes_the_nodes_report_of_the_as_built_state(monkeypatch
     execution.advance(built, report_to_dict(report, {}), {}, CheckOptions(),
                       Settings(lookahead_steps=1, min_margin_g=0.01))
     assert keys[0] == state_key(scene, step)
+
+
+def test_the_execution_begins_while_the_node_checks_the_as_built_state(monkeypatch):
+    """The node hands ~/report to the execution as it makes it (``NodeReport``, on its
+    check thread): the look-ahead solves the first step ahead before the state's verdict
+    is made, and the repair of a failing step begins before the state's tolerance question
+    is answered. The outputs are those of the execution given the finished report (the
+    replay's; each ExecutionState carries the answer), and no state is checked twice."""
+    for plan, built in _cases():
+        settings = Settings(lookahead_steps=0)
+        execution = Execution()
+        execution.set_design(plan)
+        report = asbuilt_check(execution.holding(built)).reports[0]
+        before = execution.advance(built, report_to_dict(report, {}), {}, CheckOptions(),
+                                   settings)
+        repaired = any(kind != EXECUTION for kind, _ in before)
+
+        execution = Execution()
+        execution.set_design(plan)
+        held = execution.holding(built)
+        made = NodeReport()
+        solved_early, repair_began, answered = (threading.Event() for _ in range(3))
+        events, keys = [], []
+        whole, checked = lookahead.check, StepRunner._check
+
+        def early(assembly, options):
+            events.append(("early", made.waiting))
+            solved_early.set()
+            return whole(assembly, options)
+
+        def counted(self, plan, step, checker):
+            keys.append(state_key(plan, step))
+            return checked(self, plan, step, checker)
+
+        def repairer(*args):
+            events.append(("repair", not answered.is_set()))
+            repair_began.set()
+            return repair(*args)
+
+        def decided(verdict):
+            made.decide(verdict, {})
+            if repaired:            # the tolerance question waits for the repair to begin
+                assert repair_began.wait(60)
+
+        def node():
+            sent = None
+            try:
+                assert solved_early.wait(60)    # the verdict waits for the early solve
+                sent = asbuilt_check(held, on_verdict=decided).reports[0]
+                answered.set()
+                # ~/report as the node made it before it handed it over
+                assert report_to_dict(replace(sent, solve_time=0.0), {}) == \
+                    report_to_dict(replace(report, solve_time=0.0), {})
+            finally:
+                made.send(sent, {})
+
+        monkeypatch.setattr(lookahead, "check", early)
+        monkeypatch.setattr(StepRunner, "_check", counted)
+        thread = threading.Thread(target=node)
+        thread.start()
+        after = execution.advance(built, made, {}, CheckOptions(), settings, repairer)
+        thread.join()
+        monkeypatch.undo()
+        assert answered.is_set()
+        assert _no_time(after) == _no_time(before)
+        assert events[0] == ("early", True)
+        assert [e for e in events if e[0] == "repair"][:1] == ([("repair", True)] if repaired
+                                                               else [])
+        assert len(keys) == len(set(keys))      # no state checked twice
+    assert repaired                             # the twin counterweights: two repairs

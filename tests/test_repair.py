@@ -259,10 +259,10 @@ def test_the_repair_checks_no_state_its_look_ahead_checked(monkeypatch):
     states = []         # (blocks, supports: the held ones too) of each state checked
     real = StepChecker.check
 
-    def counted(self, assembly):
+    def counted(self, assembly, *whole):
         states.append((frozenset(b.id for b in assembly.blocks),
                        frozenset(b.id for b in assembly.blocks if b.support)))
-        return real(self, assembly)
+        return real(self, assembly, *whole)
 
     monkeypatch.setattr(StepChecker, "check", counted)
     alone = repair_plan(scene, built, max_held=1)
@@ -418,9 +418,9 @@ def test_the_re_plan_path_checks_no_state_the_planner_checked(monkeypatch):
     events = []         # ("runner", state) of each state the repair's runner checks, then
     real, plan = StepChecker.check, repair_module.plan_sequence
 
-    def counted(self, assembly):
+    def counted(self, assembly, *whole):
         events.append(("runner", frozenset(b.id for b in assembly.blocks)))
-        return real(self, assembly)
+        return real(self, assembly, *whole)
 
     def planned(*args, **kwargs):
         found = plan(*args, **kwargs)

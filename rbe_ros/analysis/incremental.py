@@ -78,11 +78,13 @@ class StepChecker:
         self._previous: frozenset[str] = frozenset()     # blocks of the last step checked
         self._last_failed = False
 
-    def check(self, assembly: Assembly) -> Report:
-        """The verdict of ``assembly``, the next step after the ones checked before."""
+    def check(self, assembly: Assembly, whole: Report | None = None) -> Report:
+        """The verdict of ``assembly``, the next step after the ones checked before.
+        ``whole``: the full problem's report of it (:func:`check` under these options),
+        made before: the one taken where the regions do not settle the step."""
         report = self.attempt(assembly) if self.local else None
         if report is None:
-            report = check(assembly, self.options)
+            report = whole if whole is not None else check(assembly, self.options)
         self.advance(assembly, report)
         return replace(report, num_blocks=len(assembly.blocks))
 

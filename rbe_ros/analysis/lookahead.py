@@ -45,6 +45,7 @@ from .options import CheckOptions
 from .pipeline import Placed, _completed, slim, tolerance_asked
 from .steps import Step, sequence_step, step_count, step_state
 from .validate import validated_assembly
+from .verdict import check
 
 #: Look-ahead steps of the node by default (its ``lookahead_steps`` parameter).
 DEFAULT_LOOKAHEAD = 10
@@ -225,6 +226,32 @@ class Checked:
     walk: tuple[tuple, ...]             # the states walked, from the as-built one, in order
     checker: StepChecker                # the checker after the walk
 
+    def answered(self, by: "Checked") -> "Checked":
+        """These states with the reports ``by`` has of them: a repair that began on a
+        look-ahead's states before the as-built state's tolerance question was answered
+        (:func:`look_ahead`'s ``on_failing``) hands back that state's report as it had it;
+        ``by``, the look-ahead's own, has the answer."""
+        return replace(self, reports={k: by.reports.get(k, r) for k, r in self.reports.items()})
+
+
+@dataclass(frozen=True)
+class Given:
+    """The as-built state's check made elsewhere as a whole (the node's ~/report, made on
+    its check thread while the look-ahead runs), each part waited for when the look-ahead
+    needs it: ``verdict()``, its report before the tolerance question is asked (with its
+    interfaces: taken as the look-ahead's check), then ``asked()``, the report with it
+    (None, either: no report to take). ``waiting``: the verdict is still being made (the
+    look-ahead solves the first step ahead meanwhile: :meth:`StepRunner.early`)."""
+
+    verdict: Callable[[], Report | None]
+    asked: Callable[[], Report | None]
+    waiting: bool = False
+
+    @classmethod
+    def made(cls, report: Report | None) -> "Given":
+        """A check made before, its tolerance question asked (a replay's ~/report)."""
+        return cls(lambda: report, lambda: report)
+
 
 class StepRunner:
     """Checks steps of plans on one as-built scene (the blocks at their poses; a plan is a
@@ -262,6 +289,8 @@ class StepRunner:
         validated_assembly(scene.subset(built), options.limits, options.contact)
         self.full = Assembly.from_scene(scene, options.contact)
         self.memo: dict[tuple, Report] = dict(checked.reports) if checked else {}
+        #: states solved whole before the walk reached them (:meth:`early`)
+        self._early: dict[tuple, Report] = {}
         #: as-built states the tolerance was not asked of: their check (whole) and assembly
         self._unasked: dict[tuple, tuple[Report, Assembly]] = {}
         self.checks = 0
@@ -336,19 +365,33 @@ class StepRunner:
             found = self._check(plan, step, checker)
         return replace(found, step_index=k, block_placed=step.block)
 
+    def early(self, plan: Scene, k: int) -> None:
+        """Solve step ``k`` of ``plan`` whole now, before the walk reaches it (the node's
+        look-ahead solves the first step ahead while the node checks the as-built state on
+        its own thread): its check is then that solve wherever the regions around the new
+        block do not settle the step (:meth:`StepChecker.check`'s ``whole``), every report
+        the one the walk would have made."""
+        if self.pool is not None or k >= step_count(plan):
+            return
+        step = sequence_step(plan, k)
+        key = state_key(plan, step)
+        if key not in self.memo:
+            self._early[key] = check(self.full.subset(step.present, step.held, step.grips),
+                                     self.options)
+
     def _check(self, plan: Scene, step: Step, checker: StepChecker) -> Report:
         """The check of ``step`` of ``plan`` by ``checker``, kept (slim)."""
         if self.should_stop is not None and self.should_stop():
             raise TimeoutError(f"stopped before {where(step.index, step.block)}")
         assembly = self.full.subset(step.present, step.held, step.grips)
-        raw = checker.check(assembly)
+        key = state_key(plan, step)
+        raw = checker.check(assembly, self._early.pop(key, None))
         # whether a verdict hangs on the contact tolerance is asked of the state built
         # (placed blocks only), not of the steps ahead: one or two solves each
         found = _completed(raw, assembly, step.held, self.options,
                            Placed(self.full, step.present, step.block,
                                   plan.approach_of(step.block)),
                            tolerance=self.tolerance and step.index < self.placed)
-        key = state_key(plan, step)
         if not self.tolerance and step.index < self.placed:
             self._unasked[key] = (raw, assembly)
         found = self.memo[key] = slim(found)
@@ -398,12 +441,18 @@ class StepRunner:
         self.memo[key] = slim(report)
         return True
 
-    def explained(self, plan: Scene) -> Report:
+    def explained(self, plan: Scene, asked: Callable[[], Report | None] | None = None
+                  ) -> Report:
         """The report of the as-built state of ``plan`` (its step ``placed - 1``) with
         whether its verdict hangs on the contact tolerance, asked now if it was not (of
-        the state's check: the same report as a check that asked it)."""
+        the state's check: the same report as a check that asked it). ``asked``: the
+        state's report was taken (:meth:`take`) before its question was answered
+        elsewhere, and this gives it with the answer (None: the report as taken)."""
         key = self._key(plan, self.placed - 1)
-        if key in self._unasked:
+        answered = asked() if asked is not None else None
+        if answered is not None:
+            self.memo[key] = slim(answered)
+        elif key in self._unasked:
             raw, assembly = self._unasked.pop(key)
             self.memo[key] = slim(tolerance_asked(self.memo[key], raw, assembly,
                                                   self.options))
@@ -481,7 +530,8 @@ class StepRunner:
 def look_ahead(plan: Scene, built: Scene, options: CheckOptions = CheckOptions(), *,
                lookahead_steps: int = DEFAULT_LOOKAHEAD, min_margin_g: float = 0.0,
                until_failure: bool = False, cell=None, checked: Checked | None = None,
-               as_built: Report | None = None) -> Lookahead:
+               as_built: Report | Given | None = None,
+               on_failing: Callable[[int, Checked], None] | None = None) -> Lookahead:
     """Check the as-built state of ``plan`` (the free blocks of the as-built scene ``built``
     placed, a prefix of its order, at their measured poses) and its next ``lookahead_steps``
     steps (0: to the end) with the rest at design and the plan's holds, under ``options`` and
@@ -494,7 +544,10 @@ def look_ahead(plan: Scene, built: Scene, options: CheckOptions = CheckOptions()
     report of the as-built state (:func:`as_built_state`) checked as a whole under
     ``options``, with its interfaces (the node's ~/report): neither checked nor asked its
     tolerance question again (:meth:`StepRunner.take`; checked when it is not of the same
-    check).
+    check); :class:`Given` while it is made elsewhere.
+    ``on_failing(step, checked)``: called as soon as a step ahead fails on an as-built
+    state that stands, with the states checked, before the as-built state's tolerance
+    question is answered (the repair may begin: the robot needs it first).
 
     Raises SceneError for bad input: measured blocks not in the plan, or not a prefix of its
     order, a plan that is not one (no whole sequence), measured blocks that interpenetrate."""
@@ -512,13 +565,24 @@ def look_ahead(plan: Scene, built: Scene, options: CheckOptions = CheckOptions()
     checker = runner.walker(scene)
     fresh = runner.fork(checker)
     total = step_count(scene)
-    if placed and (as_built is None or not runner.take(scene, checker, as_built, options)):
-        runner.report(scene, placed - 1, checker)
+    given = Given.made(as_built) if isinstance(as_built, Report) else as_built
+    taken = False
+    if placed:
+        if given is not None:
+            if given.waiting:
+                runner.early(scene, placed)
+            verdict = given.verdict()
+            taken = verdict is not None and runner.take(scene, checker, verdict, options)
+        if not taken:
+            runner.report(scene, placed - 1, checker)
     stop = total if lookahead_steps == 0 else min(total, placed + lookahead_steps)
     forks: list[StepChecker] = []
     steps = runner.scan(scene, placed, stop, checker, until_failure, forks)
-    as_built = runner.explained(scene) if placed else None
     failing = next((s for s in steps if not s.passes), None)
+    if on_failing is not None and failing is not None and (
+            not placed or runner.report(scene, placed - 1, checker).stable):
+        on_failing(failing.step, runner.handover(scene, steps, forks, checker, fresh))
+    as_built = runner.explained(scene, given.asked if taken else None) if placed else None
     message = ""
     if as_built is not None and not as_built.stable:
         message = f"as built, {where(placed - 1, as_built.block_placed)} does not stand: " \
@@ -584,7 +648,7 @@ def approaches(scene: Scene, order) -> tuple:
     return tuple(given.get(b) for b in order)
 
 
-__all__ = ["Checked", "DEFAULT_LOOKAHEAD", "Lookahead", "StepAhead", "StepRunner", "approaches",
-           "as_built_plan", "as_built_state", "check_plan_design", "failure", "held_by_step",
-           "holds_of", "look_ahead", "placed_count", "plan_order", "state_key", "where",
-           "with_plan"]
+__all__ = ["Checked", "DEFAULT_LOOKAHEAD", "Given", "Lookahead", "StepAhead", "StepRunner",
+           "approaches", "as_built_plan", "as_built_state", "check_plan_design", "failure",
+           "held_by_step", "holds_of", "look_ahead", "placed_count", "plan_order", "state_key",
+           "where", "with_plan"]

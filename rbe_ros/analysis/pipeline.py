@@ -25,9 +25,13 @@ from .verdict import check
 
 
 def check_scene(scene: Scene, options: CheckOptions = CheckOptions(),
-                assembly: Assembly | None = None) -> Report:
+                assembly: Assembly | None = None,
+                on_verdict: Callable[[Report], None] | None = None) -> Report:
     """Check ``scene`` as a whole (contact detection included in the reported time);
     ``assembly``: its blocks on interfaces given instead of detected (a COMPAS file's).
+    ``on_verdict(report)``: called with the report before the tolerance question is asked
+    (the rest of the report is its answer: :func:`tolerance_asked`), for work that needs
+    only the verdict and its forces (the node's look-ahead begins then).
 
     With holds, the assembly is the state after the last step: supports whose hold ends are
     taken away, free blocks held to the end are supports (``held_blocks``). An unstable
@@ -45,10 +49,14 @@ def check_scene(scene: Scene, options: CheckOptions = CheckOptions(),
                 present, held = final_state(scene)
                 assembly = whole.subset(present, held, final_grips(scene, held))
             with stage("solve"):
-                report = check(assembly, options)
+                raw = check(assembly, options)
             placed = Placed(whole, tuple(b.id for b in assembly.blocks), last_block(scene),
                             scene.approach_of(last_block(scene)))
-            report = _completed(report, assembly, held, options, placed)
+            report = _completed(raw, assembly, held, options, placed,
+                                tolerance=on_verdict is None)
+            if on_verdict is not None:
+                on_verdict(report)
+                report = tolerance_asked(report, raw, assembly, options)
     except CheckTimeout as exc:
         report = timeout_report(exc)
     return replace(report, solve_time=time.perf_counter() - start)
@@ -213,14 +221,16 @@ class StateCheck:
 def check_state(read_scene: Callable[[bool], Scene], sequence: bool,
                 options: CheckOptions = CheckOptions(), *,
                 on_step: Callable[[Report, Scene, int], None] | None = None,
-                cancelled: Callable[[], bool] | None = None) -> StateCheck:
+                cancelled: Callable[[], bool] | None = None,
+                on_verdict: Callable[[Report], None] | None = None) -> StateCheck:
     """Check one received state; never raises.
 
     ``read_scene(sequence)`` makes the scene of the state (with its sequence, or without it
     for a check of the whole assembly); ``sequence``: check every step, else the whole.
     ``on_step(report, scene, total)`` is called for each report of the check as soon as it
-    is made. A state that cannot be read or checked ends with :func:`error_report` (in
-    ``reports`` and ``error``, not passed to ``on_step``)."""
+    is made; ``on_verdict``: a whole check's, as :func:`check_scene`'s. A state that cannot
+    be read or checked ends with :func:`error_report` (in ``reports`` and ``error``, not
+    passed to ``on_step``)."""
     reports: list[Report] = []
     scene = None
     total = 0
@@ -236,7 +246,7 @@ def check_state(read_scene: Callable[[bool], Scene], sequence: bool,
         if sequence:
             check_sequence(scene, options, on_step=step, cancelled=cancelled)
         else:
-            step(check_scene(scene, options), 1)
+            step(check_scene(scene, options, on_verdict=on_verdict), 1)
     except Exception as exc:        # a failed check is a report, never a crash
         error = error_report(exc)
         return StateCheck([*reports, error], scene, total, error)

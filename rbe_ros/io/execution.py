@@ -10,7 +10,12 @@ the robot needs first first: the ExecutionState at the first step that fails (it
 look-ahead the steps up to it), then the repair of that step
 (:func:`rbe_ros.analysis.repair.repair_plan` with a window that ends there, in the node a
 process of its own), then the look-ahead of the repaired plan over the whole window, which
-repairs again at a later failing step the same way. Poses that do not fit the plan (a block
+repairs again at a later failing step the same way. The node begins as it checks the
+as-built state (:class:`NodeReport`): the look-ahead solves the first step ahead while the
+node solves the state, takes the state's verdict as its check of it, and begins the repair
+of a failing step while the node asks the state's tolerance question; the ExecutionState
+goes out with ~/report's answer, its outputs those of an execution given the finished
+report (the replay's). Poses that do not fit the plan (a block
 out of the plan's order, a block not in the design, a design that is not the plan's) make
 the state inactive with the reason, the step reached and its look-ahead kept.
 
@@ -25,12 +30,14 @@ repair re-plans for the cell when a state between actions falls, over the steps 
 from __future__ import annotations
 
 import collections
+import functools
 from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, replace
 
 from ..analysis.cell_execution import CellPlan, repair_cell
-from ..analysis.lookahead import (DEFAULT_LOOKAHEAD, Checked, approaches, as_built_state,
-                                  check_plan_design, look_ahead)
+from ..analysis.lookahead import (DEFAULT_LOOKAHEAD, Checked, Given, approaches,
+                                  as_built_state, check_plan_design, look_ahead, placed_count)
 from ..analysis.options import CheckOptions
 from ..analysis.repair import Repair, repair_plan
 from ..analysis.timeline import Timeline
@@ -90,6 +97,61 @@ def planned_note(scene: Scene, report: Report) -> str:
 
 
 NO_PLAN = "no plan: set design_file to a planned scene, or send a design with a sequence"
+
+
+class NodeReport:
+    """~/report of an as-built state while the node makes it (on its check thread), for
+    the execution that begins with it: the check's report before the tolerance question
+    is asked (:func:`rbe_ros.io.replay.asbuilt_check`'s ``on_verdict``), then the report
+    sent, each a report dict (None: no report) made when the execution first needs it (a
+    node without a plan converts no report: its interfaces may number thousands) and
+    waited for until then. Whoever makes it calls :meth:`send` whatever happens (a
+    ``finally``): the execution never waits for ever."""
+
+    def __init__(self) -> None:
+        self._verdict: Future = Future()
+        self._sent: Future = Future()
+
+    @classmethod
+    def made(cls, report: dict | None) -> "NodeReport":
+        """A report made before (a replay's, or none)."""
+        made = cls()
+        made._sent.set_result(lambda: report)
+        made._verdict.set_result(lambda: report)
+        return made
+
+    @staticmethod
+    def _of(report: Report | None, header: dict) -> Callable[[], dict | None]:
+        return functools.cache(lambda: None if report is None else
+                               report_to_dict(report, header))
+
+    def decide(self, report: Report | None, header: dict) -> None:
+        """The check's report, its tolerance question not asked yet."""
+        if not self._verdict.done():
+            self._verdict.set_result(self._of(report, header))
+
+    def send(self, report: Report | None, header: dict) -> None:
+        """The report sent (its verdict too, if not given before)."""
+        made = self._of(report, header)
+        if not self._verdict.done():
+            self._verdict.set_result(made)
+        self._sent.set_result(made)
+
+    @property
+    def waiting(self) -> bool:
+        """Whether the check's report is still being made."""
+        return not self._verdict.done()
+
+    def verdict(self) -> dict | None:
+        return self._verdict.result()()
+
+    def sent(self) -> dict | None:
+        return self._sent.result()()
+
+    def slim(self) -> dict | None:
+        """The report sent, as the outputs carry it (its interfaces are ~/report's)."""
+        sent = self.sent()
+        return None if sent is None else {**sent, "interfaces": [], "near_contacts": []}
 
 
 class Execution:
@@ -162,20 +224,23 @@ class Execution:
         copy: the node's check thread appends while its execution thread reads)."""
         return next((h for b, p, h in tuple(self._held) if b is built and p is plan), None)
 
-    def advance(self, built: Scene | SceneError, as_built: dict | None, header: dict,
-                options: CheckOptions, settings: Settings, repairer: Repairer = repair,
+    def advance(self, built: Scene | SceneError, as_built: dict | NodeReport | None,
+                header: dict, options: CheckOptions, settings: Settings,
+                repairer: Repairer = repair,
                 on_output: Callable[[str, dict], None] | None = None
                 ) -> list[tuple[str, dict]]:
         """The outputs of one as-built state (``built``, or why the poses were refused;
         ``as_built``: the node's report of it, with its interfaces: of :meth:`holding`'s
-        state, the look-ahead checks it not again): an ExecutionState, and when a step ahead
-        fails a PlanUpdate and the ExecutionState of the repaired plan, again while a later
-        step of the window fails (in stages: see the module docstring); each passed to
-        ``on_output(kind, message)`` as soon as it is made (the failing step goes out
-        before the repair starts). The same state again gives its last ExecutionState with
-        the new header (a cell sends the same poses at 10 Hz: a PlanUpdate is an event, sent
-        once per repair); nothing while no plan was ever given (a node that only checks says
-        nothing on ~/execution); never raises."""
+        state, the look-ahead checks it not again; a :class:`NodeReport` while the node
+        makes it): an ExecutionState, and when a step ahead fails a PlanUpdate and the
+        ExecutionState of the repaired plan, again while a later step of the window fails
+        (in stages: see the module docstring); each passed to ``on_output(kind, message)``
+        as soon as it is made (the failing step goes out before the repair's plan; the
+        repair begins as the step fails, beside the rest of the ExecutionState's work).
+        The same state again gives its last ExecutionState with the new header (a cell
+        sends the same poses at 10 Hz: a PlanUpdate is an event, sent once per repair);
+        nothing while no plan was ever given (a node that only checks says nothing on
+        ~/execution); never raises."""
         out: list[tuple[str, dict]] = []
 
         def emit(kind: str, message: dict) -> None:
@@ -192,14 +257,11 @@ class Execution:
             if last is not None:
                 emit(EXECUTION, {**last, "header": header})
             return out
-        # the node's report of the as-built state, for the look-ahead; slim in the outputs
-        known = self._known(built, as_built)
-        if as_built is not None:
-            as_built = {**as_built, "interfaces": [], "near_contacts": []}
+        report = as_built if isinstance(as_built, NodeReport) else NodeReport.made(as_built)
         try:
-            self._advance(built, as_built, known, header, options, settings, repairer, emit)
+            self._advance(built, report, header, options, settings, repairer, emit)
         except Exception as exc:        # an answer, never a crash
-            emit(EXECUTION, self._refused(header, as_built,
+            emit(EXECUTION, self._refused(header, report.slim(),
                                           f"execution failed: {type(exc).__name__}: {exc}"))
         # the plan a repair made is the one the same state again finds: its state again
         self._seen, self._outputs = (built, self.plan, settings, options), out
@@ -228,54 +290,72 @@ class Execution:
             return None
         return replace(report, message=report.message[:len(report.message) - len(note)])
 
-    def _advance(self, built, as_built, known, header, options, settings, repairer,
+    def _advance(self, built, report: NodeReport, header, options, settings, repairer,
                  emit) -> None:
         if self.plan is None or self.error:
-            return emit(EXECUTION, self._refused(header, as_built, self.error))
+            return emit(EXECUTION, self._refused(header, report.slim(), self.error))
         if isinstance(built, SceneError):
-            return emit(EXECUTION, self._refused(header, as_built,
+            return emit(EXECUTION, self._refused(header, report.slim(),
                                                  f"poses not accepted: {built}"))
         # a plan of K holds is executed in stages: the look-ahead goes out at the first
         # failing step and its repair right after it (a cell's repair keeps to the window)
         staged = self.cell is None
-        try:
-            state = self._state(built, as_built, header, options, settings,
-                                until_failure=staged, known=known)
-        except SceneError as exc:       # out of the plan's order, not of the plan
-            return emit(EXECUTION, self._refused(header, as_built, str(exc)))
-        emit(EXECUTION, state)
-        failing = state["first_failing_step"]
-        if failing < 0 or self._repaired is built:
-            return None
-        self._repaired = built          # tried once per as-built state
-        while True:
-            # the look-ahead's states handed over: the repair checks none of them again;
-            # staged, it repairs the steps up to the failing one (the look-ahead of the
-            # repaired plan checks the rest of the window, and repairs again from there)
-            window = replace(settings, lookahead_steps=failing - state["current_step"] + 1) \
-                if staged else settings
-            found, timeline = repairer(self.plan, built, options, window, self.cell,
-                                       self._checked)
-            emit(PLAN_UPDATE, plan_update_to_dict(
-                header, reason=found.reason or state["message"],
-                changed_step=found.changed_step, feasible=found.feasible, repair=found.kind,
-                order=found.order, holds=found.holds, message=found.message,
-                timeline=timeline_to_dicts(timeline, header)))
-            if not (found.feasible and found.changed):
-                return None
-            # a block's approach stays its own when the repair reorders the steps
-            self.plan = replace(self.plan, sequence=tuple(found.order),
-                                holds=tuple(found.holds),
-                                approach=approaches(self.plan, found.order))
-            # the repair's states (the look-ahead's with them) not checked again
-            state = self._state(built, as_built, header, options, settings, found.checked,
-                                until_failure=staged)
-            emit(EXECUTION, state)
-            # each round's repair makes the steps up to its failing one pass: the next
-            # failing step is later, or the loop ends (bounded by the window)
-            if not staged or state["first_failing_step"] <= failing:
-                return None
-            failing = state["first_failing_step"]
+        # the node's report as the look-ahead takes it, part by part as the node makes it
+        given = Given(lambda: self._known(built, report.verdict()),
+                      lambda: self._known(built, report.sent()), report.waiting)
+        tried, failing, checked = self._repaired is built, -1, None
+        begun: list[Future] = []        # the repair of this round's failing step
+
+        def window(step: int) -> Settings:
+            # staged, the repair's window ends at the failing step (the look-ahead of the
+            # repaired plan checks the rest, and repairs again from a later failing step);
+            # a cell's repair keeps to the look-ahead's
+            return replace(settings, lookahead_steps=step + 1 - placed_count(
+                self.plan, built)) if staged else settings
+
+        def begin(step: int, handed: Checked) -> None:
+            # the repair begun as the step fails (the ExecutionState still waits for the
+            # as-built state's tolerance question), the look-ahead's states handed over:
+            # it checks none of them again
+            if step > failing:
+                begun.append(beside.submit(repairer, self.plan, built, options,
+                                           window(step), None, handed))
+
+        with ThreadPoolExecutor(1) as beside:
+            while True:
+                begun.clear()
+                try:
+                    state = self._state(built, report.slim, header, options, settings,
+                                        checked, until_failure=staged,
+                                        known=given if checked is None else None,
+                                        on_failing=begin if staged and not tried else None)
+                except SceneError as exc:       # out of the plan's order, not of the plan
+                    return emit(EXECUTION, self._refused(header, report.slim(), str(exc)))
+                emit(EXECUTION, state)
+                # each round's repair makes the steps up to its failing one pass: the next
+                # failing step is later, or the loop ends (bounded by the window)
+                if state["first_failing_step"] <= failing or tried or (
+                        checked is not None and not staged):
+                    return None
+                failing = state["first_failing_step"]
+                self._repaired = built          # tried once per as-built state
+                found, timeline = begun[0].result() if begun else repairer(
+                    self.plan, built, options, window(failing), self.cell, self._checked)
+                emit(PLAN_UPDATE, plan_update_to_dict(
+                    header, reason=found.reason or state["message"],
+                    changed_step=found.changed_step, feasible=found.feasible,
+                    repair=found.kind, order=found.order, holds=found.holds,
+                    message=found.message, timeline=timeline_to_dicts(timeline, header)))
+                if not (found.feasible and found.changed):
+                    return None
+                # a block's approach stays its own when the repair reorders the steps
+                self.plan = replace(self.plan, sequence=tuple(found.order),
+                                    holds=tuple(found.holds),
+                                    approach=approaches(self.plan, found.order))
+                # the repair's states (the look-ahead's with them) not checked again; one
+                # begun before the as-built state's tolerance question was answered hands
+                # back that state's report without the answer, the look-ahead's has it
+                checked = found.checked.answered(self._checked) if begun else found.checked
 
     def _cell(self, options: CheckOptions) -> CellPlan | None:
         """The plan's cell with its design's assembly (made again for other contact
@@ -286,12 +366,14 @@ class Execution:
             self._cell_plan = CellPlan(self.cell, self.plan, options)
         return self._cell_plan
 
-    def _state(self, built: Scene, as_built, header, options, settings,
-               checked: Checked | None = None, until_failure: bool = False,
-               known: Report | None = None) -> dict:
+    def _state(self, built: Scene, as_built: Callable[[], dict | None], header, options,
+               settings, checked: Checked | None = None, until_failure: bool = False,
+               known: Given | None = None,
+               on_failing: Callable[[int, Checked], None] | None = None) -> dict:
         ahead = look_ahead(self.plan, built, options, lookahead_steps=settings.lookahead_steps,
                            min_margin_g=settings.min_margin_g, cell=self._cell(options),
-                           until_failure=until_failure, checked=checked, as_built=known)
+                           until_failure=until_failure, checked=checked, as_built=known,
+                           on_failing=on_failing)
         self._checked = ahead.checked
         if ahead.timeline is not None:
             self.timeline = timeline_to_dicts(ahead.timeline, header)
@@ -303,10 +385,10 @@ class Execution:
             # the as-built state with the plan's holds at its step (nothing placed: the
             # node's check of the supports)
             as_built=report_to_dict(ahead.as_built, header) if ahead.as_built is not None
-            else as_built, lookahead=[lookahead_step_to_dict(s) for s in ahead.steps],
+            else as_built(), lookahead=[lookahead_step_to_dict(s) for s in ahead.steps],
             first_failing_step=ahead.first_failing_step, message=ahead.message)
         return self.last
 
 
 __all__ = ["EXECUTION", "Execution", "LOOKAHEAD_STEPS", "MIN_MARGIN_G", "NO_PLAN",
-           "PLAN_UPDATE", "Repairer", "Settings", "planned_note", "repair"]
+           "NodeReport", "PLAN_UPDATE", "Repairer", "Settings", "planned_note", "repair"]

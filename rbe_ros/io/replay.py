@@ -386,23 +386,27 @@ def asbuilt_scenes(runs: list[Run]) -> list[Scene | SceneError | None]:
     return out
 
 
-def asbuilt_check(scene: Scene | SceneError, options: CheckOptions = CheckOptions()
-                  ) -> StateCheck:
+def asbuilt_check(scene: Scene | SceneError, options: CheckOptions = CheckOptions(),
+                  on_verdict: Callable[[Report], None] | None = None) -> StateCheck:
     """The check ``rbe_node`` makes of an as-built scene (as a whole), or the report of why
     there is none: the node's own dispatch, as for a state. A scene with holds is the state
     a plan has at its step (:meth:`Execution.holding`): its report's message ends with the
-    step and the blocks held."""
+    step and the blocks held. ``on_verdict``: given the report before its tolerance
+    question is asked (:func:`rbe_ros.analysis.pipeline.check_scene`'s), the note too."""
     def read(_sequence: bool) -> Scene:
         if isinstance(scene, SceneError):
             raise scene
         return scene
 
-    result = check_state(read, False, options)
+    def noted(report: Report) -> Report:
+        return replace(report, message=report.message + planned_note(scene, report)) \
+            if scene.holds else report
+
+    result = check_state(read, False, options, on_verdict=on_verdict and (
+        lambda report: on_verdict(noted(report))))
     if result.error is not None or not scene.holds:
         return result
-    report = result.reports[0]
-    report = replace(report, message=report.message + planned_note(scene, report))
-    return replace(result, reports=[report])
+    return replace(result, reports=[noted(result.reports[0])])
 
 
 def state_reports(state: dict, options: CheckOptions = CheckOptions()) -> list[Report]:

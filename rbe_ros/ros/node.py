@@ -30,9 +30,10 @@ Interfaces (relative to the node, e.g. ``/rbe_node/report``):
   their pace meanwhile;
 * publishes ``~/execution`` (rbe_msgs/ExecutionState) and ``~/plan_update``
   (rbe_msgs/PlanUpdate), both latched: the plan under execution (a design with a sequence, or
-  a ~/plan result of the design) after each design or poses message checked, the steps
+  a ~/plan result of the design) for each design or poses message checked, the steps
   ahead at the measured poses, and a repaired plan when one of them fails
-  (:mod:`rbe_ros.io.execution`, its own thread; parameters ``lookahead_steps``,
+  (:mod:`rbe_ros.io.execution`, its own thread, begun with the check of the message:
+  :class:`rbe_ros.io.execution.NodeReport`; parameters ``lookahead_steps``,
   ``min_margin_g``). A plan for a robot cell (a ``design_file`` written by ``rbe-ros plan
   --cell -o``, a ``~/plan`` result for a cell; a design sent on ``~/design`` carries none) is
   executed as its timeline, the cell recorded with the settings, and its robots drawn on
@@ -100,7 +101,8 @@ from ..io.messages import (plan_feedback_to_dict, plan_goal_from_dict, plan_resu
 from ..io.cell_file import read_cell
 from ..io.plan_export import plan_cell
 from ..io.plans import INVALID_CELL
-from ..io.execution import EXECUTION, LOOKAHEAD_STEPS, MIN_MARGIN_G, Execution, Settings
+from ..io.execution import (EXECUTION, LOOKAHEAD_STEPS, MIN_MARGIN_G, Execution,
+                             NodeReport, Settings)
 from ..io.poses import AsBuilt
 from ..io.replay import (DESIGN, EXECUTION_TYPE, OPTIONS_KEY, PLAN_GOAL_TYPE, PLAN_RESULT_TYPE,
                          PLAN_UPDATE_TYPE, POSES, SETTINGS_TYPE, asbuilt_check, merge_message,
@@ -858,22 +860,32 @@ class RbeChecks:
         return poses_to_dict(self._asbuilt.measured, self.get_parameter("frame_id").value)
 
     def _check_asbuilt(self, header: dict, scene, design: int) -> None:
-        """Check an as-built scene (or report why there is none) as a whole, then hand it
-        to the plan's execution (``design``: the number of the design it was merged on)."""
+        """Check an as-built scene (or report why there is none) as a whole for ~/report,
+        handed to the plan's execution as it is made (``design``: the number of the design
+        it was merged on): the execution begins at once, checking the first step ahead
+        while this thread checks the state, then its repair while this thread asks the
+        state's tolerance question (:class:`rbe_ros.io.execution.NodeReport`)."""
         options = self.check_options()
-        result = asbuilt_check(self._holding(scene, design), options)
-        if result.error is None:
-            report = result.reports[0]
-            self._publish(result.scene, report, header)
-        else:
-            # drawn as a state that failed: what could be merged, the blocks at fault
-            state = AssemblyState() if result.scene is None else \
-                dict_to_message(state_to_dict(result.scene), AssemblyState)
-            report = result.error
-            self._publish(None, report, header, state)
+        held = self._holding(scene, design)
+        made = NodeReport()
         with self._exec_cond:
-            self._exec_slot["state"] = (header, scene, report, design, options)
+            self._exec_slot["state"] = (header, scene, made, design, options)
             self._exec_cond.notify()
+        report = None
+        try:
+            result = asbuilt_check(held, options,
+                                   on_verdict=lambda verdict: made.decide(verdict, header))
+            if result.error is None:
+                report = result.reports[0]
+                self._publish(result.scene, report, header)
+            else:
+                # drawn as a state that failed: what could be merged, the blocks at fault
+                state = AssemblyState() if result.scene is None else \
+                    dict_to_message(state_to_dict(result.scene), AssemblyState)
+                report = result.error
+                self._publish(None, report, header, state)
+        finally:
+            made.send(report, header)
 
     # --- plan execution (rbe_ros.io.execution) ----------------------------------------------
 
@@ -940,17 +952,14 @@ class RbeChecks:
                     self._exec_running = (None, None)
                     self._exec_cond.notify_all()
 
-    def _advance(self, header: dict, scene, report: Report, options: CheckOptions) -> None:
+    def _advance(self, header: dict, scene, report: NodeReport, options: CheckOptions
+                 ) -> None:
         """Publish (and record) what the as-built state means for the plan: its
         ExecutionState, and a repaired plan when a step ahead fails (WARN); under the
-        options ``report`` was checked with (whole: the look-ahead takes it as its check
-        of the state, its interfaces too; without a plan nothing, not even the conversion of
-        a report whose interfaces may number thousands)."""
-        if self._execution.idle:
-            return
-        self._execution.advance(scene, report_to_dict(report, header), header, options,
-                                self._execution_settings(), self._repair,
-                                self._send_execution)
+        options ``report`` (~/report, as it is made) was checked with (whole: the look-ahead
+        takes it as its check of the state, its interfaces too)."""
+        self._execution.advance(scene, report, header, options, self._execution_settings(),
+                                self._repair, self._send_execution)
 
     def _send_execution(self, kind: str, message: dict) -> None:
         """Record, then publish an ExecutionState or a PlanUpdate (the latter logged)."""

@@ -415,13 +415,16 @@ def main() -> int:
              "rows of the node's answer time it from the pose message to each output, in "
              "process (its repair too), as the node does it: ~/report (the as-built state "
              "with the plan's holds checked whole, its tolerance question asked: a row of "
-             "its own), then `Execution.advance` given that report, which the look-ahead "
-             "takes as its check of the as-built state (not checked again), in stages: "
-             "the ExecutionState as soon as a step of the window fails (the steps up to it), "
-             "the PlanUpdate of the repair of the steps up to it, then the ExecutionState "
-             "of the repaired plan over the whole window (repairing again at a later "
-             "failing step); the last row is the same answer with `Execution.advance` not given "
-             "the report (the state checked twice, as before).", ""]
+             "its own) on a thread of its own, handed to `Execution.advance` as it is made "
+             "(`NodeReport`): the look-ahead solves the first step ahead while the state "
+             "is solved, takes the state's verdict as its check of it (not checked again), "
+             "and begins the repair of a failing step while the state's tolerance question "
+             "is asked; in stages: the ExecutionState as soon as a step of the window fails "
+             "(the steps up to it) and ~/report is made, the PlanUpdate of the repair of "
+             "the steps up to it, then the ExecutionState of the repaired plan over the "
+             "whole window (repairing again at a later failing step); the last row is the "
+             "same answer with `Execution.advance` given ~/report only once it is made (one "
+             "after the other, as before).", ""]
     if "--dome527" in sys.argv:
         # its re-check to the end costs many minutes (docs/SCALING.md): a node's window only
         scene, _ = load_design(DOME527)
@@ -440,11 +443,8 @@ def main() -> int:
                           profile="--profile" in sys.argv)
     if "--profile" in sys.argv:
         return 0
-    lines += ["compas_assembly's 527-block dome: `benchmarks/repair.py --dome527` "
-              "(docs/REPAIR_527.md, appended below when made).", ""]
-    extra = ROOT / "docs" / "REPAIR_527.md"
-    if extra.exists():
-        lines += [extra.read_text()]
+    lines += ["compas_assembly's 527-block dome: [docs/REPAIR_527.md](REPAIR_527.md) "
+              "(`benchmarks/repair.py --dome527`: its plan takes an hour or more).", ""]
     out = Path(sys.argv[sys.argv.index("--out") + 1]) if "--out" in sys.argv else \
         ROOT / "docs" / "REPAIR.md"
     out.write_text("\n".join(lines))

@@ -193,8 +193,8 @@ def staged(plan_scene, built, window: int) -> list[tuple[str, float, str]]:
         def check() -> None:
             report = None
             try:
-                report = asbuilt_check(held, options, on_verdict=lambda verdict: made.decide(
-                    verdict, {}) if beside else None).reports[0]
+                decided = (lambda verdict: made.decide(verdict, {})) if beside else None
+                report = asbuilt_check(held, options, on_verdict=decided).reports[0]
                 checked.append(time.perf_counter() - start)
             finally:
                 made.send(report, {})

@@ -116,8 +116,7 @@ class NodeReport:
     def made(cls, report: dict | None) -> "NodeReport":
         """A report made before (a replay's, or none)."""
         made = cls()
-        made._sent.set_result(lambda: report)
-        made._verdict.set_result(lambda: report)
+        made._send(lambda: report)
         return made
 
     @staticmethod
@@ -132,7 +131,9 @@ class NodeReport:
 
     def send(self, report: Report | None, header: dict) -> None:
         """The report sent (its verdict too, if not given before)."""
-        made = self._of(report, header)
+        self._send(self._of(report, header))
+
+    def _send(self, made: Callable[[], dict | None]) -> None:
         if not self._verdict.done():
             self._verdict.set_result(made)
         self._sent.set_result(made)

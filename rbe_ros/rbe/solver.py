@@ -118,6 +118,12 @@ class Solution:
     #: about its centroid in N m; m a and the rate of its angular momentum); else empty
     unbalanced: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
+    @classmethod
+    def unsolved(cls, status: str, solver_status: str, nv: int, time: float,
+                 **extra) -> "Solution":
+        """A solve that found no forces ("infeasible" or "failed"): NaN at every vertex."""
+        return cls(status, solver_status, np.full((4, nv), np.nan), time, **extra)
+
     @property
     def solved(self) -> bool:
         return self.status == "solved"
@@ -229,7 +235,7 @@ class Kept:
             if status in _SOLVED else None
         elapsed = _spent_since(start)
         if status in _INFEASIBLE:   # where a fresh solve's first attempt ends too (no retry)
-            return Solution("infeasible", status, np.full((4, self.v.nv), np.nan), elapsed)
+            return Solution.unsolved("infeasible", status, self.v.nv, elapsed)
         return None if accepted is None else replace(accepted, time=elapsed)
 
 
@@ -321,7 +327,7 @@ def solve(model: EquilibriumModel, options: SolveOptions = SolveOptions(), *,
     kind = "infeasible" if status in _INFEASIBLE else "failed"
     if kind == "failed":
         checkpoint()
-    return Solution(kind, status, np.full((4, nv), np.nan), elapsed)
+    return Solution.unsolved(kind, status, nv, elapsed)
 
 
 def _settings(options: SolveOptions, attempt: _Attempt, spent: float, kkt_size: int):
@@ -383,8 +389,8 @@ class LoadMultipliers:
         status = str(result.status)
         elapsed = _spent_since(start)
         if status in _INFEASIBLE:       # no lambda > 0: the smallest live load topples it
-            return Solution("infeasible", status, np.full((4, self._v.nv), np.nan), elapsed,
-                            multiplier=0.0)
+            return Solution.unsolved("infeasible", status, self._v.nv, elapsed,
+                                     multiplier=0.0)
         if status in _SOLVED:
             x = np.array(result.x)
             s = x[self._v.lam]

@@ -8,7 +8,7 @@ the floor of any sound repair: one check of each remaining state; the repaired p
 re-checked by `check_sequence` (the oracle). Writes docs/REPAIR.md.
 
 The plans are kept in build/repair/ (made by the first run; the 527-block dome's plan takes
-many minutes): delete them to plan again.
+hours on 2 cores): delete them to plan again.
 
 Usage: .venv/bin/python benchmarks/repair.py [--dome527] [--thin | --only KEY] [--workers N]
 [--profile] [--out PATH] (make bench-repair). ``--thin``: the 0.6-thickness dome only (the
@@ -51,6 +51,7 @@ from rbe_ros.analysis.steps import sequence_step, step_count  # noqa: E402
 from rbe_ros.io.execution import (EXECUTION, LOOKAHEAD_STEPS, Execution,  # noqa: E402
                                   NodeReport, Settings)
 from rbe_ros.io.inputs import load_design  # noqa: E402
+from rbe_ros.io.plan_output import ProgressLines  # noqa: E402
 from rbe_ros.io.poses import scene_at_poses  # noqa: E402
 from rbe_ros.io.replay import asbuilt_check  # noqa: E402
 
@@ -69,13 +70,15 @@ DOMES = (("14 x 10 dome", "dome14x10", {}),
 
 def planned(name: str, scene, max_held: int = 2):
     """(plan, plan time s): ``plan_sequence(scene, max_held)``, kept in
-    build/repair/<name>.pkl (the 527-block dome's plan takes many minutes)."""
+    build/repair/<name>.pkl (the 527-block dome's plan takes hours on 2 cores: its progress
+    goes to stderr, as ``rbe-ros plan`` prints it)."""
     path = CACHE / f"{name}.pkl"
     if path.exists():
         with open(path, "rb") as f:
             return pickle.load(f)
     start = time.perf_counter()
-    made = (plan_sequence(scene, max_held), time.perf_counter() - start)
+    made = (plan_sequence(scene, max_held, progress=ProgressLines(sys.stderr)),
+            time.perf_counter() - start)
     CACHE.mkdir(parents=True, exist_ok=True)
     with open(path, "wb") as f:
         pickle.dump(made, f)
@@ -251,7 +254,7 @@ def one_dome(name: str, key: str, scene, window: int = 0, whole: bool = True,
              workers: int = 1, profile: bool = False) -> list[str]:
     """The section of docs/REPAIR.md of one dome; ``window`` > 0: deviations looked for and
     repaired within the next ``window`` steps only (a node's look-ahead). ``whole`` False:
-    no re-planning from scratch and no oracle (the 527-block dome: many minutes each)."""
+    no re-planning from scratch and no oracle (the 527-block dome: each takes hours)."""
     plan, plan_time = planned(key, scene)
     planned_scene = plan.scene
     half = len(plan.order) // 2
@@ -444,7 +447,7 @@ def main() -> int:
     if "--profile" in sys.argv:
         return 0
     lines += ["compas_assembly's 527-block dome: [docs/REPAIR_527.md](REPAIR_527.md) "
-              "(`benchmarks/repair.py --dome527`: its plan takes an hour or more).", ""]
+              "(`benchmarks/repair.py --dome527`: its plan takes hours on 2 cores).", ""]
     out = Path(sys.argv[sys.argv.index("--out") + 1]) if "--out" in sys.argv else \
         ROOT / "docs" / "REPAIR.md"
     out.write_text("\n".join(lines))

@@ -4,13 +4,17 @@ one run: the processor time of ``rbe-ros check dome14.json --sequence --json`` (
 dome of ``rbe-ros generate dome``; the command's own process, imports included) and of
 ``repair_plan`` of the 14 x 10 dome built to half with the last placed block off by
 benchmarks/repair.py's first deviation, with the 10-step look-ahead and to the end (the
-plan kept by ``make bench-repair`` in build/repair/; the repair alone timed).
+plan kept by ``make bench-repair`` in build/repair/; the repair alone timed); and with
+``--dome527``, compas_assembly's 527-block dome planned by the first tree until 134 blocks are
+placed (``plan_sequence`` stopped there: its first descent, the same in every tree that makes
+the same verdicts), the state after its last step checked whole by each (``verdict.check``,
+the check of a planner's candidate; its open course's programs).
 
 Each measurement runs the tree's own package (PYTHONPATH) in a process of its own, the trees
 alternating, so that the load of a shared machine falls on all of them alike; read the
 ratios.
 
-    python benchmarks/rule4_cost.py TREE [TREE ...] [--repeats N]
+    python benchmarks/rule4_cost.py TREE [TREE ...] [--repeats N] [--only WORD] [--dome527]
 """
 from __future__ import annotations
 
@@ -35,6 +39,40 @@ r = repair_plan(scene, built, lookahead_steps=int(sys.argv[3]))
 print(json.dumps({"cpu": time.process_time() - start, "outcome": [r.kind, r.changed_step]}))
 """
 
+#: Run in a tree: the 527-block dome planned until argv[4] blocks are placed, kept in the
+#: file argv[3] (as the plans of build/repair/ are).
+PARTIAL = """
+from dataclasses import replace
+from rbe_ros.analysis.planning import plan_sequence
+from rbe_ros.io.inputs import load_design
+from repair import DOME527, UNCERTAINTY
+scene, _ = load_design(DOME527)
+placed = [0]
+partial = plan_sequence(replace(scene, pose_uncertainty=UNCERTAINTY), 2,
+                        progress=lambda p: placed.__setitem__(0, p.placed),
+                        should_stop=lambda: placed[0] >= int(sys.argv[4]))
+pickle.dump((partial, 0.0), open(sys.argv[3], "wb"))
+print(json.dumps({"placed": len(partial.order)}))
+"""
+#: Run in a tree: the state after the last step of the plan checked whole, its processor
+#: time and status as one JSON line.
+STATE = """
+from rbe_ros.analysis.asbuilt import declared
+from rbe_ros.analysis.assembly import Assembly
+from rbe_ros.analysis.options import CheckOptions
+from rbe_ros.analysis.steps import sequence_step
+from rbe_ros.analysis.verdict import check
+options = declared(CheckOptions(), plan.scene)       # the pose uncertainty, as planned
+step = sequence_step(plan.scene, len(plan.order) - 1)
+assembly = Assembly.from_scene(plan.scene, options.contact).subset(step.present, step.held,
+                                                                   step.grips)
+start = time.process_time()
+report = check(assembly, options)
+print(json.dumps({"cpu": time.process_time() - start, "outcome": report.status.name}))
+"""
+#: The 527-block dome's blocks placed before its state is checked (its open course)
+DOME527_PLACED = 134
+
 
 def _sequence(tree: Path, scene: Path) -> dict:
     """``check --sequence`` of ``scene`` by ``tree``: its processor time (user + system of
@@ -50,6 +88,9 @@ def _sequence(tree: Path, scene: Path) -> dict:
 
 def main() -> int:
     parser = arguments(__doc__)
+    parser.add_argument("--only", default="", help="the cases whose name holds this")
+    parser.add_argument("--dome527", action="store_true",
+                        help="also the 527-block dome's state (its partial plan first)")
     args = parser.parse_args()
     trees = started(args)
     if trees is None:
@@ -62,7 +103,12 @@ def main() -> int:
         cases = (("check --sequence", lambda t: _sequence(t, scene)),
                  ("repair, 10-step look-ahead", lambda t: in_tree(t, REPAIR, 10)),
                  ("repair, to the end", lambda t: in_tree(t, REPAIR, 0)))
-        for name, run in cases:
+        if args.dome527:
+            partial = Path(folder) / "dome527_partial.pkl"
+            in_tree(trees[0], PARTIAL, partial, DOME527_PLACED)
+            cases += ((f"527-block dome, the state of {DOME527_PLACED} blocks placed, whole",
+                       lambda t: in_tree(t, STATE, plan=partial)),)
+        for name, run in (c for c in cases if args.only in c[0]):
             best = {t: None for t in trees}
             for _ in range(args.repeats):
                 for t in trees:

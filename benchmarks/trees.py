@@ -30,9 +30,10 @@ plan, _ = pickle.load(open(sys.argv[2], "rb"))
 """
 
 
-def in_tree(tree: Path, snippet: str, *args) -> dict:
-    """The JSON line that ``snippet`` (after PROLOGUE) prints last, run by ``tree``."""
-    out = subprocess.run([str(PYTHON), "-c", PROLOGUE + snippet, str(HERE), str(PLAN),
+def in_tree(tree: Path, snippet: str, *args, plan: Path = PLAN) -> dict:
+    """The JSON line that ``snippet`` (after PROLOGUE, ``plan`` loaded) prints last, run by
+    ``tree``."""
+    out = subprocess.run([str(PYTHON), "-c", PROLOGUE + snippet, str(HERE), str(plan),
                           *map(str, args)], capture_output=True, text=True, cwd=tree,
                          env=os.environ | {"PYTHONPATH": str(tree)}, check=True)
     return json.loads(out.stdout.splitlines()[-1])

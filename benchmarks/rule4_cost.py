@@ -8,7 +8,10 @@ plan kept by ``make bench-repair`` in build/repair/; the repair alone timed); an
 ``--dome527``, compas_assembly's 527-block dome planned by the first tree until 134 blocks are
 placed (``plan_sequence`` stopped there: its first descent, the same in every tree that makes
 the same verdicts), the state after its last step checked whole by each (``verdict.check``,
-the check of a planner's candidate; its open course's programs).
+the check of a planner's candidate; its open course's programs), and its states of the
+248-260 lowest blocks (half of it built course by course, then the next course open, nothing
+held: states like those a repair's window at half-built checks, which no plan made on this
+machine within a session reaches).
 
 Each measurement runs the tree's own package (PYTHONPATH) in a process of its own, the trees
 alternating, so that the load of a shared machine falls on all of them alike; read the
@@ -54,9 +57,15 @@ partial = plan_sequence(replace(scene, pose_uncertainty=UNCERTAINTY), 2,
 pickle.dump((partial, 0.0), open(sys.argv[3], "wb"))
 print(json.dumps({"placed": len(partial.order)}))
 """
-#: Run in a tree: the state after the last step of the plan checked whole, its processor
-#: time and status as one JSON line.
-STATE = """
+#: The end of the snippets that check one state of the 527-block dome: ``assembly`` checked
+#: whole with ``options``, its processor time and status as one JSON line.
+CHECKED = """
+start = time.process_time()
+report = check(assembly, options)
+print(json.dumps({"cpu": time.process_time() - start, "outcome": report.status.name}))
+"""
+#: Run in a tree: the state after the last step of the plan (a partial one) checked whole.
+PLANNED_STATE = """
 from rbe_ros.analysis.asbuilt import declared
 from rbe_ros.analysis.assembly import Assembly
 from rbe_ros.analysis.options import CheckOptions
@@ -66,12 +75,29 @@ options = declared(CheckOptions(), plan.scene)       # the pose uncertainty, as 
 step = sequence_step(plan.scene, len(plan.order) - 1)
 assembly = Assembly.from_scene(plan.scene, options.contact).subset(step.present, step.held,
                                                                    step.grips)
-start = time.process_time()
-report = check(assembly, options)
-print(json.dumps({"cpu": time.process_time() - start, "outcome": report.status.name}))
-"""
-#: The 527-block dome's blocks placed before its state is checked (its open course)
+""" + CHECKED
+#: Run in a tree: the 527-block dome's supports and its argv[3] lowest free blocks (by
+#: position: course by course, as a plan's candidates go) checked whole, nothing held.
+LOWEST_STATE = """
+from dataclasses import replace
+from rbe_ros.analysis.asbuilt import declared
+from rbe_ros.analysis.assembly import Assembly
+from rbe_ros.analysis.options import CheckOptions
+from rbe_ros.analysis.verdict import check
+from rbe_ros.io.inputs import load_design
+from repair import DOME527, UNCERTAINTY
+scene, _ = load_design(DOME527)
+scene = replace(scene, pose_uncertainty=UNCERTAINTY)
+options = declared(CheckOptions(), scene)
+free = sorted((b for b in scene.blocks if not b.support), key=lambda b: (b.position[2], b.id))
+ids = [b.id for b in scene.blocks if b.support] + [b.id for b in free[:int(sys.argv[3])]]
+assembly = Assembly.from_scene(scene, options.contact).subset(ids)
+""" + CHECKED
+#: The 527-block dome's blocks placed by its partial plan before its state is checked (its
+#: open course), and the numbers of its lowest blocks whose states are checked: half of its
+#: 496 (a course closed) and the next course open
 DOME527_PLACED = 134
+DOME527_LOWEST = (248, 252, 256, 260)
 
 
 def _sequence(tree: Path, scene: Path) -> dict:
@@ -105,9 +131,16 @@ def main() -> int:
                  ("repair, to the end", lambda t: in_tree(t, REPAIR, 0)))
         if args.dome527:
             partial = Path(folder) / "dome527_partial.pkl"
-            in_tree(trees[0], PARTIAL, partial, DOME527_PLACED)
-            cases += ((f"527-block dome, the state of {DOME527_PLACED} blocks placed, whole",
-                       lambda t: in_tree(t, STATE, plan=partial)),)
+
+            def planned_state(t: Path) -> dict:
+                if not partial.exists():        # planned by the first tree, once
+                    in_tree(trees[0], PARTIAL, partial, DOME527_PLACED)
+                return in_tree(t, PLANNED_STATE, plan=partial)
+
+            cases += ((f"527-block dome, the state of {DOME527_PLACED} blocks placed (plan "
+                       "order), whole", planned_state),) + tuple(
+                (f"527-block dome, its {n} lowest blocks, whole",
+                 lambda t, n=n: in_tree(t, LOWEST_STATE, n)) for n in DOME527_LOWEST)
         for name, run in (c for c in cases if args.only in c[0]):
             best = {t: None for t in trees}
             for _ in range(args.repeats):

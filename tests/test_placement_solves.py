@@ -21,16 +21,19 @@ import scipy.optimize
 from scipy.optimize import linprog
 
 from rbe_ros import generators
+from rbe_ros.analysis.asbuilt import declared
 from rbe_ros.analysis.assembly import Assembly
 from rbe_ros.analysis.options import CheckOptions
 from rbe_ros.analysis.pipeline import check_scene
 from rbe_ros.analysis.verdict import check, model_of
 from rbe_ros.interlock import keyed_vault
+from rbe_ros.io.inputs import load_design
 from rbe_ros.io.scene_json import load_scene
 from rbe_ros.rbe import prestress
 from rbe_ros.rbe.solver import Kept, SolveOptions, solve
 
 SUITE = Path(__file__).resolve().parent / "data" / "squeeze"
+DOME = Path(__file__).resolve().parent / "data" / "compas_assembly" / "dome_assembly.json.gz"
 MANIFEST = json.loads((SUITE / "manifest.json").read_text())["scenes"]
 
 
@@ -212,3 +215,43 @@ def test_a_least_normal_forces_call_asked_again_is_answered_without_a_program(mo
     assert len(solved) == 1 and np.array_equal(first, again) and first is not again
     other = least(model, options, 0.9 * load, caps, interfaces)
     assert len(solved) == 2 and not np.allclose(other, first)
+
+
+@pytest.mark.long
+def test_the_published_domes_open_course_is_solved_refined_as_highs_at_tight_tolerances(
+        monkeypatch):
+    """compas_assembly's 527-block dome (published data), its supports and its 134 lowest
+    blocks, 5 mm / 3.5 deg declared (as benchmarks/repair.py plans it): Clarabel runs out of
+    iterations on the open course's programs still converging, the refined attempt solves
+    them, HiGHS is not asked, and each least is that of HiGHS at tolerances 1e-10 (the
+    oracle) to 1e-4 W (1e-7 of it), not above it; the state stands."""
+    scene, _ = load_design(DOME)
+    scene = replace(scene, pose_uncertainty=(0.005, 3.5))
+    options = declared(CheckOptions(), scene)
+    free = sorted((b for b in scene.blocks if not b.support),
+                  key=lambda b: (b.position[2], b.id))
+    ids = [b.id for b in scene.blocks if b.support] + [b.id for b in free[:134]]
+    asked, cut, real = [], [], prestress.LeastNormals.__call__
+    monkeypatch.setattr(prestress.LeastNormals, "__call__",
+                        lambda self, *args: asked.append(args) or real(self, *args))
+    cut_off = prestress._cut_off
+    monkeypatch.setattr(prestress, "_cut_off", lambda r: cut.append(cut_off(r)) or cut[-1])
+    monkeypatch.setattr(scipy.optimize, "linprog", lambda *a, **k: pytest.fail("HiGHS asked"))
+    report = check(Assembly.from_scene(scene, options.contact).subset(ids), options)
+    assert report.status.name == "STABLE" and sum(cut) >= 2
+    monkeypatch.undo()
+    model, solve_options, load, caps, interfaces = asked[0]
+    least = prestress.LeastNormals()
+    found = least(*asked[0])
+    up = np.concatenate([np.zeros(least.facet_rows),
+                         np.tile(least.h * caps / model.force_scale, least.facets)])
+    nv = model.num_vertices
+    for k in interfaces:
+        cost = np.concatenate([(model.vertex_interface == k).astype(float), np.zeros(2 * nv)])
+        oracle = linprog(cost, A_ub=least.upper, b_ub=up, A_eq=least.equal, b_eq=-load,
+                         bounds=[(0, None)] * nv + [(None, None)] * (2 * nv), method="highs",
+                         options={"primal_feasibility_tolerance": 1e-10,
+                                  "dual_feasibility_tolerance": 1e-10})
+        assert oracle.status == 0
+        assert found[k] == pytest.approx(oracle.fun * model.force_scale, abs=1e-4)
+        assert found[k] <= oracle.fun * model.force_scale + 1e-6

@@ -116,7 +116,8 @@ def main() -> int:
     parser = arguments(__doc__)
     parser.add_argument("--only", default="", help="the cases whose name holds this")
     parser.add_argument("--dome527", action="store_true",
-                        help="also the 527-block dome's state (its partial plan first)")
+                        help="also the 527-block dome's states (a partial plan's, its "
+                        "lowest blocks')")
     args = parser.parse_args()
     trees = started(args)
     if trees is None:

@@ -159,17 +159,45 @@ def test_a_kept_solver_proves_infeasible_as_a_fresh_one_and_then_solves():
     assert np.abs(wide.forces - fresh.forces).max() <= 1e-9 * model.force_scale
 
 
+def _asked(monkeypatch, assembly: Assembly, options: CheckOptions = CheckOptions()
+           ) -> tuple[list[tuple], object]:
+    """Every call's arguments of rule 4's least normal forces in the check of ``assembly``,
+    and its report (the monkeypatches undone after it, those set before included)."""
+    asked, real = [], prestress.LeastNormals.__call__
+    monkeypatch.setattr(prestress.LeastNormals, "__call__",
+                        lambda self, *args: asked.append(args) or real(self, *args))
+    report = check(assembly, options)
+    monkeypatch.undo()
+    return asked, report
+
+
 def _least_normals_asked(monkeypatch) -> tuple:
     """The arguments of rule 4's first least normal forces on the 8 x 5 dome's open course
     (its first 27 blocks, course3_slice00 held: three rubbing interfaces)."""
     scene = generators.dome(8, 5)
-    asked, real = [], prestress.LeastNormals.__call__
-    monkeypatch.setattr(prestress.LeastNormals, "__call__",
-                        lambda self, *args: asked.append(args) or real(self, *args))
-    check(Assembly.from_scene(scene).subset([b.id for b in scene.blocks][:27],
-                                            held=("course3_slice00",)))
-    monkeypatch.undo()
+    asked, _ = _asked(monkeypatch, Assembly.from_scene(scene).subset(
+        [b.id for b in scene.blocks][:27], held=("course3_slice00",)))
     return asked[0]
+
+
+def _highs(model, options, load, caps, interfaces) -> np.ndarray:
+    """The oracle: each least of ``interfaces`` by HiGHS at tolerances 1e-10, on the
+    program LeastNormals states."""
+    least = prestress.LeastNormals()
+    least._program(model, options, np.flatnonzero(np.isfinite(caps)))
+    up = np.concatenate([np.zeros(least.facet_rows),
+                         np.tile(least.h * caps / model.force_scale, least.facets)])
+    nv = model.num_vertices
+    found = []
+    for k in interfaces:
+        cost = np.concatenate([(model.vertex_interface == k).astype(float), np.zeros(2 * nv)])
+        oracle = linprog(cost, A_ub=least.upper, b_ub=up, A_eq=least.equal, b_eq=-load,
+                         bounds=[(0, None)] * nv + [(None, None)] * (2 * nv), method="highs",
+                         options={"primal_feasibility_tolerance": 1e-10,
+                                  "dual_feasibility_tolerance": 1e-10})
+        assert oracle.status == 0
+        found.append(oracle.fun * model.force_scale)
+    return np.array(found)
 
 
 def test_a_program_clarabel_stalls_on_is_solved_with_refinement_and_not_by_highs(monkeypatch):
@@ -178,28 +206,17 @@ def test_a_program_clarabel_stalls_on_is_solved_with_refinement_and_not_by_highs
     the same solver with iterative refinement does, HiGHS never asked: each least that of
     the full first attempt to 1e-6 W and of HiGHS at tolerances 1e-10 (the oracle) to 1e-5 W
     (1e-9 of them), not above it."""
-    model, options, load, caps, interfaces = asked = _least_normals_asked(monkeypatch)
+    asked = _least_normals_asked(monkeypatch)
+    interfaces = asked[4]
     full = prestress.LeastNormals()(*asked)
-    least = prestress.LeastNormals()
-    least._program(model, options, np.flatnonzero(np.isfinite(caps)))
-    up = np.concatenate([np.zeros(least.facet_rows),
-                         np.tile(least.h * caps / model.force_scale, least.facets)])
-    highs = []
-    for k in interfaces:
-        nv = model.num_vertices
-        cost = np.concatenate([(model.vertex_interface == k).astype(float), np.zeros(2 * nv)])
-        found = linprog(cost, A_ub=least.upper, b_ub=up, A_eq=least.equal, b_eq=-load,
-                        bounds=[(0, None)] * nv + [(None, None)] * (2 * nv), method="highs",
-                        options={"primal_feasibility_tolerance": 1e-10,
-                                 "dual_feasibility_tolerance": 1e-10})
-        highs.append(found.fun * model.force_scale)
+    highs = _highs(*asked)
     monkeypatch.setattr(prestress, "LEAST_MAX_ITER", 5)
     monkeypatch.setattr(scipy.optimize, "linprog", lambda *a, **k: pytest.fail("HiGHS asked"))
     refined = prestress.LeastNormals()(*asked)
     assert len(interfaces) == 3 and (full[interfaces] > 1e3).sum() == 2
     assert refined == pytest.approx(full, abs=1e-6)
     assert refined[interfaces] == pytest.approx(highs, abs=1e-5)
-    assert (refined[interfaces] <= np.array(highs) + 1e-6).all()   # a lower bound: safe
+    assert (refined[interfaces] <= highs + 1e-6).all()   # a lower bound: safe
 
 
 def test_a_least_normal_forces_call_asked_again_is_answered_without_a_program(monkeypatch):
@@ -231,27 +248,14 @@ def test_the_published_domes_open_course_is_solved_refined_as_highs_at_tight_tol
     free = sorted((b for b in scene.blocks if not b.support),
                   key=lambda b: (b.position[2], b.id))
     ids = [b.id for b in scene.blocks if b.support] + [b.id for b in free[:134]]
-    asked, cut, real = [], [], prestress.LeastNormals.__call__
-    monkeypatch.setattr(prestress.LeastNormals, "__call__",
-                        lambda self, *args: asked.append(args) or real(self, *args))
-    cut_off = prestress._cut_off
+    cut, cut_off = [], prestress._cut_off
     monkeypatch.setattr(prestress, "_cut_off", lambda r: cut.append(cut_off(r)) or cut[-1])
     monkeypatch.setattr(scipy.optimize, "linprog", lambda *a, **k: pytest.fail("HiGHS asked"))
-    report = check(Assembly.from_scene(scene, options.contact).subset(ids), options)
+    asked, report = _asked(monkeypatch, Assembly.from_scene(scene, options.contact).subset(ids),
+                           options)
     assert report.status.name == "STABLE" and sum(cut) >= 2
-    monkeypatch.undo()
-    model, solve_options, load, caps, interfaces = asked[0]
-    least = prestress.LeastNormals()
-    found = least(*asked[0])
-    up = np.concatenate([np.zeros(least.facet_rows),
-                         np.tile(least.h * caps / model.force_scale, least.facets)])
-    nv = model.num_vertices
-    for k in interfaces:
-        cost = np.concatenate([(model.vertex_interface == k).astype(float), np.zeros(2 * nv)])
-        oracle = linprog(cost, A_ub=least.upper, b_ub=up, A_eq=least.equal, b_eq=-load,
-                         bounds=[(0, None)] * nv + [(None, None)] * (2 * nv), method="highs",
-                         options={"primal_feasibility_tolerance": 1e-10,
-                                  "dual_feasibility_tolerance": 1e-10})
-        assert oracle.status == 0
-        assert found[k] == pytest.approx(oracle.fun * model.force_scale, abs=1e-4)
-        assert found[k] <= oracle.fun * model.force_scale + 1e-6
+    interfaces = asked[0][4]
+    found = prestress.LeastNormals()(*asked[0])[interfaces]
+    highs = _highs(*asked[0])
+    assert found == pytest.approx(highs, abs=1e-4)
+    assert (found <= highs + 1e-6).all()
